@@ -1,0 +1,67 @@
+//! Per-sample cost of `Detector::step` (bench-A and a larger LPV channel).
+//!
+//! `cargo bench -p glrmon-core --bench step`; figures in docs/PERFORMANCE.md.
+
+use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
+use glrmon_core::{Sample, StepOutput};
+use glrmon_sim::{SimSample, scenarios};
+
+const BATCH: usize = 10_000;
+
+fn bench_scenario(c: &mut Criterion, name: &str, sc: &scenarios::Scenario) {
+    let mut sim = sc.simulator(42).unwrap();
+    let data: Vec<SimSample> = (0..2 * BATCH).map(|_| sim.next_sample()).collect();
+    let mut group = c.benchmark_group(name);
+    group.throughput(Throughput::Elements(BATCH as u64));
+    group.bench_function("step", |b| {
+        b.iter_batched_ref(
+            || {
+                // Warm the window up outside the timing: the bank is full from here on.
+                let mut det = sc.detector().unwrap();
+                let mut out = StepOutput::new(sc.model_outputs(), sc.faults.len());
+                for (k, x) in data[..BATCH].iter().enumerate() {
+                    det.step(
+                        &Sample {
+                            k: k as u64,
+                            u: &x.u,
+                            y: &x.y,
+                            p: &x.p,
+                        },
+                        &mut out,
+                    )
+                    .unwrap();
+                }
+                (det, out)
+            },
+            |(det, out)| {
+                for (k, x) in data[BATCH..].iter().enumerate() {
+                    let k = (k + BATCH) as u64;
+                    det.step(
+                        &Sample {
+                            k,
+                            u: &x.u,
+                            y: &x.y,
+                            p: &x.p,
+                        },
+                        out,
+                    )
+                    .unwrap();
+                }
+            },
+            BatchSize::LargeInput,
+        );
+    });
+    group.finish();
+}
+
+fn steps(c: &mut Criterion) {
+    bench_scenario(c, "bench_a_lpv_n2_p1_m2_w100", &scenarios::bench_a());
+    bench_scenario(c, "lpv_n3_p2_m4_w160", &scenarios::lpv_n3_p2_m4());
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().sample_size(20);
+    targets = steps
+}
+criterion_main!(benches);

@@ -1,0 +1,501 @@
+//! One channel's detector: model evaluation → Kalman innovation → Γ signatures →
+//! moving-window GLR, one sample at a time, without allocating.
+//!
+//! Ref.: Zhang & Basseville 2014, §3-§5 (eqs. (6)-(10), (32)-(37), (44)-(46)).
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::error::{ModelError, StepError};
+use crate::fault::FaultDictionary;
+use crate::glr::{DEFAULT_RANK_TOLERANCE, WindowBank};
+use crate::innovation::InnovationFilter;
+use crate::isolation::FisherStatistics;
+use crate::linalg::{gemm, solve_lower_in_place};
+use crate::model::{Dims, Signals, StateSpace, SystemMatrices};
+
+/// Settings of the moving-window GLR.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WindowSettings {
+    /// w: onsets r ∈ {k − w + 1, …, k − s} are candidates (eq. (37)). At least 2.
+    pub window: usize,
+    /// s: the youngest candidate onset is k − s (s < w), so that at least s + 1 samples
+    /// carry each candidate's signature.
+    pub min_lag: usize,
+    /// τ: relative cut-off for the rank of C_k(r) (pivots or eigenvalues ≤ τ·scale are
+    /// treated as zero).
+    pub rank_tolerance: f64,
+}
+
+impl Default for WindowSettings {
+    fn default() -> Self {
+        Self {
+            window: 100,
+            min_lag: 1,
+            rank_tolerance: DEFAULT_RANK_TOLERANCE,
+        }
+    }
+}
+
+/// One sample of a channel: index k, known inputs U_k, outputs Y_k, signals p(k).
+#[derive(Debug, Clone, Copy)]
+pub struct Sample<'a> {
+    /// Sample index k; consecutive samples have consecutive indices.
+    pub k: u64,
+    /// U_k (length l).
+    pub u: &'a [f64],
+    /// Y_k (length p).
+    pub y: &'a [f64],
+    /// p(k) (length q).
+    pub p: &'a [f64],
+}
+
+/// What one step produced. Allocated once with [`StepOutput::new`], overwritten by
+/// every [`Detector::step`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepOutput {
+    /// The sample index k.
+    pub k: u64,
+    /// ε_k (eq. (10)).
+    pub innovation: DVector<f64>,
+    /// εᵀΣ⁻¹ε: χ²(p) under no fault.
+    pub normalized_innovation: f64,
+    /// l_k (eq. (35)); `None` while no onset is admissible (k − s before the first sample).
+    pub glr: Option<f64>,
+    /// r̂_k (eq. (36)).
+    pub onset: Option<u64>,
+    /// θ̂ = C_k(r̂)⁺d_k(r̂), one value per fault (eq. (34)); zeros when `glr` is `None`.
+    pub magnitude: DVector<f64>,
+    /// rank C_k(r̂): the χ² degrees of freedom of l_k.
+    pub rank: usize,
+}
+
+impl StepOutput {
+    /// Buffers for a detector with `outputs` outputs and `faults` faults.
+    #[must_use]
+    pub fn new(outputs: usize, faults: usize) -> Self {
+        Self {
+            k: 0,
+            innovation: DVector::zeros(outputs),
+            normalized_innovation: 0.0,
+            glr: None,
+            onset: None,
+            magnitude: DVector::zeros(faults),
+            rank: 0,
+        }
+    }
+}
+
+/// The detector of one channel.
+///
+/// # Examples
+/// ```
+/// use glrmon_core::detector::{Detector, Sample, StepOutput, WindowSettings};
+/// use glrmon_core::fault::{Column, Fault, FaultDictionary, Onset};
+/// use glrmon_core::model::{Lpv, StateSpace};
+/// use nalgebra::{DMatrix, DVector};
+///
+/// let model = Lpv::lti(
+///     DMatrix::from_element(1, 1, 0.9), DMatrix::zeros(1, 0),
+///     DMatrix::from_element(1, 1, 1.0), DMatrix::zeros(1, 0),
+///     DMatrix::from_element(1, 1, 0.01), DMatrix::from_element(1, 1, 0.01),
+/// ).unwrap();
+/// let faults = FaultDictionary::new(model.dims(), vec![
+///     Fault::output("bias", Onset::Step, Column::Constant(DVector::from_vec(vec![1.0]))),
+/// ]).unwrap();
+/// let mut det = Detector::new(
+///     Box::new(model), faults, DVector::zeros(1), DMatrix::identity(1, 1),
+///     WindowSettings { window: 20, min_lag: 0, ..Default::default() },
+/// ).unwrap();
+/// let mut out = StepOutput::new(1, 1);
+/// for k in 0..40 {
+///     let y = if k >= 30 { 1.0 } else { 0.0 }; // a sensor bias from k = 30
+///     det.step(&Sample { k, u: &[], y: &[y], p: &[] }, &mut out).unwrap();
+/// }
+/// assert_eq!(out.onset, Some(30));
+/// assert!((out.magnitude[0] - 1.0).abs() < 1e-9);
+/// ```
+#[derive(Debug)]
+pub struct Detector {
+    model: Box<dyn StateSpace>,
+    faults: FaultDictionary,
+    filter: InnovationFilter,
+    bank: WindowBank,
+    settings: WindowSettings,
+    dims: Dims,
+    system: SystemMatrices,
+    /// Ψ̃_k (n×m).
+    psi: DMatrix<f64>,
+    /// Φ̃_k (p×m), then overwritten with L⁻¹Φ̃_k.
+    phi: DMatrix<f64>,
+    /// Φ̃_k of the last measured sample, unwhitened.
+    phi_last: DMatrix<f64>,
+    /// F_kK_kΦ̃_k (n×m).
+    fk_phi: DMatrix<f64>,
+    /// Signals of the last sample, repeated for predict-only steps.
+    held_u: Vec<f64>,
+    held_p: Vec<f64>,
+    next_k: Option<u64>,
+    last_measured: Option<u64>,
+}
+
+impl Detector {
+    /// Builds a detector; every buffer the per-sample path needs is allocated here.
+    ///
+    /// # Errors
+    /// [`ModelError`] when the dictionary's dimensions differ from the model's, the
+    /// initial state or covariance do not fit, or the window settings are out of range
+    /// (w < 2, s ≥ w, τ not in (0, 1)).
+    pub fn new(
+        model: Box<dyn StateSpace>,
+        faults: FaultDictionary,
+        x0: DVector<f64>,
+        p0: DMatrix<f64>,
+        settings: WindowSettings,
+    ) -> Result<Self, ModelError> {
+        let dims = model.dims();
+        if faults.dims() != dims {
+            return Err(ModelError::Dimension {
+                what: "fault dictionary",
+                detail: format!("built for {:?} but the model is {:?}", faults.dims(), dims),
+            });
+        }
+        if x0.len() != dims.states {
+            return Err(ModelError::Dimension {
+                what: "x0",
+                detail: format!(
+                    "x0 has {} entries but the model has {} states",
+                    x0.len(),
+                    dims.states
+                ),
+            });
+        }
+        if settings.window < 2 {
+            return Err(ModelError::Setting {
+                what: "window",
+                detail: format!("w must be at least 2, got {}", settings.window),
+            });
+        }
+        if settings.min_lag >= settings.window {
+            return Err(ModelError::Setting {
+                what: "min_lag",
+                detail: format!(
+                    "s must be below w = {}, got {}",
+                    settings.window, settings.min_lag
+                ),
+            });
+        }
+        if !(settings.rank_tolerance > 0.0 && settings.rank_tolerance < 1.0) {
+            return Err(ModelError::Setting {
+                what: "rank_tolerance",
+                detail: format!("τ must be in (0, 1), got {}", settings.rank_tolerance),
+            });
+        }
+        let (n, p, m) = (dims.states, dims.outputs, faults.len());
+        let filter = InnovationFilter::new(x0, p0, p)?;
+        let kinds = faults.faults().iter().map(|f| f.onset).collect();
+        let bank = WindowBank::new(
+            n,
+            m,
+            p,
+            settings.window,
+            settings.min_lag,
+            kinds,
+            settings.rank_tolerance,
+        );
+        Ok(Self {
+            model,
+            faults,
+            filter,
+            bank,
+            settings,
+            dims,
+            system: SystemMatrices::zeros(dims),
+            psi: DMatrix::zeros(n, m),
+            phi: DMatrix::zeros(p, m),
+            phi_last: DMatrix::zeros(p, m),
+            fk_phi: DMatrix::zeros(n, m),
+            held_u: vec![0.0; dims.inputs],
+            held_p: vec![0.0; dims.signals],
+            next_k: None,
+            last_measured: None,
+        })
+    }
+
+    /// Processes sample k: the measurement update, the signatures and sufficient
+    /// statistics of every onset in the window, the GLR maximum, and the time update.
+    ///
+    /// # Errors
+    /// [`StepError::WrongDimension`] / [`StepError::NonFinite`] for a malformed sample,
+    /// [`StepError::OutOfOrder`] when k is not the next index (call
+    /// [`Detector::predict_only`] for missing samples), [`StepError::Numerical`] when
+    /// the model at this sample gives a non-finite matrix or a singular Σ_k. On error
+    /// the detector's state is unchanged.
+    pub fn step(&mut self, sample: &Sample<'_>, out: &mut StepOutput) -> Result<(), StepError> {
+        self.check(sample)?;
+        let signals = Signals {
+            u: sample.u,
+            p: sample.p,
+        };
+        self.model.evaluate(sample.k, &signals, &mut self.system);
+        if !self.system.is_finite() {
+            return Err(StepError::Numerical {
+                what: "the model evaluated at this sample's signals is not finite",
+            });
+        }
+        self.filter.measure(&self.system, sample.u, sample.y)?;
+        if self.next_k.is_none() {
+            self.bank.start(sample.k);
+        }
+        let (n, p, m) = (self.dims.states, self.dims.outputs, self.faults.len());
+        let k = sample.k;
+        self.faults.evaluate(
+            k,
+            &signals,
+            &self.system,
+            self.psi.as_mut_slice(),
+            self.phi.as_mut_slice(),
+        );
+        self.phi_last.copy_from(&self.phi);
+        // Whiten Φ̃_k in place; F_kK_kΦ̃_k uses the unwhitened copy after the time update.
+        solve_lower_in_place(
+            self.filter.innovation_cholesky().as_slice(),
+            p,
+            self.phi.as_mut_slice(),
+            m,
+        );
+        self.bank.accumulate(
+            k,
+            self.filter.whitened_output_matrix().as_slice(),
+            self.phi.as_slice(),
+            self.filter.whitened_innovation().as_slice(),
+        );
+        let best = self.bank.maximize(k);
+
+        out.k = k;
+        out.innovation.copy_from(self.filter.innovation());
+        out.normalized_innovation = self.filter.normalized_innovation_squared();
+        match best {
+            Some(b) => {
+                out.glr = Some(b.glr);
+                out.onset = Some(b.onset);
+                out.rank = b.rank;
+                self.bank.magnitude(b.onset, out.magnitude.as_mut_slice());
+            }
+            None => {
+                out.glr = None;
+                out.onset = None;
+                out.rank = 0;
+                out.magnitude.fill(0.0);
+            }
+        }
+
+        self.filter.time_update(&self.system, sample.u);
+        gemm(
+            1.0,
+            self.filter.predictor_gain().as_slice(),
+            (n, p),
+            false,
+            self.phi_last.as_slice(),
+            (p, m),
+            false,
+            0.0,
+            self.fk_phi.as_mut_slice(),
+        );
+        self.bank.time_update(
+            k,
+            self.filter.closed_loop().as_slice(),
+            self.psi.as_slice(),
+            self.fk_phi.as_slice(),
+            false,
+        );
+        self.held_u.copy_from_slice(sample.u);
+        self.held_p.copy_from_slice(sample.p);
+        self.next_k = Some(k + 1);
+        self.last_measured = Some(k);
+        Ok(())
+    }
+
+    /// Predict-only step for a missing sample k: no measurement, so C and d do not
+    /// change; X̂, P and every Γ advance with K_k = 0, using the last sample's inputs and
+    /// signals (held). A missing sample is thereby neither skipped nor invented.
+    ///
+    /// # Errors
+    /// [`StepError::OutOfOrder`] when k is not the next index or no sample has been
+    /// seen yet; [`StepError::Numerical`] when the model is not finite.
+    pub fn predict_only(&mut self, k: u64) -> Result<(), StepError> {
+        match self.next_k {
+            Some(next) if next == k => {}
+            Some(next) => {
+                return Err(StepError::OutOfOrder {
+                    expected: next,
+                    got: k,
+                });
+            }
+            None => {
+                return Err(StepError::OutOfOrder {
+                    expected: k,
+                    got: k,
+                });
+            }
+        }
+        let signals = Signals {
+            u: &self.held_u,
+            p: &self.held_p,
+        };
+        self.model.evaluate(k, &signals, &mut self.system);
+        if !self.system.is_finite() {
+            return Err(StepError::Numerical {
+                what: "the model evaluated at the held signals is not finite",
+            });
+        }
+        self.faults.evaluate(
+            k,
+            &signals,
+            &self.system,
+            self.psi.as_mut_slice(),
+            self.phi.as_mut_slice(),
+        );
+        self.filter.predict_only(&self.system, &self.held_u);
+        self.fk_phi.fill(0.0);
+        self.bank.time_update(
+            k,
+            self.filter.closed_loop().as_slice(),
+            self.psi.as_slice(),
+            self.fk_phi.as_slice(),
+            true,
+        );
+        self.next_k = Some(k + 1);
+        Ok(())
+    }
+
+    fn check(&self, s: &Sample<'_>) -> Result<(), StepError> {
+        if let Some(next) = self.next_k {
+            if s.k != next {
+                return Err(StepError::OutOfOrder {
+                    expected: next,
+                    got: s.k,
+                });
+            }
+        }
+        for (field, v, expected) in [
+            ("u", s.u, self.dims.inputs),
+            ("y", s.y, self.dims.outputs),
+            ("p", s.p, self.dims.signals),
+        ] {
+            if v.len() != expected {
+                return Err(StepError::WrongDimension {
+                    field,
+                    expected,
+                    got: v.len(),
+                });
+            }
+            if let Some(index) = v.iter().position(|x| !x.is_finite()) {
+                return Err(StepError::NonFinite { field, index });
+            }
+        }
+        Ok(())
+    }
+
+    /// The index the detector expects next (`None` before the first sample).
+    #[must_use]
+    pub fn next_index(&self) -> Option<u64> {
+        self.next_k
+    }
+
+    /// The channel's dimensions.
+    #[must_use]
+    pub fn dims(&self) -> Dims {
+        self.dims
+    }
+
+    /// m, the number of faults.
+    #[must_use]
+    pub fn fault_count(&self) -> usize {
+        self.faults.len()
+    }
+
+    /// The fault dictionary.
+    #[must_use]
+    pub fn faults(&self) -> &FaultDictionary {
+        &self.faults
+    }
+
+    /// The window settings.
+    #[must_use]
+    pub fn settings(&self) -> WindowSettings {
+        self.settings
+    }
+
+    /// The Kalman innovation filter (X̂, P, ε, Σ, K).
+    #[must_use]
+    pub fn filter(&self) -> &InnovationFilter {
+        &self.filter
+    }
+
+    /// The sufficient statistics F = C_k(r), ζ = d_k(r) of onset r after the last step,
+    /// for isolation (they equal MᵀR⁻¹M and MᵀR⁻¹Z of eqs. (38)-(41)). `None` when r is
+    /// no longer in the window. Allocates: call it at alarms, not per sample.
+    #[must_use]
+    pub fn fisher_statistics(&self, onset: u64) -> Option<FisherStatistics> {
+        let m = self.faults.len();
+        let mut info = DMatrix::zeros(m, m);
+        let mut score = DVector::zeros(m);
+        if !self
+            .bank
+            .information(onset, info.as_mut_slice(), score.as_mut_slice())
+        {
+            return None;
+        }
+        FisherStatistics::new(info, score)
+            .ok()
+            .map(|f| f.with_rank_tolerance(self.settings.rank_tolerance))
+    }
+
+    /// Writes C_k(r) (m×m) and d_k(r) (m) of onset r after the last step; false when r
+    /// is not in the window.
+    pub fn information(
+        &self,
+        onset: u64,
+        info: &mut DMatrix<f64>,
+        score: &mut DVector<f64>,
+    ) -> bool {
+        self.bank
+            .information(onset, info.as_mut_slice(), score.as_mut_slice())
+    }
+
+    /// Writes the fault signature S_k(r) = H_kΓ_k(r) + Φ_k(r) (p×m, eq. (45)) of onset r
+    /// at the last measured sample k; false when r is not in the window.
+    pub fn signature(&self, onset: u64, out: &mut DMatrix<f64>) -> bool {
+        if self.last_measured != self.next_k.map(|n| n - 1) {
+            // The last step was predict-only: no signature at that sample.
+            return false;
+        }
+        if !self.bank.whitened_signature(onset, out.as_mut_slice()) {
+            return false;
+        }
+        let chol = self.filter.innovation_cholesky();
+        let p = self.dims.outputs;
+        for j in 0..self.faults.len() {
+            for i in (0..p).rev() {
+                let mut v = 0.0;
+                for l in 0..=i {
+                    v += chol[(i, l)] * out[(l, j)];
+                }
+                out[(i, j)] = v;
+            }
+        }
+        true
+    }
+
+    /// Writes Γ_{k+1}(r) (n×m) of onset r after the step at k (eq. (46)); false when r
+    /// is not in the window.
+    pub fn gamma(&self, onset: u64, out: &mut DMatrix<f64>) -> bool {
+        self.bank.gamma(onset, out.as_mut_slice())
+    }
+
+    /// Rank of C_k(r) and the statistic d_k(r)ᵀC_k(r)⁺d_k(r) at the last step.
+    #[must_use]
+    pub fn onset_statistic(&self, onset: u64) -> Option<(f64, usize)> {
+        Some((self.bank.statistic_of(onset)?, self.bank.rank_of(onset)?))
+    }
+}

@@ -1,0 +1,502 @@
+//! The moving-window GLR bank: one Γ recursion, one (C, d) pair and one statistic per
+//! candidate onset r (Zhang & Basseville 2014, §4.2 and §5).
+//!
+//! For each onset r in the window (eq. (37)):
+//!
+//! ```text
+//! Γ_r(r)       = Ψ_{r−1}(r)                                   (Γ_{r−1}(r) = 0)
+//! Γ_{k+1}(r)   = A_k Γ_k(r) + Ψ_k(r) − F_kK_k Φ_k(r)          (46), A_k = F_k(I − K_kH_k)
+//! S_k(r)       = H_k Γ_k(r) + Φ_k(r)                          (45)
+//! C_k(r)       = Σ_{j=r}^{k} S_jᵀ Σ_j⁻¹ S_j                     (32)
+//! d_k(r)       = Σ_{j=r}^{k} S_jᵀ Σ_j⁻¹ ε_j                     (33)
+//! l_k          = max_{k−w+1 ≤ r ≤ k−s} d_k(r)ᵀ C_k(r)⁺ d_k(r)    (35), (37)
+//! r̂_k          = argmax (earliest on ties)                     (36)
+//! θ̂_k          = C_k(r̂)⁺ d_k(r̂)                                (34)
+//! ```
+//!
+//! The sums start at j = r, not r + 1 as printed in (32)-(33): for a state step fault
+//! S_r(r) = 0 and the two agree; for impulses and output faults the j = r term carries
+//! the fault.
+//!
+//! # Layout
+//! The window is a ring of w slots in structure-of-arrays layout: each scalar component
+//! (an entry of Γ, of the whitened signature L⁻¹S, of C or d) is a contiguous array over
+//! the slots, so every per-sample loop runs over slots innermost with no branches and
+//! vectorises. Advancing k retires the oldest onset and starts the newest in its slot;
+//! nothing is allocated per sample.
+//!
+//! # Rank-deficient C
+//! Until the signatures are persistently exciting (eq. (22)), C_k(r) is singular (for a
+//! state step fault at lag 0 it is exactly 0). The statistic uses an LDLᵀ factorisation
+//! of C in which pivots D_j ≤ τ·max_i C_ii are dropped (τ = the rank tolerance). For a
+//! positive semi-definite C an exactly zero pivot comes with an exactly zero column of
+//! the Schur complement, so the dropped-pivot factorisation is a generalised inverse
+//! C⁻ (C C⁻ C = C); since d ∈ range(C), dᵀC⁻d = dᵀC⁺d is exactly 2 ln LR and is χ²
+//! with dof = rank C = the number of kept pivots. The magnitude θ̂ at r̂ uses the
+//! Moore–Penrose pseudo-inverse (eigenvalues ≤ τ·λ_max dropped) when C is deficient.
+
+use crate::fault::Onset;
+use crate::linalg::{at, jacobi_eigen};
+
+/// Default relative tolerance τ for the rank decision on C_k(r).
+pub const DEFAULT_RANK_TOLERANCE: f64 = 1e-9;
+
+/// Index of C_ab (a ≥ b) in the packed lower triangle.
+#[inline(always)]
+fn tri(a: usize, b: usize) -> usize {
+    a * (a + 1) / 2 + b
+}
+
+/// The window of candidate onsets and its sufficient statistics.
+#[derive(Debug, Clone)]
+pub(crate) struct WindowBank {
+    n: usize,
+    m: usize,
+    p: usize,
+    /// Number of slots: w (moving window) or 1 (known profile).
+    slots: usize,
+    /// s: the youngest admissible onset is k − s.
+    min_lag: u64,
+    known: bool,
+    tolerance: f64,
+    kinds: Vec<Onset>,
+    first: Option<u64>,
+    /// Onset r held by each slot.
+    onset: Vec<u64>,
+    /// 1.0 for a slot holding an onset, 0.0 before the window has filled.
+    active: Vec<f64>,
+    /// Γ_k(r): component (i, j) of slot s at [(i + n j)·slots + s].
+    gamma: Vec<f64>,
+    gamma_next: Vec<f64>,
+    /// L_k⁻¹S_k(r): component (i, j) at [(i + p j)·slots + s].
+    signature: Vec<f64>,
+    /// C_k(r), packed lower triangle: [tri(a, b)·slots + s].
+    info: Vec<f64>,
+    /// d_k(r): [a·slots + s].
+    score: Vec<f64>,
+    // Per-step scratch over slots.
+    state_factor: Vec<f64>,
+    output_factor: Vec<f64>,
+    ldl: Vec<f64>,
+    inv_pivot: Vec<f64>,
+    solved: Vec<f64>,
+    stat: Vec<f64>,
+    rank: Vec<f64>,
+    cutoff: Vec<f64>,
+    // Eigen scratch for θ̂ when C(r̂) is deficient.
+    eig_a: Vec<f64>,
+    eig_vals: Vec<f64>,
+    eig_vecs: Vec<f64>,
+}
+
+/// The GLR decision quantities of one step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct WindowMax {
+    pub(crate) glr: f64,
+    pub(crate) onset: u64,
+    pub(crate) rank: usize,
+}
+
+impl WindowBank {
+    pub(crate) fn new(
+        n: usize,
+        m: usize,
+        p: usize,
+        window: usize,
+        min_lag: usize,
+        kinds: Vec<Onset>,
+        tolerance: f64,
+    ) -> Self {
+        let known = kinds.iter().all(|k| *k == Onset::Known);
+        let slots = if known { 1 } else { window };
+        let t = m * (m + 1) / 2;
+        let z = |len: usize| vec![0.0; len];
+        Self {
+            n,
+            m,
+            p,
+            slots,
+            min_lag: min_lag as u64,
+            known,
+            tolerance,
+            kinds,
+            first: None,
+            onset: vec![0; slots],
+            active: z(slots),
+            gamma: z(n * m * slots),
+            gamma_next: z(n * m * slots),
+            signature: z(p * m * slots),
+            info: z(t * slots),
+            score: z(m * slots),
+            state_factor: z(m * slots),
+            output_factor: z(m * slots),
+            ldl: z(t * slots),
+            inv_pivot: z(m * slots),
+            solved: z(m * slots),
+            stat: z(slots),
+            rank: z(slots),
+            cutoff: z(slots),
+            eig_a: z(m * m),
+            eig_vals: z(m),
+            eig_vecs: z(m * m),
+        }
+    }
+
+    fn slot_of(&self, onset: u64) -> usize {
+        let first = self.first.unwrap_or(0);
+        ((onset - first) % self.slots as u64) as usize
+    }
+
+    /// The slot holding onset r at the current step k, if r is still in the window.
+    pub(crate) fn slot_for(&self, onset: u64) -> Option<usize> {
+        let first = self.first?;
+        if onset < first {
+            return None;
+        }
+        let s = self.slot_of(onset);
+        (self.active[s] != 0.0 && self.onset[s] == onset).then_some(s)
+    }
+
+    /// Starts the bank at the first sample k0 with onset k0 (Γ_{k0}(k0) = 0: an impulse
+    /// entering X_{k0} cannot be told from the initial-state error covered by P_0).
+    pub(crate) fn start(&mut self, k0: u64) {
+        self.first = Some(k0);
+        self.onset[0] = k0;
+        self.active[0] = 1.0;
+    }
+
+    /// Per-slot profile factors at step k: a_j(k − r) and b_j(k − r).
+    fn compute_factors(&mut self, k: u64) {
+        let slots = self.slots;
+        for (j, kind) in self.kinds.iter().enumerate() {
+            let sf = &mut self.state_factor[j * slots..(j + 1) * slots];
+            let of = &mut self.output_factor[j * slots..(j + 1) * slots];
+            for s in 0..slots {
+                let lag = k.wrapping_sub(self.onset[s]);
+                sf[s] = self.active[s] * kind.state_factor(lag);
+                of[s] = self.active[s] * kind.output_factor(lag);
+            }
+        }
+    }
+
+    /// Measurement step k: whitened signatures L⁻¹S_k(r) = (L⁻¹H_k)Γ_k(r) + b(k−r)L⁻¹Φ̃_k
+    /// and the accumulation of C_k(r), d_k(r) (eqs. (32)-(33) from j = r).
+    ///
+    /// `h_white` is L⁻¹H_k (p×n), `phi_white` is L⁻¹Φ̃_k (p×m), `eps_white` is L⁻¹ε_k.
+    pub(crate) fn accumulate(
+        &mut self,
+        k: u64,
+        h_white: &[f64],
+        phi_white: &[f64],
+        eps_white: &[f64],
+    ) {
+        self.compute_factors(k);
+        let (n, m, p, w) = (self.n, self.m, self.p, self.slots);
+        for j in 0..m {
+            let of = &self.output_factor[j * w..(j + 1) * w];
+            for i in 0..p {
+                let dst = &mut self.signature[(i + p * j) * w..(i + p * j + 1) * w];
+                let phi = phi_white[at(p, i, j)];
+                for (d, f) in dst.iter_mut().zip(of) {
+                    *d = phi * f;
+                }
+                for l in 0..n {
+                    let h = h_white[at(p, i, l)];
+                    let g = &self.gamma[(l + n * j) * w..(l + n * j + 1) * w];
+                    for (d, g) in dst.iter_mut().zip(g) {
+                        *d += h * g;
+                    }
+                }
+            }
+        }
+        for a in 0..m {
+            for b in 0..=a {
+                let c = &mut self.info[tri(a, b) * w..(tri(a, b) + 1) * w];
+                for i in 0..p {
+                    let sa = &self.signature[(i + p * a) * w..(i + p * a + 1) * w];
+                    let sb = &self.signature[(i + p * b) * w..(i + p * b + 1) * w];
+                    for ((c, x), y) in c.iter_mut().zip(sa).zip(sb) {
+                        *c += x * y;
+                    }
+                }
+            }
+            let d = &mut self.score[a * w..(a + 1) * w];
+            for (i, e) in eps_white.iter().enumerate().take(p) {
+                let sa = &self.signature[(i + p * a) * w..(i + p * a + 1) * w];
+                for (d, x) in d.iter_mut().zip(sa) {
+                    *d += x * e;
+                }
+            }
+        }
+    }
+
+    /// d_k(r)ᵀC_k(r)⁺d_k(r) and rank C_k(r) for every slot (batched LDLᵀ with dropped
+    /// pivots, vectorised over slots), then the maximum over admissible onsets.
+    pub(crate) fn maximize(&mut self, k: u64) -> Option<WindowMax> {
+        let (m, w) = (self.m, self.slots);
+        // Rank cut-off per slot: τ·max_a C_aa.
+        self.cutoff.iter_mut().for_each(|c| *c = 0.0);
+        for a in 0..m {
+            let caa = &self.info[tri(a, a) * w..(tri(a, a) + 1) * w];
+            for (c, x) in self.cutoff.iter_mut().zip(caa) {
+                *c = c.max(*x);
+            }
+        }
+        let tol = self.tolerance;
+        self.cutoff.iter_mut().for_each(|c| *c *= tol);
+        self.stat.iter_mut().for_each(|x| *x = 0.0);
+        self.rank.iter_mut().for_each(|x| *x = 0.0);
+        for j in 0..m {
+            // D_j = C_jj − Σ_{q<j} L_jq² D_q
+            self.ldl[tri(j, j) * w..(tri(j, j) + 1) * w]
+                .copy_from_slice(&self.info[tri(j, j) * w..(tri(j, j) + 1) * w]);
+            for q in 0..j {
+                let (head, tail) = self.ldl.split_at_mut(tri(j, j) * w);
+                let djj = &mut tail[..w];
+                let ljq = &head[tri(j, q) * w..(tri(j, q) + 1) * w];
+                let dq = &head[tri(q, q) * w..(tri(q, q) + 1) * w];
+                for ((d, l), dd) in djj.iter_mut().zip(ljq).zip(dq) {
+                    *d -= l * l * dd;
+                }
+            }
+            {
+                let djj = &self.ldl[tri(j, j) * w..(tri(j, j) + 1) * w];
+                let inv = &mut self.inv_pivot[j * w..(j + 1) * w];
+                for (((iv, d), c), r) in inv
+                    .iter_mut()
+                    .zip(djj)
+                    .zip(&self.cutoff)
+                    .zip(self.rank.iter_mut())
+                {
+                    let keep = *d > *c && *d > 0.0;
+                    *iv = if keep { 1.0 / d } else { 0.0 };
+                    *r += if keep { 1.0 } else { 0.0 };
+                }
+            }
+            // L_ij = (C_ij − Σ_{q<j} L_iq L_jq D_q) / D_j for i > j (0 for a dropped pivot).
+            for i in (j + 1)..m {
+                self.ldl[tri(i, j) * w..(tri(i, j) + 1) * w]
+                    .copy_from_slice(&self.info[tri(i, j) * w..(tri(i, j) + 1) * w]);
+                for q in 0..j {
+                    let (head, tail) = self.ldl.split_at_mut(tri(i, j) * w);
+                    let lij = &mut tail[..w];
+                    let liq = &head[tri(i, q) * w..(tri(i, q) + 1) * w];
+                    let ljq = &head[tri(j, q) * w..(tri(j, q) + 1) * w];
+                    let dq = &head[tri(q, q) * w..(tri(q, q) + 1) * w];
+                    for (((x, a), b), d) in lij.iter_mut().zip(liq).zip(ljq).zip(dq) {
+                        *x -= a * b * d;
+                    }
+                }
+                let inv = &self.inv_pivot[j * w..(j + 1) * w];
+                let lij = &mut self.ldl[tri(i, j) * w..(tri(i, j) + 1) * w];
+                for (x, iv) in lij.iter_mut().zip(inv) {
+                    *x *= iv;
+                }
+            }
+        }
+        // z = L⁻¹d (unit lower triangular), statistic Σ_j z_j²/D_j over kept pivots.
+        for j in 0..m {
+            let (done, rest) = self.solved.split_at_mut(j * w);
+            let zj = &mut rest[..w];
+            zj.copy_from_slice(&self.score[j * w..(j + 1) * w]);
+            for q in 0..j {
+                let zq = &done[q * w..(q + 1) * w];
+                let ljq = &self.ldl[tri(j, q) * w..(tri(j, q) + 1) * w];
+                for ((z, l), x) in zj.iter_mut().zip(ljq).zip(zq) {
+                    *z -= l * x;
+                }
+            }
+            let inv = &self.inv_pivot[j * w..(j + 1) * w];
+            for ((st, z), iv) in self.stat.iter_mut().zip(zj.iter()).zip(inv) {
+                *st += z * z * iv;
+            }
+        }
+        self.best(k)
+    }
+
+    /// Earliest onset with the largest statistic among r ∈ {max(k−w+1, k0), …, k − s}.
+    fn best(&self, k: u64) -> Option<WindowMax> {
+        let first = self.first?;
+        if self.known {
+            return Some(WindowMax {
+                glr: self.stat[0],
+                onset: first,
+                rank: self.rank[0] as usize,
+            });
+        }
+        let newest = k.checked_sub(self.min_lag)?;
+        let oldest = (k + 1).saturating_sub(self.slots as u64).max(first);
+        if newest < oldest {
+            return None;
+        }
+        let mut best: Option<WindowMax> = None;
+        let mut s = self.slot_of(oldest);
+        for r in oldest..=newest {
+            let v = self.stat[s];
+            if best.is_none_or(|b| v > b.glr) {
+                best = Some(WindowMax {
+                    glr: v,
+                    onset: r,
+                    rank: self.rank[s] as usize,
+                });
+            }
+            s += 1;
+            if s == self.slots {
+                s = 0;
+            }
+        }
+        best
+    }
+
+    /// θ̂ = C_k(r)⁺d_k(r) for the slot holding onset r (eq. (34)); false when r is not in
+    /// the window.
+    pub(crate) fn magnitude(&mut self, onset: u64, out: &mut [f64]) -> bool {
+        let Some(s) = self.slot_for(onset) else {
+            return false;
+        };
+        let (m, w) = (self.m, self.slots);
+        if self.rank[s] as usize == m {
+            // Back-substitution on the slot's LDLᵀ: θ = L⁻ᵀ D⁻¹ z.
+            for j in 0..m {
+                out[j] = self.solved[j * w + s] * self.inv_pivot[j * w + s];
+            }
+            for j in (0..m).rev() {
+                let mut v = out[j];
+                for i in (j + 1)..m {
+                    v -= self.ldl[tri(i, j) * w + s] * out[i];
+                }
+                out[j] = v;
+            }
+        } else {
+            for a in 0..m {
+                for b in 0..=a {
+                    let c = self.info[tri(a, b) * w + s];
+                    self.eig_a[at(m, a, b)] = c;
+                    self.eig_a[at(m, b, a)] = c;
+                }
+            }
+            jacobi_eigen(&mut self.eig_a, m, &mut self.eig_vals, &mut self.eig_vecs);
+            let lmax = self.eig_vals.iter().fold(0.0_f64, |a, b| a.max(*b));
+            let cut = self.tolerance * lmax;
+            out.iter_mut().for_each(|x| *x = 0.0);
+            for e in 0..m {
+                let lam = self.eig_vals[e];
+                if lam > cut && lam > 0.0 {
+                    let v = &self.eig_vecs[e * m..(e + 1) * m];
+                    let proj: f64 = (0..m).map(|a| v[a] * self.score[a * w + s]).sum();
+                    for a in 0..m {
+                        out[a] += v[a] * proj / lam;
+                    }
+                }
+            }
+        }
+        true
+    }
+
+    /// Time update k → k+1 (eq. (46)): Γ_{k+1}(r) = A_kΓ_k(r) + a(k−r)Ψ̃_k − b(k−r)F_kK_kΦ̃_k,
+    /// then the onset k − w + 1 leaves the window and onset k + 1 enters it with
+    /// Γ_{k+1}(k+1) = Ψ_k(k+1) and C = 0, d = 0.
+    ///
+    /// `closed_loop` is A_k (n×n), `psi` is Ψ̃_k (n×m), `fk_phi` is F_kK_kΦ̃_k (n×m).
+    /// After a predict-only step `fk_phi` is zero and the factors are recomputed here.
+    pub(crate) fn time_update(
+        &mut self,
+        k: u64,
+        closed_loop: &[f64],
+        psi: &[f64],
+        fk_phi: &[f64],
+        recompute_factors: bool,
+    ) {
+        if recompute_factors {
+            self.compute_factors(k);
+        }
+        let (n, m, w) = (self.n, self.m, self.slots);
+        for j in 0..m {
+            let sf = &self.state_factor[j * w..(j + 1) * w];
+            let of = &self.output_factor[j * w..(j + 1) * w];
+            for i in 0..n {
+                let dst = &mut self.gamma_next[(i + n * j) * w..(i + n * j + 1) * w];
+                let (ps, fp) = (psi[at(n, i, j)], fk_phi[at(n, i, j)]);
+                for ((d, a), b) in dst.iter_mut().zip(sf).zip(of) {
+                    *d = ps * a - fp * b;
+                }
+                for l in 0..n {
+                    let a = closed_loop[at(n, i, l)];
+                    let g = &self.gamma[(l + n * j) * w..(l + n * j + 1) * w];
+                    for (d, g) in dst.iter_mut().zip(g) {
+                        *d += a * g;
+                    }
+                }
+            }
+        }
+        std::mem::swap(&mut self.gamma, &mut self.gamma_next);
+        if self.known {
+            return;
+        }
+        let next = k + 1;
+        let s = self.slot_of(next);
+        self.onset[s] = next;
+        self.active[s] = 1.0;
+        for (j, kind) in self.kinds.iter().enumerate() {
+            let entry = kind.entry_factor();
+            for i in 0..n {
+                self.gamma[(i + n * j) * w + s] = entry * psi[at(n, i, j)];
+            }
+        }
+        for a in 0..m {
+            self.score[a * w + s] = 0.0;
+        }
+        for t in 0..m * (m + 1) / 2 {
+            self.info[t * w + s] = 0.0;
+        }
+    }
+
+    /// Copies Γ(r) for onset r (n×m, column-major): Γ_{k+1}(r) after a step at k.
+    pub(crate) fn gamma(&self, onset: u64, out: &mut [f64]) -> bool {
+        let Some(s) = self.slot_for(onset) else {
+            return false;
+        };
+        for (c, o) in out.iter_mut().enumerate().take(self.n * self.m) {
+            *o = self.gamma[c * self.slots + s];
+        }
+        true
+    }
+
+    /// Copies L_k⁻¹S_k(r) (p×m) of the last measured step.
+    pub(crate) fn whitened_signature(&self, onset: u64, out: &mut [f64]) -> bool {
+        let Some(s) = self.slot_for(onset) else {
+            return false;
+        };
+        for (c, o) in out.iter_mut().enumerate().take(self.p * self.m) {
+            *o = self.signature[c * self.slots + s];
+        }
+        true
+    }
+
+    /// Copies C_k(r) (m×m, full symmetric, column-major) and d_k(r).
+    pub(crate) fn information(&self, onset: u64, info: &mut [f64], score: &mut [f64]) -> bool {
+        let Some(s) = self.slot_for(onset) else {
+            return false;
+        };
+        let (m, w) = (self.m, self.slots);
+        for a in 0..m {
+            for b in 0..=a {
+                let c = self.info[tri(a, b) * w + s];
+                info[at(m, a, b)] = c;
+                info[at(m, b, a)] = c;
+            }
+            score[a] = self.score[a * w + s];
+        }
+        true
+    }
+
+    /// Rank of C_k(r) decided at the last [`WindowBank::maximize`].
+    pub(crate) fn rank_of(&self, onset: u64) -> Option<usize> {
+        self.slot_for(onset).map(|s| self.rank[s] as usize)
+    }
+
+    /// Statistic of onset r at the last [`WindowBank::maximize`].
+    pub(crate) fn statistic_of(&self, onset: u64) -> Option<f64> {
+        self.slot_for(onset).map(|s| self.stat[s])
+    }
+}

@@ -1,0 +1,22 @@
+#![doc = include_str!("../README.md")]
+#![warn(missing_docs)]
+
+pub mod alarm;
+pub mod detector;
+pub mod error;
+pub mod fault;
+mod glr;
+pub mod innovation;
+pub mod isolation;
+mod linalg;
+pub mod model;
+pub mod threshold;
+
+pub use alarm::{AlarmSettings, AlarmState, AlarmTransition};
+pub use detector::{Detector, Sample, StepOutput, WindowSettings};
+pub use error::{ModelError, StepError};
+pub use fault::{Column, ColumnFn, Fault, FaultDictionary, Onset};
+pub use glr::DEFAULT_RANK_TOLERANCE;
+pub use innovation::InnovationFilter;
+pub use isolation::{FisherStatistics, TestStatistic};
+pub use model::{Dims, Lpv, LpvMatrix, Signals, StateSpace, SystemMatrices};
