@@ -65,6 +65,8 @@ pub(crate) struct WindowBank {
     onset: Vec<u64>,
     /// 1.0 for a slot holding an onset, 0.0 before the window has filled.
     active: Vec<f64>,
+    /// k − r for each slot at the current step, as f64 (for ramp factors).
+    lag: Vec<f64>,
     /// Γ_k(r): component (i, j) of slot s at [(i + n j)·slots + s].
     gamma: Vec<f64>,
     gamma_next: Vec<f64>,
@@ -123,6 +125,7 @@ impl WindowBank {
             first: None,
             onset: vec![0; slots],
             active: z(slots),
+            lag: z(slots),
             gamma: z(n * m * slots),
             gamma_next: z(n * m * slots),
             signature: z(p * m * slots),
@@ -163,18 +166,37 @@ impl WindowBank {
         self.first = Some(k0);
         self.onset[0] = k0;
         self.active[0] = 1.0;
+        self.lag[0] = 0.0;
     }
 
-    /// Per-slot profile factors at step k: a_j(k − r) and b_j(k − r).
+    /// Per-slot profile factors at step k: a_j(k − r) and b_j(k − r), one loop per
+    /// profile kind so that the loops over slots are branch-free.
     fn compute_factors(&mut self, k: u64) {
         let slots = self.slots;
+        let newest = self.first.map(|_| self.slot_of(k));
         for (j, kind) in self.kinds.iter().enumerate() {
             let sf = &mut self.state_factor[j * slots..(j + 1) * slots];
             let of = &mut self.output_factor[j * slots..(j + 1) * slots];
-            for s in 0..slots {
-                let lag = k.wrapping_sub(self.onset[s]);
-                sf[s] = self.active[s] * kind.state_factor(lag);
-                of[s] = self.active[s] * kind.output_factor(lag);
+            match kind {
+                Onset::Step | Onset::Known => {
+                    sf.copy_from_slice(&self.active);
+                    of.copy_from_slice(&self.active);
+                }
+                Onset::Ramp => {
+                    for ((f, a), l) in sf.iter_mut().zip(&self.active).zip(&self.lag) {
+                        *f = a * (l + 1.0);
+                    }
+                    of.copy_from_slice(sf);
+                }
+                Onset::Impulse => {
+                    sf.fill(0.0);
+                    of.fill(0.0);
+                    if let Some(s) = newest {
+                        if self.onset[s] == k {
+                            of[s] = self.active[s];
+                        }
+                    }
+                }
             }
         }
     }
@@ -209,6 +231,10 @@ impl WindowBank {
                 }
             }
         }
+        if m == 2 && p == 1 {
+            self.accumulate_m2_p1(eps_white[0]);
+            return;
+        }
         for a in 0..m {
             for b in 0..=a {
                 let c = &mut self.info[tri(a, b) * w..(tri(a, b) + 1) * w];
@@ -230,9 +256,88 @@ impl WindowBank {
         }
     }
 
+    /// C and d updates for m = 2, p = 1 in one pass (same operations and order as the
+    /// generic loops).
+    fn accumulate_m2_p1(&mut self, e: f64) {
+        let w = self.slots;
+        let (s0, s1) = self.signature.split_at(w);
+        let (c00, rest) = self.info.split_at_mut(w);
+        let (c10, c11) = rest.split_at_mut(w);
+        let (d0, d1) = self.score.split_at_mut(w);
+        let (s1, c10, c11, d1) = (&s1[..w], &mut c10[..w], &mut c11[..w], &mut d1[..w]);
+        for s in 0..w {
+            let (x0, x1) = (s0[s], s1[s]);
+            c00[s] += x0 * x0;
+            c10[s] += x1 * x0;
+            c11[s] += x1 * x1;
+            d0[s] += x0 * e;
+            d1[s] += x1 * e;
+        }
+    }
+
     /// d_k(r)ᵀC_k(r)⁺d_k(r) and rank C_k(r) for every slot (batched LDLᵀ with dropped
     /// pivots, vectorised over slots), then the maximum over admissible onsets.
     pub(crate) fn maximize(&mut self, k: u64) -> Option<WindowMax> {
+        match self.m {
+            1 => self.statistic_m1(),
+            2 => self.statistic_m2(),
+            _ => self.statistic_generic(),
+        }
+        self.best(k)
+    }
+
+    /// The LDLᵀ statistic for m = 1 in one pass: d²/C where C > τ·C.
+    fn statistic_m1(&mut self) {
+        let w = self.slots;
+        let tol = self.tolerance;
+        let (c, d) = (&self.info[..w], &self.score[..w]);
+        let it = self
+            .stat
+            .iter_mut()
+            .zip(self.rank.iter_mut())
+            .zip(&mut self.inv_pivot[..w]);
+        for (((st, rk), iv), (c, z)) in it.zip(c.iter().zip(d)) {
+            let keep = *c > tol * c && *c > 0.0;
+            *iv = if keep { 1.0 / c } else { 0.0 };
+            *rk = if keep { 1.0 } else { 0.0 };
+            *st = z * z * *iv;
+        }
+        self.solved[..w].copy_from_slice(&self.score[..w]);
+    }
+
+    /// The LDLᵀ statistic for m = 2 fused into one branch-free pass over the slots; the
+    /// same operations, in the same order, as [`WindowBank::statistic_generic`].
+    fn statistic_m2(&mut self) {
+        let w = self.slots;
+        let tol = self.tolerance;
+        let (c00, rest) = self.info.split_at(w);
+        let (c10, c11) = rest.split_at(w);
+        let (d0, d1) = self.score.split_at(w);
+        let (iv0, iv1) = self.inv_pivot.split_at_mut(w);
+        let (z0, z1) = self.solved.split_at_mut(w);
+        let l10 = &mut self.ldl[w..2 * w];
+        let (c11, d1, iv1, z1) = (&c11[..w], &d1[..w], &mut iv1[..w], &mut z1[..w]);
+        for s in 0..w {
+            let cut = c00[s].max(c11[s]) * tol;
+            let keep0 = c00[s] > cut && c00[s] > 0.0;
+            let inv0 = if keep0 { 1.0 / c00[s] } else { 0.0 };
+            let l = c10[s] * inv0;
+            let dd1 = c11[s] - l * l * c00[s];
+            let keep1 = dd1 > cut && dd1 > 0.0;
+            let inv1 = if keep1 { 1.0 / dd1 } else { 0.0 };
+            let y1 = d1[s] - l * d0[s];
+            iv0[s] = inv0;
+            iv1[s] = inv1;
+            l10[s] = l;
+            z0[s] = d0[s];
+            z1[s] = y1;
+            self.rank[s] = f64::from(u8::from(keep0)) + f64::from(u8::from(keep1));
+            self.stat[s] = d0[s] * d0[s] * inv0 + y1 * y1 * inv1;
+        }
+    }
+
+    /// The batched LDLᵀ statistic for any m.
+    fn statistic_generic(&mut self) {
         let (m, w) = (self.m, self.slots);
         // Rank cut-off per slot: τ·max_a C_aa.
         self.cutoff.iter_mut().for_each(|c| *c = 0.0);
@@ -311,7 +416,6 @@ impl WindowBank {
                 *st += z * z * iv;
             }
         }
-        self.best(k)
     }
 
     /// Earliest onset with the largest statistic among r ∈ {max(k−w+1, k0), …, k − s}.
@@ -329,23 +433,29 @@ impl WindowBank {
         if newest < oldest {
             return None;
         }
-        let mut best: Option<WindowMax> = None;
-        let mut s = self.slot_of(oldest);
-        for r in oldest..=newest {
-            let v = self.stat[s];
-            if best.is_none_or(|b| v > b.glr) {
-                best = Some(WindowMax {
-                    glr: v,
-                    onset: r,
-                    rank: self.rank[s] as usize,
-                });
-            }
-            s += 1;
-            if s == self.slots {
-                s = 0;
+        // Scan the ring in onset order as two contiguous runs; strict `>` keeps the
+        // earliest onset on ties.
+        let start = self.slot_of(oldest);
+        let count = (newest - oldest + 1) as usize;
+        let first_run = count.min(self.slots - start);
+        let mut best_value = f64::NEG_INFINITY;
+        let mut best_pos = 0usize;
+        for (pos, v) in self.stat[start..start + first_run]
+            .iter()
+            .chain(&self.stat[..count - first_run])
+            .enumerate()
+        {
+            if *v > best_value {
+                best_value = *v;
+                best_pos = pos;
             }
         }
-        best
+        let slot = (start + best_pos) % self.slots;
+        Some(WindowMax {
+            glr: self.stat[slot],
+            onset: oldest + best_pos as u64,
+            rank: self.rank[slot] as usize,
+        })
     }
 
     /// θ̂ = C_k(r)⁺d_k(r) for the slot holding onset r (eq. (34)); false when r is not in
@@ -414,22 +524,20 @@ impl WindowBank {
         for j in 0..m {
             let sf = &self.state_factor[j * w..(j + 1) * w];
             let of = &self.output_factor[j * w..(j + 1) * w];
-            for i in 0..n {
-                let dst = &mut self.gamma_next[(i + n * j) * w..(i + n * j + 1) * w];
-                let (ps, fp) = (psi[at(n, i, j)], fk_phi[at(n, i, j)]);
-                for ((d, a), b) in dst.iter_mut().zip(sf).zip(of) {
-                    *d = ps * a - fp * b;
-                }
-                for l in 0..n {
-                    let a = closed_loop[at(n, i, l)];
-                    let g = &self.gamma[(l + n * j) * w..(l + n * j + 1) * w];
-                    for (d, g) in dst.iter_mut().zip(g) {
-                        *d += a * g;
-                    }
-                }
+            let src = &self.gamma[n * j * w..n * (j + 1) * w];
+            let dst = &mut self.gamma_next[n * j * w..n * (j + 1) * w];
+            let psi_j = &psi[n * j..n * (j + 1)];
+            let fkphi_j = &fk_phi[n * j..n * (j + 1)];
+            match n {
+                1 => gamma_column::<1>(closed_loop, psi_j, fkphi_j, sf, of, src, dst),
+                2 => gamma_column::<2>(closed_loop, psi_j, fkphi_j, sf, of, src, dst),
+                3 => gamma_column::<3>(closed_loop, psi_j, fkphi_j, sf, of, src, dst),
+                4 => gamma_column::<4>(closed_loop, psi_j, fkphi_j, sf, of, src, dst),
+                _ => gamma_column_generic(n, closed_loop, psi_j, fkphi_j, sf, of, src, dst),
             }
         }
         std::mem::swap(&mut self.gamma, &mut self.gamma_next);
+        self.lag.iter_mut().for_each(|l| *l += 1.0);
         if self.known {
             return;
         }
@@ -437,6 +545,7 @@ impl WindowBank {
         let s = self.slot_of(next);
         self.onset[s] = next;
         self.active[s] = 1.0;
+        self.lag[s] = 0.0;
         for (j, kind) in self.kinds.iter().enumerate() {
             let entry = kind.entry_factor();
             for i in 0..n {
@@ -498,5 +607,157 @@ impl WindowBank {
     /// Statistic of onset r at the last [`WindowBank::maximize`].
     pub(crate) fn statistic_of(&self, onset: u64) -> Option<f64> {
         self.slot_for(onset).map(|s| self.stat[s])
+    }
+}
+
+/// Column j of eq. (46) for every slot, n known at compile time: one fused pass.
+/// `src`/`dst` hold the n rows of Γ(:, j) as n consecutive arrays over the slots.
+fn gamma_column<const N: usize>(
+    a: &[f64],
+    psi: &[f64],
+    fk_phi: &[f64],
+    sf: &[f64],
+    of: &[f64],
+    src: &[f64],
+    dst: &mut [f64],
+) {
+    let w = sf.len();
+    let of = &of[..w];
+    let rows: [&[f64]; N] = std::array::from_fn(|l| &src[l * w..(l + 1) * w]);
+    let mut coef = [[0.0; N]; N];
+    for (i, row) in coef.iter_mut().enumerate() {
+        for (l, c) in row.iter_mut().enumerate() {
+            *c = a[at(N, i, l)];
+        }
+    }
+    for (i, out) in dst.chunks_exact_mut(w).take(N).enumerate() {
+        let (ps, fp, ci) = (psi[i], fk_phi[i], coef[i]);
+        for s in 0..w {
+            let mut v = ps * sf[s] - fp * of[s];
+            for l in 0..N {
+                v += ci[l] * rows[l][s];
+            }
+            out[s] = v;
+        }
+    }
+}
+
+/// Column j of eq. (46) for any n, in the same operation order as [`gamma_column`].
+#[allow(clippy::too_many_arguments)]
+fn gamma_column_generic(
+    n: usize,
+    a: &[f64],
+    psi: &[f64],
+    fk_phi: &[f64],
+    sf: &[f64],
+    of: &[f64],
+    src: &[f64],
+    dst: &mut [f64],
+) {
+    let w = sf.len();
+    for (i, out) in dst.chunks_exact_mut(w).take(n).enumerate() {
+        let (ps, fp) = (psi[i], fk_phi[i]);
+        for ((d, f), g) in out.iter_mut().zip(sf).zip(of) {
+            *d = ps * f - fp * g;
+        }
+        for l in 0..n {
+            let c = a[at(n, i, l)];
+            for (d, g) in out.iter_mut().zip(&src[l * w..(l + 1) * w]) {
+                *d += c * g;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A bank with random C, d in every slot (PSD, some slots rank-deficient).
+    fn bank_with_random_stats(m: usize, seed: u64) -> WindowBank {
+        let w = 37;
+        let mut b = WindowBank::new(1, m, 1, w, 0, vec![Onset::Step; m], DEFAULT_RANK_TOLERANCE);
+        let mut x = seed;
+        let mut rnd = || {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((x >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        };
+        for s in 0..w {
+            let rank = s % (m + 1);
+            let vecs: Vec<Vec<f64>> = (0..rank).map(|_| (0..m).map(|_| rnd()).collect()).collect();
+            for a in 0..m {
+                for c in 0..=a {
+                    b.info[tri(a, c) * w + s] = vecs.iter().map(|v| v[a] * v[c]).sum();
+                }
+                // d in range(C): d = C z.
+            }
+            let z: Vec<f64> = (0..m).map(|_| rnd()).collect();
+            for a in 0..m {
+                b.score[a * w + s] = (0..m)
+                    .map(|c| {
+                        let (hi, lo) = if a >= c { (a, c) } else { (c, a) };
+                        b.info[tri(hi, lo) * w + s] * z[c]
+                    })
+                    .sum();
+            }
+        }
+        b
+    }
+
+    #[test]
+    fn fused_m1_m2_statistics_equal_generic_ldl_bit_for_bit() {
+        for m in [1, 2] {
+            let mut fast = bank_with_random_stats(m, 3);
+            let mut slow = fast.clone();
+            if m == 1 {
+                fast.statistic_m1();
+            } else {
+                fast.statistic_m2();
+            }
+            slow.statistic_generic();
+            assert_eq!(fast.stat, slow.stat, "m = {m}");
+            assert_eq!(fast.rank, slow.rank, "m = {m}");
+        }
+    }
+
+    /// The dropped-pivot LDLᵀ statistic equals dᵀC⁺d from the eigendecomposition for
+    /// rank-deficient C with d ∈ range(C) (the generalised-inverse argument in the
+    /// module docs).
+    #[test]
+    fn dropped_pivot_ldl_equals_moore_penrose_quadratic_form() {
+        for m in [2, 3, 5] {
+            let mut b = bank_with_random_stats(m, 11);
+            b.statistic_generic();
+            let w = b.slots;
+            for s in 0..w {
+                let mut a = vec![0.0; m * m];
+                for i in 0..m {
+                    for j in 0..=i {
+                        a[at(m, i, j)] = b.info[tri(i, j) * w + s];
+                        a[at(m, j, i)] = b.info[tri(i, j) * w + s];
+                    }
+                }
+                let (mut vals, mut vecs) = (vec![0.0; m], vec![0.0; m * m]);
+                jacobi_eigen(&mut a, m, &mut vals, &mut vecs);
+                let lmax = vals.iter().fold(0.0_f64, |x, y| x.max(*y));
+                let mut q = 0.0;
+                let mut rank = 0;
+                for e in 0..m {
+                    if vals[e] > 1e-9 * lmax && vals[e] > 0.0 {
+                        let proj: f64 = (0..m).map(|i| vecs[e * m + i] * b.score[i * w + s]).sum();
+                        q += proj * proj / vals[e];
+                        rank += 1;
+                    }
+                }
+                assert_eq!(b.rank[s] as usize, rank, "m = {m}, slot {s}");
+                assert!(
+                    (b.stat[s] - q).abs() <= 1e-9 * (1.0 + q),
+                    "m = {m}, slot {s}: {} vs {q}",
+                    b.stat[s]
+                );
+            }
+        }
     }
 }

@@ -1,0 +1,1302 @@
+//! Result records: the JSON objects glrmon publishes on Zenoh (`glrmon/<channel>/<type>`),
+//! writes to MCAP and prints in replay's JSONL.
+//!
+//! Every record is one JSON object with `"type"` (`stat`, `alarm`, `alarm_end`,
+//! `diagnosis`, `error`) and `"channel"`; [`Record`] is the serde enum internally tagged by
+//! `type`. Letters and equation numbers are those of Zhang & Basseville (2014): l_k the GLR
+//! statistic, r̂ the onset, θ̂ the magnitude, ε_k the innovation.
+//!
+//! # Floats
+//!
+//! [`encode_json`] prints every float in the shortest form that parses back to the same
+//! bits (`0.1 + 0.2` → `0.30000000000000004`, `1e-300` → `1e-300`), and [`decode_record`]
+//! parses correctly rounded, so a round trip is bit-identical. Negative zero is printed as
+//! `-0.0` and comes back as `-0.0`.
+//!
+//! JSON has no NaN or infinity. `null` has exactly one meaning per field and is written
+//! only for `None`: `glr: null` means no onset is admissible yet (the window is not
+//! filled), `t: null` that the sample had no time, `threshold: null` that none is
+//! configured. A non-finite float anywhere, inside an `Option` or not, is an
+//! [`EncodeError`] naming the field, rather than a silent `null` (serde_json's own
+//! behaviour) that would read as "no onset". Callers turn "no value" into `None` first.
+//!
+//! # Compatibility
+//!
+//! Decoding ignores unknown fields, so a consumer built against this version reads
+//! records from a newer glrmon that added fields. Fields of type `Option` may be absent
+//! or `null`; all others are required.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+
+use crate::error::{DecodeError, DecodeErrorKind, EncodeError, EncodeErrorKind, ErrorCode, Stage};
+use crate::key::result_key;
+use crate::sample::{is_out_of_range, write_json};
+
+/// Per-sample detection statistic (`type: "stat"`), on Zenoh decimated as configured.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Stat {
+    /// Channel name.
+    pub channel: String,
+    /// Sample index k.
+    pub k: u64,
+    /// Sample time in seconds, if the sample carried one.
+    pub t: Option<f64>,
+    /// GLR statistic l_k = max over the window of θ̂ᵀ C_k(r) θ̂ (Zhang & Basseville 2014,
+    /// eq. (13)); `None` (`null`) while no onset is admissible.
+    pub glr: Option<f64>,
+    /// Maximising onset r̂, if any.
+    pub onset: Option<u64>,
+    /// Magnitude estimate θ̂ at r̂, one value per fault in dictionary order; empty while
+    /// no onset is admissible.
+    pub magnitude: Vec<f64>,
+    /// Numerical rank of C_k(r̂) (fewer than the number of faults when some are not
+    /// separable over the window).
+    pub rank: usize,
+    /// Innovation ε_k of the Kalman filter, one value per output.
+    pub innovation: Vec<f64>,
+    /// Alarm threshold on l_k, if configured.
+    pub threshold: Option<f64>,
+}
+
+/// Minmax / sensitivity isolation test for one fault at an alarm.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IsolationResult {
+    /// Fault name from the channel's dictionary.
+    pub fault: String,
+    /// Minmax test statistic for this fault.
+    pub minmax: f64,
+    /// Sensitivity test statistic for this fault.
+    pub sensitivity: f64,
+    /// Threshold the statistics are compared with.
+    pub threshold: f64,
+    /// Whether the fault is declared present.
+    pub isolated: bool,
+}
+
+/// An alarm: l_k crossed the threshold (`type: "alarm"`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Alarm {
+    /// Channel name.
+    pub channel: String,
+    /// Sample index at which the alarm was raised.
+    pub k: u64,
+    /// Sample time in seconds, if known.
+    pub t: Option<f64>,
+    /// GLR statistic l_k at the alarm.
+    pub glr: f64,
+    /// Threshold it crossed.
+    pub threshold: f64,
+    /// Estimated onset r̂.
+    pub onset: u64,
+    /// Magnitude estimate θ̂, in the order of `faults`.
+    pub magnitude: Vec<f64>,
+    /// Isolation test per fault.
+    pub isolation: Vec<IsolationResult>,
+    /// Fault names, in the order of `magnitude`.
+    pub faults: Vec<String>,
+}
+
+/// The end of an alarm episode (`type: "alarm_end"`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AlarmEnd {
+    /// Channel name.
+    pub channel: String,
+    /// Sample index at which the episode ended.
+    pub k: u64,
+    /// Sample time in seconds, if known.
+    pub t: Option<f64>,
+    /// Onset r̂ reported when the episode began.
+    pub onset: u64,
+    /// Length of the episode in samples.
+    pub duration: u64,
+    /// Largest l_k during the episode.
+    pub peak_glr: f64,
+}
+
+/// A sparse diagnosis over a span of samples (`type: "diagnosis"`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Diagnosis {
+    /// Channel name.
+    pub channel: String,
+    /// Sample index at which the diagnosis was made.
+    pub k: u64,
+    /// First sample index of the span.
+    pub from: u64,
+    /// Last sample index of the span.
+    pub to: u64,
+    /// Names of the faults selected by the Lasso.
+    pub support: Vec<String>,
+    /// Least-squares refit of the magnitude on the support, by fault name.
+    pub estimate: BTreeMap<String, f64>,
+    /// The λ chosen.
+    pub lambda: f64,
+    /// The range of λ over which the support stays the same, `[low, high]`. Both ends
+    /// must be finite: an unbounded end is clamped by the caller (e.g. to λ_max).
+    pub plateau: [f64; 2],
+    /// Residual used: [`Diagnosis::RESIDUAL_KALMAN`] or [`Diagnosis::RESIDUAL_KITANIDIS`].
+    pub residual: String,
+    /// Support size at each λ along the regularisation path.
+    pub path_support_sizes: Vec<usize>,
+}
+
+impl Diagnosis {
+    /// `residual` value: Kalman innovations of the fault-free model.
+    pub const RESIDUAL_KALMAN: &'static str = "kalman";
+    /// `residual` value: Kitanidis filter residuals (unknown-input decoupled).
+    pub const RESIDUAL_KITANIDIS: &'static str = "kitanidis";
+}
+
+/// A counted rejection or failure (`type: "error"`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ErrorRecord {
+    /// Channel name.
+    pub channel: String,
+    /// Sample index, if known.
+    pub k: Option<u64>,
+    /// Catalogue code, serialized as its snake_case label.
+    pub code: ErrorCode,
+    /// What, where and why, e.g. `channel "pump3": field y has 3 values, model expects 4`.
+    pub message: String,
+    /// Where in the data flow it happened.
+    pub stage: Stage,
+}
+
+impl ErrorRecord {
+    /// The record of a decode error, with its channel, code and message.
+    ///
+    /// # Examples
+    ///
+    /// ```
+    /// use glrmon_wire::{decode_samples, DecodeLimits, ErrorRecord, Stage};
+    ///
+    /// let err = decode_samples("pump3", b"{}", &DecodeLimits::default(), &mut Vec::new())
+    ///     .unwrap_err();
+    /// let rec = ErrorRecord::from_decode_error(&err, None, Stage::Receiving);
+    /// assert_eq!(rec.code.as_str(), "missing_field");
+    /// assert_eq!(rec.message, r#"channel "pump3": field y is missing"#);
+    /// ```
+    #[must_use]
+    pub fn from_decode_error(err: &DecodeError, k: Option<u64>, stage: Stage) -> Self {
+        ErrorRecord {
+            channel: err.channel.clone(),
+            k,
+            code: err.code(),
+            message: err.to_string(),
+            stage,
+        }
+    }
+}
+
+/// Any result record, tagged in JSON by `"type"`.
+///
+/// Prefer [`encode_json`] to serializing with serde directly: serde_json writes a NaN as
+/// `null` without complaint, `encode_json` refuses it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+#[non_exhaustive]
+pub enum Record {
+    /// `"stat"`.
+    Stat(Stat),
+    /// `"alarm"`.
+    Alarm(Alarm),
+    /// `"alarm_end"`.
+    AlarmEnd(AlarmEnd),
+    /// `"diagnosis"`.
+    Diagnosis(Diagnosis),
+    /// `"error"`.
+    Error(ErrorRecord),
+}
+
+/// Every record `type`, in the order of [`Record`]'s variants.
+pub const RECORD_KINDS: [&str; 5] = ["stat", "alarm", "alarm_end", "diagnosis", "error"];
+
+impl Record {
+    /// The record's channel.
+    #[must_use]
+    pub fn channel(&self) -> &str {
+        match self {
+            Record::Stat(r) => &r.channel,
+            Record::Alarm(r) => &r.channel,
+            Record::AlarmEnd(r) => &r.channel,
+            Record::Diagnosis(r) => &r.channel,
+            Record::Error(r) => &r.channel,
+        }
+    }
+
+    /// The `type` tag: `stat`, `alarm`, `alarm_end`, `diagnosis` or `error`.
+    #[must_use]
+    pub const fn kind_str(&self) -> &'static str {
+        match self {
+            Record::Stat(_) => "stat",
+            Record::Alarm(_) => "alarm",
+            Record::AlarmEnd(_) => "alarm_end",
+            Record::Diagnosis(_) => "diagnosis",
+            Record::Error(_) => "error",
+        }
+    }
+
+    /// The sample index the record refers to, if known.
+    #[must_use]
+    pub const fn k(&self) -> Option<u64> {
+        match self {
+            Record::Stat(r) => Some(r.k),
+            Record::Alarm(r) => Some(r.k),
+            Record::AlarmEnd(r) => Some(r.k),
+            Record::Diagnosis(r) => Some(r.k),
+            Record::Error(r) => r.k,
+        }
+    }
+
+    /// The Zenoh key to publish it on: `glrmon/<channel>/<type>`.
+    #[must_use]
+    pub fn key(&self) -> String {
+        result_key(self.channel(), self.kind_str())
+    }
+
+    /// Checks that every float is finite, i.e. that the record can be JSON.
+    ///
+    /// # Errors
+    ///
+    /// [`EncodeErrorKind::NonFinite`] naming the first offending field: `glr`,
+    /// `magnitude[1]`, `isolation[0].minmax`, `estimate.leak`, `plateau[1]`, …
+    pub fn check_finite(&self) -> Result<(), EncodeError> {
+        let c = FiniteCheck {
+            channel: self.channel(),
+        };
+        match self {
+            Record::Stat(r) => {
+                c.opt("t", r.t)?;
+                c.opt("glr", r.glr)?;
+                c.all("magnitude", &r.magnitude)?;
+                c.all("innovation", &r.innovation)?;
+                c.opt("threshold", r.threshold)
+            }
+            Record::Alarm(r) => {
+                c.opt("t", r.t)?;
+                c.one("glr", r.glr)?;
+                c.one("threshold", r.threshold)?;
+                c.all("magnitude", &r.magnitude)?;
+                for (i, iso) in r.isolation.iter().enumerate() {
+                    c.one(&format!("isolation[{i}].minmax"), iso.minmax)?;
+                    c.one(&format!("isolation[{i}].sensitivity"), iso.sensitivity)?;
+                    c.one(&format!("isolation[{i}].threshold"), iso.threshold)?;
+                }
+                Ok(())
+            }
+            Record::AlarmEnd(r) => {
+                c.opt("t", r.t)?;
+                c.one("peak_glr", r.peak_glr)
+            }
+            Record::Diagnosis(r) => {
+                for (name, v) in &r.estimate {
+                    c.one(&format!("estimate.{name}"), *v)?;
+                }
+                c.one("lambda", r.lambda)?;
+                c.all("plateau", &r.plateau)
+            }
+            Record::Error(_) => Ok(()),
+        }
+    }
+}
+
+struct FiniteCheck<'a> {
+    channel: &'a str,
+}
+
+impl FiniteCheck<'_> {
+    fn one(&self, field: &str, value: f64) -> Result<(), EncodeError> {
+        if value.is_finite() {
+            Ok(())
+        } else {
+            Err(EncodeError {
+                channel: self.channel.to_owned(),
+                field: field.to_owned(),
+                kind: EncodeErrorKind::NonFinite { value },
+            })
+        }
+    }
+
+    fn opt(&self, field: &str, value: Option<f64>) -> Result<(), EncodeError> {
+        value.map_or(Ok(()), |v| self.one(field, v))
+    }
+
+    fn all(&self, field: &str, values: &[f64]) -> Result<(), EncodeError> {
+        match values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            None => Ok(()),
+            Some((i, v)) => self.one(&format!("{field}[{i}]"), *v),
+        }
+    }
+}
+
+macro_rules! record_from {
+    ($($ty:ident => $variant:ident),*) => {$(
+        impl From<$ty> for Record {
+            fn from(r: $ty) -> Self {
+                Record::$variant(r)
+            }
+        }
+    )*};
+}
+record_from!(Stat => Stat, Alarm => Alarm, AlarmEnd => AlarmEnd, Diagnosis => Diagnosis, ErrorRecord => Error);
+
+/// Appends `record` as one JSON object (no trailing newline) to `out`.
+///
+/// Floats are printed shortest-roundtrip, so [`decode_record`] gives back bit-identical
+/// values; `None` is written as `null`.
+///
+/// # Errors
+///
+/// [`EncodeErrorKind::NonFinite`] if any float is NaN or infinite (see the module docs
+/// for why this is not mapped to `null`); `out` is then unchanged.
+///
+/// # Examples
+///
+/// ```
+/// use glrmon_wire::{encode_json, AlarmEnd, Record};
+///
+/// let rec = Record::from(AlarmEnd {
+///     channel: "pump3".into(), k: 140, t: None, onset: 101, duration: 39, peak_glr: 87.5,
+/// });
+/// let mut out = Vec::new();
+/// encode_json(&rec, &mut out)?;
+/// assert_eq!(out, br#"{"type":"alarm_end","channel":"pump3","k":140,"t":null,"onset":101,"duration":39,"peak_glr":87.5}"#);
+/// # Ok::<(), glrmon_wire::EncodeError>(())
+/// ```
+pub fn encode_json(record: &Record, out: &mut Vec<u8>) -> Result<(), EncodeError> {
+    record.check_finite()?;
+    write_json(record.channel(), record, out)
+}
+
+/// Decodes one record from a JSON object.
+///
+/// Unknown fields are ignored (see the module docs on compatibility); the payload must be
+/// an object, not an array.
+///
+/// # Errors
+///
+/// A [`DecodeError`] whose `channel` is the record's if it could be read (empty
+/// otherwise) and whose `field` names the fault: `InvalidJson`, `NonFinite` (a number
+/// such as `1e999`), `MissingField`, `WrongType` (including an unknown `type`, `code` or
+/// `stage`), `WrongDimension` (`plateau` not of length 2), `DuplicateField`.
+///
+/// # Examples
+///
+/// ```
+/// use glrmon_wire::{decode_record, ErrorCode, Record};
+///
+/// let rec = decode_record(br#"{"type":"error","channel":"pump3","k":null,"code":"gap",
+///                             "message":"2 samples missing","stage":"processing"}"#)?;
+/// assert_eq!(rec.kind_str(), "error");
+///
+/// let err = decode_record(br#"{"type":"alarm_end","channel":"pump3","k":1}"#).unwrap_err();
+/// assert_eq!(err.code(), ErrorCode::MissingField);
+/// assert_eq!(err.to_string(), r#"channel "pump3": field onset is missing"#);
+/// # Ok::<(), glrmon_wire::DecodeError>(())
+/// ```
+pub fn decode_record(payload: &[u8]) -> Result<Record, DecodeError> {
+    // serde's internally tagged enums also accept `["stat", …]` arrays; the wire format
+    // is objects only.
+    let first = payload.iter().copied().find(|b| !b.is_ascii_whitespace());
+    if first != Some(b'{') {
+        return Err(
+            match serde_json::from_slice::<serde::de::IgnoredAny>(payload) {
+                Err(err) => syntax_error(&err),
+                Ok(_) => DecodeError::new("", None, wrong_type(EXPECT_RECORD)),
+            },
+        );
+    }
+    serde_json::from_slice(payload).map_err(|err| record_error(payload, &err))
+}
+
+const EXPECT_RECORD: &str = "a record object";
+
+fn wrong_type(expected: &str) -> DecodeErrorKind {
+    DecodeErrorKind::WrongType {
+        expected: expected.to_owned(),
+    }
+}
+
+fn syntax_error(err: &serde_json::Error) -> DecodeError {
+    let kind = if is_out_of_range(err) {
+        DecodeErrorKind::NonFinite
+    } else {
+        DecodeErrorKind::InvalidJson(err.to_string())
+    };
+    DecodeError::new("", None, kind)
+}
+
+/// Turns serde's error into a located one. serde's derive reports "invalid type: string,
+/// expected f64" without saying which field, so on this (rare) path the payload is parsed
+/// again as a `Value` and checked against the schema below, which names the field.
+fn record_error(payload: &[u8], err: &serde_json::Error) -> DecodeError {
+    if err.classify() != serde_json::error::Category::Data {
+        return syntax_error(err);
+    }
+    let Ok(Value::Object(obj)) = serde_json::from_slice::<Value>(payload) else {
+        return DecodeError::new("", None, wrong_type(EXPECT_RECORD));
+    };
+    let channel = obj
+        .get("channel")
+        .and_then(Value::as_str)
+        .unwrap_or_default();
+    let msg = err.to_string();
+    if let Some(name) = msg
+        .strip_prefix("duplicate field `")
+        .and_then(|m| m.split('`').next())
+    {
+        return DecodeError::new(
+            channel,
+            Some(name.to_owned()),
+            DecodeErrorKind::DuplicateField,
+        );
+    }
+    match locate(&obj) {
+        Some((field, kind)) => DecodeError::new(channel, Some(field), kind),
+        // Only reachable if the schema below drifted from the structs; the test
+        // `schema_matches_serialized_fields` guards against that.
+        None => DecodeError::new(
+            channel,
+            None,
+            wrong_type(&format!("a valid record ({msg})")),
+        ),
+    }
+}
+
+/// The JSON type of one record field, for locating decode errors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Ty {
+    U64,
+    OptU64,
+    Usize,
+    F64,
+    OptF64,
+    Str,
+    Bool,
+    VecF64,
+    VecUsize,
+    VecStr,
+    MapF64,
+    Pair,
+    Isolation,
+    Code,
+    Stage,
+}
+
+impl Ty {
+    const fn optional(self) -> bool {
+        matches!(self, Ty::OptU64 | Ty::OptF64)
+    }
+
+    const fn expected(self) -> &'static str {
+        match self {
+            Ty::U64 | Ty::Usize => "a non-negative integer",
+            Ty::OptU64 => "a non-negative integer or null",
+            Ty::F64 => "a number",
+            Ty::OptF64 => "a number or null",
+            Ty::Str => "a string",
+            Ty::Bool => "a boolean",
+            Ty::VecF64 => "an array of numbers",
+            Ty::VecUsize => "an array of non-negative integers",
+            Ty::VecStr => "an array of strings",
+            Ty::MapF64 => "an object of numbers",
+            Ty::Pair => "an array of 2 numbers",
+            Ty::Isolation => "an array of isolation objects",
+            Ty::Code => "an error code (invalid_json, wrong_type, …, numerical)",
+            Ty::Stage => "one of receiving, processing, sending",
+        }
+    }
+}
+
+type Schema = &'static [(&'static str, Ty)];
+
+const STAT_SCHEMA: Schema = &[
+    ("channel", Ty::Str),
+    ("k", Ty::U64),
+    ("t", Ty::OptF64),
+    ("glr", Ty::OptF64),
+    ("onset", Ty::OptU64),
+    ("magnitude", Ty::VecF64),
+    ("rank", Ty::Usize),
+    ("innovation", Ty::VecF64),
+    ("threshold", Ty::OptF64),
+];
+const ALARM_SCHEMA: Schema = &[
+    ("channel", Ty::Str),
+    ("k", Ty::U64),
+    ("t", Ty::OptF64),
+    ("glr", Ty::F64),
+    ("threshold", Ty::F64),
+    ("onset", Ty::U64),
+    ("magnitude", Ty::VecF64),
+    ("isolation", Ty::Isolation),
+    ("faults", Ty::VecStr),
+];
+const ISOLATION_SCHEMA: Schema = &[
+    ("fault", Ty::Str),
+    ("minmax", Ty::F64),
+    ("sensitivity", Ty::F64),
+    ("threshold", Ty::F64),
+    ("isolated", Ty::Bool),
+];
+const ALARM_END_SCHEMA: Schema = &[
+    ("channel", Ty::Str),
+    ("k", Ty::U64),
+    ("t", Ty::OptF64),
+    ("onset", Ty::U64),
+    ("duration", Ty::U64),
+    ("peak_glr", Ty::F64),
+];
+const DIAGNOSIS_SCHEMA: Schema = &[
+    ("channel", Ty::Str),
+    ("k", Ty::U64),
+    ("from", Ty::U64),
+    ("to", Ty::U64),
+    ("support", Ty::VecStr),
+    ("estimate", Ty::MapF64),
+    ("lambda", Ty::F64),
+    ("plateau", Ty::Pair),
+    ("residual", Ty::Str),
+    ("path_support_sizes", Ty::VecUsize),
+];
+const ERROR_SCHEMA: Schema = &[
+    ("channel", Ty::Str),
+    ("k", Ty::OptU64),
+    ("code", Ty::Code),
+    ("message", Ty::Str),
+    ("stage", Ty::Stage),
+];
+
+fn schema(kind: &str) -> Option<Schema> {
+    match kind {
+        "stat" => Some(STAT_SCHEMA),
+        "alarm" => Some(ALARM_SCHEMA),
+        "alarm_end" => Some(ALARM_END_SCHEMA),
+        "diagnosis" => Some(DIAGNOSIS_SCHEMA),
+        "error" => Some(ERROR_SCHEMA),
+        _ => None,
+    }
+}
+
+type Located = (String, DecodeErrorKind);
+
+fn locate(obj: &Map<String, Value>) -> Option<Located> {
+    const EXPECT_KIND: &str = "one of stat, alarm, alarm_end, diagnosis, error";
+    let kind = match obj.get("type") {
+        None => return Some(("type".to_owned(), DecodeErrorKind::MissingField)),
+        Some(Value::String(kind)) => kind,
+        Some(_) => return Some(("type".to_owned(), wrong_type(EXPECT_KIND))),
+    };
+    let Some(fields) = schema(kind) else {
+        return Some(("type".to_owned(), wrong_type(EXPECT_KIND)));
+    };
+    locate_in(obj, "", fields)
+}
+
+fn locate_in(obj: &Map<String, Value>, prefix: &str, fields: Schema) -> Option<Located> {
+    fields.iter().find_map(|&(name, ty)| {
+        let path = format!("{prefix}{name}");
+        match obj.get(name) {
+            None | Some(Value::Null) if ty.optional() => None,
+            None => Some((path, DecodeErrorKind::MissingField)),
+            Some(value) => locate_value(value, path, ty),
+        }
+    })
+}
+
+fn locate_value(value: &Value, path: String, ty: Ty) -> Option<Located> {
+    let ok = match ty {
+        Ty::U64 | Ty::OptU64 => value.as_u64().is_some(),
+        Ty::Usize => value.as_u64().is_some_and(|v| usize::try_from(v).is_ok()),
+        Ty::F64 | Ty::OptF64 => value.is_number(),
+        Ty::Str => value.is_string(),
+        Ty::Bool => value.is_boolean(),
+        Ty::VecF64 => return locate_elements(value, path, ty, Ty::F64),
+        Ty::VecUsize => return locate_elements(value, path, ty, Ty::Usize),
+        Ty::VecStr => return locate_elements(value, path, ty, Ty::Str),
+        Ty::Pair => match value.as_array() {
+            Some(pair) if pair.len() != 2 => {
+                return Some((
+                    path,
+                    DecodeErrorKind::WrongDimension {
+                        expected: 2,
+                        got: pair.len(),
+                    },
+                ));
+            }
+            _ => return locate_elements(value, path, ty, Ty::F64),
+        },
+        Ty::MapF64 => match value.as_object() {
+            Some(map) => {
+                return map
+                    .iter()
+                    .find_map(|(name, v)| locate_value(v, format!("{path}.{name}"), Ty::F64));
+            }
+            None => false,
+        },
+        Ty::Isolation => match value.as_array() {
+            Some(items) => {
+                return items
+                    .iter()
+                    .enumerate()
+                    .find_map(|(i, item)| match item.as_object() {
+                        Some(obj) => locate_in(obj, &format!("{path}[{i}]."), ISOLATION_SCHEMA),
+                        None => Some((format!("{path}[{i}]"), wrong_type("an isolation object"))),
+                    });
+            }
+            None => false,
+        },
+        Ty::Code => ErrorCode::deserialize(value).is_ok(),
+        Ty::Stage => Stage::deserialize(value).is_ok(),
+    };
+    (!ok).then(|| (path, wrong_type(ty.expected())))
+}
+
+fn locate_elements(value: &Value, path: String, ty: Ty, element: Ty) -> Option<Located> {
+    match value.as_array() {
+        Some(items) => items
+            .iter()
+            .enumerate()
+            .find_map(|(i, item)| locate_value(item, format!("{path}[{i}]"), element)),
+        None => Some((path, wrong_type(ty.expected()))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn stat() -> Stat {
+        Stat {
+            channel: "pump3".into(),
+            k: 12,
+            t: Some(1_732_200_000.25),
+            glr: Some(0.1 + 0.2),
+            onset: Some(7),
+            magnitude: vec![1e-300, -0.0, 2.5],
+            rank: 3,
+            innovation: vec![0.1, -1.7976931348623157e308],
+            threshold: Some(13.8),
+        }
+    }
+
+    fn stat_before_onset() -> Stat {
+        Stat {
+            glr: None,
+            onset: None,
+            magnitude: vec![],
+            rank: 0,
+            t: None,
+            threshold: None,
+            ..stat()
+        }
+    }
+
+    fn alarm() -> Alarm {
+        Alarm {
+            channel: "pump3".into(),
+            k: 140,
+            t: None,
+            glr: 87.5,
+            threshold: 13.8,
+            onset: 101,
+            magnitude: vec![0.3, 5e-324],
+            isolation: vec![
+                IsolationResult {
+                    fault: "leak".into(),
+                    minmax: 40.25,
+                    sensitivity: 39.0,
+                    threshold: 6.63,
+                    isolated: true,
+                },
+                IsolationResult {
+                    fault: "bias".into(),
+                    minmax: 0.125,
+                    sensitivity: 1.0 / 3.0,
+                    threshold: 6.63,
+                    isolated: false,
+                },
+            ],
+            faults: vec!["leak".into(), "bias".into()],
+        }
+    }
+
+    fn alarm_end() -> AlarmEnd {
+        AlarmEnd {
+            channel: "pump3".into(),
+            k: 180,
+            t: Some(-0.0),
+            onset: 101,
+            duration: 40,
+            peak_glr: 91.0,
+        }
+    }
+
+    fn diagnosis() -> Diagnosis {
+        Diagnosis {
+            channel: "pump3".into(),
+            k: 200,
+            from: 90,
+            to: 200,
+            support: vec!["leak".into()],
+            estimate: BTreeMap::from([("leak".into(), 0.1 + 0.7), ("bias".into(), -1e-300)]),
+            lambda: 0.05,
+            plateau: [0.01, 0.2],
+            residual: Diagnosis::RESIDUAL_KITANIDIS.into(),
+            path_support_sizes: vec![0, 1, 1, 2],
+        }
+    }
+
+    fn error() -> ErrorRecord {
+        ErrorRecord {
+            channel: "pump3".into(),
+            k: Some(3),
+            code: ErrorCode::WrongDimension,
+            message: r#"channel "pump3": field y has 3 values, model expects 4"#.into(),
+            stage: Stage::Processing,
+        }
+    }
+
+    fn all_records() -> Vec<Record> {
+        vec![
+            stat().into(),
+            stat_before_onset().into(),
+            alarm().into(),
+            alarm_end().into(),
+            diagnosis().into(),
+            error().into(),
+            ErrorRecord { k: None, ..error() }.into(),
+        ]
+    }
+
+    /// Every float of a record as bits, in field order, to compare bit-identically
+    /// (`PartialEq` on f64 says 0.0 == -0.0).
+    fn float_bits(record: &Record) -> Vec<u64> {
+        let mut out = Vec::new();
+        let mut push = |v: f64| out.push(v.to_bits());
+        match record {
+            Record::Stat(r) => {
+                r.t.into_iter()
+                    .chain(r.glr)
+                    .chain(r.threshold)
+                    .for_each(&mut push);
+                r.magnitude
+                    .iter()
+                    .chain(&r.innovation)
+                    .copied()
+                    .for_each(&mut push);
+            }
+            Record::Alarm(r) => {
+                r.t.into_iter()
+                    .chain([r.glr, r.threshold])
+                    .for_each(&mut push);
+                r.magnitude.iter().copied().for_each(&mut push);
+                r.isolation.iter().for_each(|i| {
+                    [i.minmax, i.sensitivity, i.threshold]
+                        .into_iter()
+                        .for_each(&mut push)
+                });
+            }
+            Record::AlarmEnd(r) => r.t.into_iter().chain([r.peak_glr]).for_each(&mut push),
+            Record::Diagnosis(r) => {
+                r.estimate
+                    .values()
+                    .copied()
+                    .chain([r.lambda])
+                    .chain(r.plateau)
+                    .for_each(&mut push);
+            }
+            Record::Error(_) => {}
+        }
+        out
+    }
+
+    fn json(record: &Record) -> String {
+        let mut out = Vec::new();
+        encode_json(record, &mut out).unwrap();
+        String::from_utf8(out).unwrap()
+    }
+
+    fn round_trip(record: &Record) -> Record {
+        let mut out = Vec::new();
+        encode_json(record, &mut out).unwrap();
+        decode_record(&out).unwrap()
+    }
+
+    #[test]
+    fn every_record_round_trips_bit_identically() {
+        for record in all_records() {
+            let back = round_trip(&record);
+            assert_eq!(back, record);
+            assert_eq!(float_bits(&back), float_bits(&record), "{record:?}");
+        }
+    }
+
+    #[test]
+    fn stat_json_shape() {
+        let mut out = Vec::new();
+        encode_json(&stat().into(), &mut out).unwrap();
+        assert_eq!(
+            std::str::from_utf8(&out).unwrap(),
+            r#"{"type":"stat","channel":"pump3","k":12,"t":1732200000.25,"glr":0.30000000000000004,"onset":7,"magnitude":[1e-300,-0.0,2.5],"rank":3,"innovation":[0.1,-1.7976931348623157e+308],"threshold":13.8}"#
+        );
+        out.clear();
+        encode_json(&stat_before_onset().into(), &mut out).unwrap();
+        let text = std::str::from_utf8(&out).unwrap();
+        assert!(
+            text.contains(r#""glr":null,"onset":null,"magnitude":[]"#),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn alarm_diagnosis_and_error_json_shape() {
+        let mut out = Vec::new();
+        encode_json(&alarm().into(), &mut out).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        assert!(
+            text.starts_with(r#"{"type":"alarm","channel":"pump3","k":140,"t":null,"glr":87.5"#),
+            "{text}"
+        );
+        assert!(text.contains(r#""isolation":[{"fault":"leak","minmax":40.25,"sensitivity":39.0,"threshold":6.63,"isolated":true},"#), "{text}");
+        assert!(text.ends_with(r#""faults":["leak","bias"]}"#), "{text}");
+
+        let text = json(&diagnosis().into());
+        assert!(
+            text.contains(r#""estimate":{"bias":-1e-300,"leak":0.7999999999999999}"#),
+            "{text}"
+        );
+        assert!(
+            text.contains(
+                r#""plateau":[0.01,0.2],"residual":"kitanidis","path_support_sizes":[0,1,1,2]"#
+            ),
+            "{text}"
+        );
+
+        let text = json(&ErrorRecord { k: None, ..error() }.into());
+        assert!(
+            text.starts_with(
+                r#"{"type":"error","channel":"pump3","k":null,"code":"wrong_dimension""#
+            ),
+            "{text}"
+        );
+        assert!(text.ends_with(r#""stage":"processing"}"#), "{text}");
+    }
+
+    #[test]
+    fn channel_kind_and_key() {
+        let kinds: Vec<_> = all_records().iter().map(Record::kind_str).collect();
+        assert_eq!(
+            kinds,
+            [
+                "stat",
+                "stat",
+                "alarm",
+                "alarm_end",
+                "diagnosis",
+                "error",
+                "error"
+            ]
+        );
+        for record in all_records() {
+            assert_eq!(record.channel(), "pump3");
+            assert!(RECORD_KINDS.contains(&record.kind_str()));
+            assert_eq!(record.key(), format!("glrmon/pump3/{}", record.kind_str()));
+            let json: Value = serde_json::from_str(&json(&record)).unwrap();
+            assert_eq!(json["type"], record.kind_str());
+            assert_eq!(json["channel"], "pump3");
+        }
+        assert_eq!(Record::from(alarm()).k(), Some(140));
+        assert_eq!(Record::from(ErrorRecord { k: None, ..error() }).k(), None);
+    }
+
+    #[test]
+    fn non_finite_floats_are_encode_errors_even_in_options() {
+        let cases: Vec<(Record, &str)> = vec![
+            (
+                Stat {
+                    glr: Some(f64::NAN),
+                    ..stat()
+                }
+                .into(),
+                "glr",
+            ),
+            (
+                Stat {
+                    t: Some(f64::INFINITY),
+                    ..stat()
+                }
+                .into(),
+                "t",
+            ),
+            (
+                Stat {
+                    threshold: Some(f64::NEG_INFINITY),
+                    ..stat()
+                }
+                .into(),
+                "threshold",
+            ),
+            (
+                Stat {
+                    innovation: vec![0.0, f64::NAN],
+                    ..stat()
+                }
+                .into(),
+                "innovation[1]",
+            ),
+            (
+                Alarm {
+                    magnitude: vec![f64::NAN],
+                    ..alarm()
+                }
+                .into(),
+                "magnitude[0]",
+            ),
+            (
+                Alarm {
+                    isolation: vec![IsolationResult {
+                        sensitivity: f64::INFINITY,
+                        ..alarm().isolation[0].clone()
+                    }],
+                    ..alarm()
+                }
+                .into(),
+                "isolation[0].sensitivity",
+            ),
+            (
+                AlarmEnd {
+                    peak_glr: f64::NAN,
+                    ..alarm_end()
+                }
+                .into(),
+                "peak_glr",
+            ),
+            (
+                Diagnosis {
+                    estimate: BTreeMap::from([("leak".into(), f64::NAN)]),
+                    ..diagnosis()
+                }
+                .into(),
+                "estimate.leak",
+            ),
+            (
+                Diagnosis {
+                    plateau: [0.0, f64::INFINITY],
+                    ..diagnosis()
+                }
+                .into(),
+                "plateau[1]",
+            ),
+            (
+                Diagnosis {
+                    lambda: f64::NAN,
+                    ..diagnosis()
+                }
+                .into(),
+                "lambda",
+            ),
+        ];
+        for (record, field) in cases {
+            let mut out = b"keep".to_vec();
+            let err = encode_json(&record, &mut out).unwrap_err();
+            assert_eq!(err.field, field);
+            assert_eq!(err.code(), ErrorCode::NonFinite);
+            assert!(
+                err.to_string()
+                    .starts_with(&format!(r#"channel "pump3": field {field} is "#)),
+                "{err}"
+            );
+            assert_eq!(out, b"keep", "out unchanged on error");
+        }
+    }
+
+    #[test]
+    fn decode_ignores_unknown_fields_and_accepts_absent_options() {
+        let rec = decode_record(
+            br#"{"type":"alarm_end","channel":"c","k":1,"onset":0,"duration":2,"peak_glr":3,"future":{"x":[1]}}"#,
+        )
+        .unwrap();
+        assert_eq!(
+            rec,
+            Record::AlarmEnd(AlarmEnd {
+                channel: "c".into(),
+                k: 1,
+                t: None,
+                onset: 0,
+                duration: 2,
+                peak_glr: 3.0
+            })
+        );
+    }
+
+    fn assert_record_error(json: &str, code: ErrorCode, field: Option<&str>) -> DecodeError {
+        let err = decode_record(json.as_bytes()).unwrap_err();
+        assert_eq!(err.code(), code, "{json}: {err}");
+        assert_eq!(err.field.as_deref(), field, "{json}: {err}");
+        if let Some(field) = field {
+            assert!(
+                err.to_string().contains(&format!("field {field} ")),
+                "{err}"
+            );
+        }
+        err
+    }
+
+    #[test]
+    fn decode_errors_name_channel_and_field() {
+        let err = assert_record_error(
+            r#"{"type":"alarm","channel":"pump3","k":1,"t":null,"glr":"high","threshold":1,"onset":0,"magnitude":[],"isolation":[],"faults":[]}"#,
+            ErrorCode::WrongType,
+            Some("glr"),
+        );
+        assert_eq!(
+            err.to_string(),
+            r#"channel "pump3": field glr has the wrong type: expected a number"#
+        );
+        assert_record_error(
+            r#"{"channel":"pump3"}"#,
+            ErrorCode::MissingField,
+            Some("type"),
+        );
+        assert_record_error(
+            r#"{"type":"status","channel":"pump3"}"#,
+            ErrorCode::WrongType,
+            Some("type"),
+        );
+        assert_record_error(
+            r#"{"type":"error","k":1}"#,
+            ErrorCode::MissingField,
+            Some("channel"),
+        );
+        let err = assert_record_error(
+            r#"{"type":"error","channel":"pump3","k":-1,"code":"gap","message":"","stage":"sending"}"#,
+            ErrorCode::WrongType,
+            Some("k"),
+        );
+        assert_eq!(err.channel, "pump3");
+        assert_record_error(
+            r#"{"type":"error","channel":"pump3","code":"bogus","message":"","stage":"sending"}"#,
+            ErrorCode::WrongType,
+            Some("code"),
+        );
+        assert_record_error(
+            r#"{"type":"error","channel":"pump3","code":"gap","message":"","stage":"later"}"#,
+            ErrorCode::WrongType,
+            Some("stage"),
+        );
+        let mut alarm_json: Value = serde_json::from_str(&json(&alarm().into())).unwrap();
+        alarm_json["isolation"][1]["isolated"] = Value::from("yes");
+        assert_record_error(
+            &alarm_json.to_string(),
+            ErrorCode::WrongType,
+            Some("isolation[1].isolated"),
+        );
+        alarm_json["isolation"][1] = Value::from(3);
+        assert_record_error(
+            &alarm_json.to_string(),
+            ErrorCode::WrongType,
+            Some("isolation[1]"),
+        );
+
+        let mut diag: Value = serde_json::from_str(&json(&diagnosis().into())).unwrap();
+        diag["plateau"] = serde_json::json!([1.0, 2.0, 3.0]);
+        let err = assert_record_error(
+            &diag.to_string(),
+            ErrorCode::WrongDimension,
+            Some("plateau"),
+        );
+        assert_eq!(
+            err.kind,
+            DecodeErrorKind::WrongDimension {
+                expected: 2,
+                got: 3
+            }
+        );
+        diag["plateau"] = serde_json::json!([1.0, 2.0]);
+        diag["estimate"]["leak"] = Value::Null;
+        assert_record_error(
+            &diag.to_string(),
+            ErrorCode::WrongType,
+            Some("estimate.leak"),
+        );
+    }
+
+    #[test]
+    fn decode_syntax_and_shape_errors() {
+        assert_record_error("", ErrorCode::InvalidJson, None);
+        assert_record_error(r#"{"type":"stat""#, ErrorCode::InvalidJson, None);
+        assert_record_error(r#"{"type":"stat","glr":1e999}"#, ErrorCode::NonFinite, None);
+        assert_record_error("[1,2]", ErrorCode::WrongType, None);
+        assert_record_error(
+            r#"["error","c",null,"gap","m","sending"]"#,
+            ErrorCode::WrongType,
+            None,
+        );
+        assert_record_error("null", ErrorCode::WrongType, None);
+        assert_record_error(
+            r#"{"type":"alarm_end","channel":"c","k":1,"k":2,"onset":0,"duration":2,"peak_glr":3}"#,
+            ErrorCode::Duplicate,
+            Some("k"),
+        );
+    }
+
+    /// The error-locating schema lists exactly the fields each record serializes, and
+    /// a wrong-typed value in any of them is located there.
+    #[test]
+    fn schema_matches_serialized_fields() {
+        for record in all_records() {
+            let Value::Object(obj) = serde_json::from_str::<Value>(&json(&record)).unwrap() else {
+                panic!("record is not an object");
+            };
+            let fields = schema(record.kind_str()).unwrap();
+            let mut want: Vec<&str> = fields.iter().map(|(name, _)| *name).collect();
+            let mut got: Vec<&str> = obj
+                .keys()
+                .map(String::as_str)
+                .filter(|k| *k != "type")
+                .collect();
+            want.sort_unstable();
+            got.sort_unstable();
+            assert_eq!(got, want, "{}", record.kind_str());
+
+            for &(name, ty) in fields {
+                let mut bad = obj.clone();
+                let wrong = if ty == Ty::Str {
+                    Value::from(7)
+                } else {
+                    Value::from("x")
+                };
+                bad.insert(name.to_owned(), wrong);
+                let text = Value::Object(bad).to_string();
+                let err = decode_record(text.as_bytes()).unwrap_err();
+                assert_eq!(err.field.as_deref(), Some(name), "{text}: {err}");
+                assert_eq!(err.code(), ErrorCode::WrongType);
+
+                if !ty.optional() {
+                    let mut missing = obj.clone();
+                    missing.remove(name);
+                    let text = Value::Object(missing).to_string();
+                    let err = decode_record(text.as_bytes()).unwrap_err();
+                    assert_eq!(err.field.as_deref(), Some(name), "{text}: {err}");
+                    assert_eq!(err.code(), ErrorCode::MissingField);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn error_record_from_decode_error() {
+        let err = DecodeError::new("pump3", Some("y[2]".into()), DecodeErrorKind::NonFinite);
+        let rec = ErrorRecord::from_decode_error(&err, Some(9), Stage::Receiving);
+        assert_eq!(rec.code, ErrorCode::NonFinite);
+        assert_eq!(
+            rec.message,
+            r#"channel "pump3": field y[2] is not a finite number"#
+        );
+        assert_eq!(round_trip(&rec.clone().into()), Record::Error(rec));
+    }
+
+    fn finite_f64() -> impl Strategy<Value = f64> {
+        prop_oneof![
+            any::<u64>()
+                .prop_map(f64::from_bits)
+                .prop_filter("finite", |v| v.is_finite()),
+            any::<f64>().prop_filter("finite", |v| v.is_finite()),
+            Just(-0.0),
+        ]
+    }
+
+    fn floats() -> impl Strategy<Value = Vec<f64>> {
+        proptest::collection::vec(finite_f64(), 0..5)
+    }
+
+    fn arb_record() -> impl Strategy<Value = Record> {
+        let name = "[a-z_]{1,8}";
+        prop_oneof![
+            (
+                any::<u64>(),
+                proptest::option::of(finite_f64()),
+                proptest::option::of(finite_f64()),
+                floats(),
+                floats()
+            )
+                .prop_map(|(k, t, glr, magnitude, innovation)| Record::from(Stat {
+                    k,
+                    t,
+                    glr,
+                    onset: glr.map(|_| k / 2),
+                    rank: magnitude.len(),
+                    magnitude,
+                    innovation,
+                    ..stat()
+                })),
+            (
+                finite_f64(),
+                finite_f64(),
+                finite_f64(),
+                floats(),
+                proptest::bool::ANY,
+                name
+            )
+                .prop_map(|(glr, minmax, sensitivity, magnitude, isolated, fault)| {
+                    Record::from(Alarm {
+                        glr,
+                        magnitude,
+                        isolation: vec![IsolationResult {
+                            fault,
+                            minmax,
+                            sensitivity,
+                            threshold: glr,
+                            isolated,
+                        }],
+                        ..alarm()
+                    })
+                }),
+            (proptest::option::of(finite_f64()), finite_f64()).prop_map(|(t, peak_glr)| {
+                Record::from(AlarmEnd {
+                    t,
+                    peak_glr,
+                    ..alarm_end()
+                })
+            }),
+            (
+                proptest::collection::btree_map(name, finite_f64(), 0..4),
+                finite_f64(),
+                finite_f64(),
+                finite_f64()
+            )
+                .prop_map(|(estimate, lambda, lo, hi)| Record::from(Diagnosis {
+                    estimate,
+                    lambda,
+                    plateau: [lo, hi],
+                    ..diagnosis()
+                })),
+            (
+                proptest::option::of(any::<u64>()),
+                ".{0,20}",
+                proptest::sample::select(ErrorCode::ALL.to_vec())
+            )
+                .prop_map(|(k, message, code)| Record::from(ErrorRecord {
+                    k,
+                    message,
+                    code,
+                    ..error()
+                })),
+        ]
+    }
+
+    proptest! {
+        /// encode_json → decode_record is the identity, every float bit for bit,
+        /// over arbitrary finite bit patterns (subnormals, -0.0, extremes).
+        #[test]
+        fn record_round_trip_is_bit_identical(record in arb_record()) {
+            let back = round_trip(&record);
+            prop_assert_eq!(float_bits(&back), float_bits(&record));
+            prop_assert_eq!(back, record);
+        }
+    }
+}
