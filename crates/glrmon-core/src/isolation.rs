@@ -53,4 +53,8 @@ impl FisherStatistics {
             dof: a.len(),
         })
     }
+
+    pub fn sensitivity(&self, a: &[usize]) -> Result<TestStatistic, ()> {
+        let faa=self.f.select_rows(a).select_columns(a); let za=self.z.select_rows(a);
+        Ok(TestStatistic{value:(za.transpose()*faa.try_inverse().unwrap()*&za)[0],dof:a.len()}) }
 }

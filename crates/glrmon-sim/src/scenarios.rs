@@ -30,6 +30,12 @@ pub struct Scenario {
 }
 
 impl Scenario {
+    /// n, the number of states.
+    #[must_use]
+    pub fn model_states(&self) -> usize {
+        self.model.dims().states
+    }
+
     /// p, the number of outputs.
     #[must_use]
     pub fn model_outputs(&self) -> usize {

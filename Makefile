@@ -1,0 +1,46 @@
+# glrmon — the one entry point. `make help` lists the targets.
+SHELL := /bin/bash
+CARGO ?= cargo
+
+.DEFAULT_GOAL := help
+
+.PHONY: help deps build test fmt fmt-check lint unit doc check-deps demo bench
+
+help: ## list the targets
+	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-11s %s\n", $$1, $$2}'
+
+deps: ## check the toolchain (rustfmt, clippy); nothing else needs installing
+	@command -v $(CARGO) >/dev/null || { echo "cargo not found: install Rust (rustup)"; exit 1; }
+	@$(CARGO) fmt --version >/dev/null 2>&1 || rustup component add rustfmt
+	@$(CARGO) clippy --version >/dev/null 2>&1 || rustup component add clippy
+
+build: deps ## build everything (release)
+	$(CARGO) build --release --workspace
+
+test: deps fmt-check lint unit doc check-deps ## everything CI runs: fmt, clippy, all tests, docs, dependency rules
+
+fmt: ## format the code
+	$(CARGO) fmt --all
+
+fmt-check:
+	$(CARGO) fmt --all -- --check
+
+lint:
+	$(CARGO) clippy --workspace --all-targets -- -D warnings
+
+unit:
+	$(CARGO) test --workspace
+
+doc:
+	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --workspace --no-deps
+
+check-deps: ## glrmon-core's normal dependencies are nalgebra and thiserror only (ARCHITECTURE.md invariant)
+	@deps=$$($(CARGO) tree -p glrmon-core -e normal --depth 1 --prefix none | tail -n +2 | awk '{print $$1}' | sort -u | tr '\n' ' '); \
+	echo "glrmon-core depends on: $$deps"; \
+	for d in $$deps; do case $$d in nalgebra|thiserror) ;; *) echo "forbidden dependency of glrmon-core: $$d"; exit 1;; esac; done
+
+demo: ## the main job on built-in simulated channels with an injected fault
+	$(CARGO) run --release -q -p glrmon-cli -- demo
+
+bench: ## criterion benchmarks of the per-sample step (figures in docs/PERFORMANCE.md)
+	$(CARGO) bench -p glrmon-core --bench step
