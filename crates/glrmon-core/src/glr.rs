@@ -467,13 +467,13 @@ impl WindowBank {
         let (m, w) = (self.m, self.slots);
         if self.rank[s] as usize == m {
             // Back-substitution on the slot's LDLᵀ: θ = L⁻ᵀ D⁻¹ z.
-            for j in 0..m {
-                out[j] = self.solved[j * w + s] * self.inv_pivot[j * w + s];
+            for (j, o) in out.iter_mut().enumerate().take(m) {
+                *o = self.solved[j * w + s] * self.inv_pivot[j * w + s];
             }
             for j in (0..m).rev() {
                 let mut v = out[j];
-                for i in (j + 1)..m {
-                    v -= self.ldl[tri(i, j) * w + s] * out[i];
+                for (i, o) in out.iter().enumerate().take(m).skip(j + 1) {
+                    v -= self.ldl[tri(i, j) * w + s] * o;
                 }
                 out[j] = v;
             }

@@ -90,7 +90,7 @@ pub(crate) fn cholesky_in_place(a: &mut [f64], n: usize) -> bool {
         for k in 0..j {
             d -= a[at(n, j, k)] * a[at(n, j, k)];
         }
-        if !(d > 0.0) || !d.is_finite() {
+        if d.is_nan() || d <= 0.0 || !d.is_finite() {
             return false;
         }
         let ljj = d.sqrt();

@@ -13,7 +13,9 @@
 
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{AlarmSettings, AlarmState, AlarmTransition, Detector, StepError, StepOutput};
-use glrmon_wire::{Alarm, AlarmEnd, ErrorCode, ErrorRecord, IsolationResult, Record, Sample, Stage, Stat};
+use glrmon_wire::{
+    Alarm, AlarmEnd, ErrorCode, ErrorRecord, IsolationResult, Record, Sample, Stage, Stat,
+};
 
 /// An isolation test: a named group of faults tested against all others (minmax,
 /// Zhang & Basseville 2014 eq. (41)).
@@ -80,7 +82,12 @@ impl Monitor {
     /// A monitor of channel `channel` around `detector`.
     #[must_use]
     pub fn new(channel: &str, detector: Detector, settings: MonitorSettings) -> Self {
-        let fault_names: Vec<String> = detector.faults().faults().iter().map(|f| f.name.clone()).collect();
+        let fault_names: Vec<String> = detector
+            .faults()
+            .faults()
+            .iter()
+            .map(|f| f.name.clone())
+            .collect();
         let groups = if settings.groups.is_empty() {
             fault_names
                 .iter()
@@ -145,9 +152,17 @@ impl Monitor {
                 let (code, why) = if k + 1 == next {
                     (ErrorCode::Duplicate, "repeats the last sample's index")
                 } else {
-                    (ErrorCode::OutOfOrder, "is older than the last processed sample")
+                    (
+                        ErrorCode::OutOfOrder,
+                        "is older than the last processed sample",
+                    )
                 };
-                self.reject(records, Some(k), code, format!("sample k = {k} {why} (expected {next})"));
+                self.reject(
+                    records,
+                    Some(k),
+                    code,
+                    format!("sample k = {k} {why} (expected {next})"),
+                );
                 return;
             }
             if k > next {
@@ -175,7 +190,10 @@ impl Monitor {
                     records,
                     Some(k),
                     ErrorCode::Gap,
-                    format!("samples {next}..{} missing: filled by predict-only steps", k - 1),
+                    format!(
+                        "samples {next}..{} missing: filled by predict-only steps",
+                        k - 1
+                    ),
                 );
             }
         }
@@ -337,14 +355,28 @@ mod tests {
         }
         let alarms: Vec<&Alarm> = records
             .iter()
-            .filter_map(|r| if let Record::Alarm(a) = r { Some(a) } else { None })
+            .filter_map(|r| {
+                if let Record::Alarm(a) = r {
+                    Some(a)
+                } else {
+                    None
+                }
+            })
             .collect();
         assert_eq!(alarms.len(), 1);
         let a = alarms[0];
         assert_eq!((a.k, a.onset), (203, 201));
-        let isolated: Vec<&str> = a.isolation.iter().filter(|i| i.isolated).map(|i| i.fault.as_str()).collect();
+        let isolated: Vec<&str> = a
+            .isolation
+            .iter()
+            .filter(|i| i.isolated)
+            .map(|i| i.fault.as_str())
+            .collect();
         assert_eq!(isolated, ["x0_jump"]);
-        let ends = records.iter().filter(|r| matches!(r, Record::AlarmEnd(_))).count();
+        let ends = records
+            .iter()
+            .filter(|r| matches!(r, Record::AlarmEnd(_)))
+            .count();
         assert_eq!(ends, 1);
     }
 
@@ -373,13 +405,25 @@ mod tests {
         }
         let stats = |r: &[Record]| -> Vec<Stat> {
             r.iter()
-                .filter_map(|r| if let Record::Stat(s) = r { Some(s.clone()) } else { None })
+                .filter_map(|r| {
+                    if let Record::Stat(s) = r {
+                        Some(s.clone())
+                    } else {
+                        None
+                    }
+                })
                 .collect()
         };
         assert_eq!(stats(&rc), stats(&rd));
         let codes: Vec<&str> = rd
             .iter()
-            .filter_map(|r| if let Record::Error(e) = r { Some(e.code.as_str()) } else { None })
+            .filter_map(|r| {
+                if let Record::Error(e) = r {
+                    Some(e.code.as_str())
+                } else {
+                    None
+                }
+            })
             .collect();
         assert_eq!(codes, ["wrong_dimension", "non_finite", "duplicate"]);
         assert!(rd.iter().any(|r| matches!(r, Record::Error(e) if e.message.contains("field y has 2 values, model expects 1"))));
@@ -400,7 +444,11 @@ mod tests {
         }
         assert_eq!(mon.counters().gap_samples, 3);
         assert_eq!(mon.counters().samples, 97);
-        assert!(records.iter().any(|r| matches!(r, Record::Error(e) if e.code == ErrorCode::Gap)));
+        assert!(
+            records
+                .iter()
+                .any(|r| matches!(r, Record::Error(e) if e.code == ErrorCode::Gap))
+        );
         assert_eq!(mon.counters().alarms, 0);
     }
 }

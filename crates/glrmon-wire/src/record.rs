@@ -1,30 +1,6 @@
 //! Result records: the JSON objects glrmon publishes on Zenoh (`glrmon/<channel>/<type>`),
-//! writes to MCAP and prints in replay's JSONL.
-//!
-//! Every record is one JSON object with `"type"` (`stat`, `alarm`, `alarm_end`,
-//! `diagnosis`, `error`) and `"channel"`; [`Record`] is the serde enum internally tagged by
-//! `type`. Letters and equation numbers are those of Zhang & Basseville (2014): l_k the GLR
-//! statistic, r̂ the onset, θ̂ the magnitude, ε_k the innovation.
-//!
-//! # Floats
-//!
-//! [`encode_json`] prints every float in the shortest form that parses back to the same
-//! bits (`0.1 + 0.2` → `0.30000000000000004`, `1e-300` → `1e-300`), and [`decode_record`]
-//! parses correctly rounded, so a round trip is bit-identical. Negative zero is printed as
-//! `-0.0` and comes back as `-0.0`.
-//!
-//! JSON has no NaN or infinity. `null` has exactly one meaning per field and is written
-//! only for `None`: `glr: null` means no onset is admissible yet (the window is not
-//! filled), `t: null` that the sample had no time, `threshold: null` that none is
-//! configured. A non-finite float anywhere, inside an `Option` or not, is an
-//! [`EncodeError`] naming the field, rather than a silent `null` (serde_json's own
-//! behaviour) that would read as "no onset". Callers turn "no value" into `None` first.
-//!
-//! # Compatibility
-//!
-//! Decoding ignores unknown fields, so a consumer built against this version reads
-//! records from a newer glrmon that added fields. Fields of type `Option` may be absent
-//! or `null`; all others are required.
+//! writes to MCAP and prints in replay's JSONL. The public contract is documented on
+//! [`Record`].
 
 use std::collections::BTreeMap;
 
@@ -190,10 +166,34 @@ impl ErrorRecord {
     }
 }
 
-/// Any result record, tagged in JSON by `"type"`.
+/// Any result record: one JSON object with `"type"` (`stat`, `alarm`, `alarm_end`,
+/// `diagnosis`, `error`) and `"channel"`, the rest of the fields flattened beside them.
 ///
-/// Prefer [`encode_json`] to serializing with serde directly: serde_json writes a NaN as
-/// `null` without complaint, `encode_json` refuses it.
+/// Letters are those of Zhang & Basseville (2014): l_k the GLR statistic (`glr`), r̂ the
+/// onset, θ̂ the magnitude, ε_k the innovation.
+///
+/// # Floats
+///
+/// [`encode_json`] prints every float in the shortest form that parses back to the same
+/// bits (`0.1 + 0.2` → `0.30000000000000004`, `1e-300` → `1e-300`), and [`decode_record`]
+/// parses correctly rounded, so a round trip is bit-identical. Negative zero is printed as
+/// `-0.0` and comes back as `-0.0` (a consumer that parses `-0.0` as `0` loses only the
+/// sign of a zero).
+///
+/// JSON has no NaN or infinity. `null` has exactly one meaning per field and is written
+/// only for `None`: `glr: null` means no onset is admissible yet (the window is not
+/// filled), `t: null` that the sample had no time, `threshold: null` that none is
+/// configured. A non-finite float anywhere, inside an `Option` or not, is an
+/// [`EncodeError`] naming the field, rather than a silent `null` (serde_json's own
+/// behaviour) that would read as "no onset". Callers turn "no value" into `None` first.
+/// So prefer [`encode_json`] to serializing this type with serde directly.
+///
+/// # Compatibility
+///
+/// Decoding ignores unknown fields, so a consumer built against this version reads
+/// records from a newer glrmon that added fields; the enum is `#[non_exhaustive]` so that
+/// a new record type is not a breaking change either. Fields of type `Option` may be
+/// absent or `null`; all others are required.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 #[non_exhaustive]

@@ -24,6 +24,10 @@ use crate::error::{DecodeError, DecodeErrorKind, EncodeError, EncodeErrorKind, S
 /// Letters follow the config: `u` known inputs (length l), `y` outputs (length p), `p`
 /// scheduling or other known exogenous signals (length q). Optional vectors are empty
 /// when absent.
+///
+/// On the wire: `{"k": 12, "t": 1732200000.25, "u": [..], "y": [..], "p": [..]}`, where
+/// only `y` is required and `null` counts as absent; see [`decode_samples`] and
+/// [`encode_sample`].
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Sample {
     /// Sample index. When absent the monitor numbers samples from 0 in order of arrival.
@@ -241,7 +245,7 @@ pub fn decode_samples(
 /// # Ok::<(), glrmon_wire::EncodeError>(())
 /// ```
 pub fn encode_sample(channel: &str, sample: &Sample, out: &mut Vec<u8>) -> Result<(), EncodeError> {
-    check_encodable(channel, "", sample)?;
+    check_encodable(channel, None, sample)?;
     write_json(channel, &SampleJson::from(sample), out)
 }
 
@@ -256,18 +260,24 @@ pub fn encode_samples(
     out: &mut Vec<u8>,
 ) -> Result<(), EncodeError> {
     for (i, sample) in samples.iter().enumerate() {
-        check_encodable(channel, &format!("[{i}]."), sample)?;
+        check_encodable(channel, Some(i), sample)?;
     }
-    let batch: Vec<SampleJson<'_>> = samples.iter().map(SampleJson::from).collect();
-    write_json(channel, &batch, out)
+    write_json(channel, &BatchJson(samples), out)
 }
 
-fn check_encodable(channel: &str, prefix: &str, sample: &Sample) -> Result<(), EncodeError> {
+fn check_encodable(
+    channel: &str,
+    batch: Option<usize>,
+    sample: &Sample,
+) -> Result<(), EncodeError> {
     match sample.first_non_finite() {
         None => Ok(()),
         Some((field, value)) => Err(EncodeError {
             channel: channel.to_owned(),
-            field: format!("{prefix}{field}"),
+            field: match batch {
+                Some(i) => format!("[{i}].{field}"),
+                None => field,
+            },
             kind: EncodeErrorKind::NonFinite { value },
         }),
     }
@@ -302,6 +312,15 @@ struct SampleJson<'a> {
     y: &'a [f64],
     #[serde(skip_serializing_if = "<[f64]>::is_empty")]
     p: &'a [f64],
+}
+
+/// A batch serialized as an array without collecting the [`SampleJson`]s first.
+struct BatchJson<'a>(&'a [Sample]);
+
+impl Serialize for BatchJson<'_> {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_seq(self.0.iter().map(SampleJson::from))
+    }
 }
 
 impl<'a> From<&'a Sample> for SampleJson<'a> {
@@ -852,6 +871,81 @@ mod tests {
         assert_eq!(ks, [Some(0), Some(1), Some(2)]);
         assert_eq!(s[2].y, [3.0]);
         assert_eq!(decode("[]").unwrap(), []);
+    }
+
+    /// Counts this thread's allocations, so that tests running in parallel on other
+    /// threads do not disturb the count.
+    struct CountingAlloc;
+
+    thread_local! {
+        static ALLOCATIONS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+    }
+
+    // SAFETY: forwards to the system allocator unchanged; the counter is a const-initialised
+    // thread-local `Cell` without destructor, whose access does not allocate.
+    unsafe impl std::alloc::GlobalAlloc for CountingAlloc {
+        unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
+            ALLOCATIONS.with(|c| c.set(c.get() + 1));
+            // SAFETY: same contract as the caller's.
+            unsafe { std::alloc::System.alloc(layout) }
+        }
+
+        unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
+            // SAFETY: same contract as the caller's.
+            unsafe { std::alloc::System.dealloc(ptr, layout) }
+        }
+
+        unsafe fn realloc(
+            &self,
+            ptr: *mut u8,
+            layout: std::alloc::Layout,
+            new_size: usize,
+        ) -> *mut u8 {
+            ALLOCATIONS.with(|c| c.set(c.get() + 1));
+            // SAFETY: same contract as the caller's.
+            unsafe { std::alloc::System.realloc(ptr, layout, new_size) }
+        }
+    }
+
+    #[global_allocator]
+    static ALLOC: CountingAlloc = CountingAlloc;
+
+    /// The claim in `decode_samples`' docs: once `out` has grown to the payload's shape,
+    /// decoding more such payloads performs no allocation at all (serde_json borrows
+    /// unescaped keys, and its scratch buffer is used only for numbers of more than 19
+    /// significant digits, which shortest-roundtrip printing never produces).
+    #[test]
+    fn steady_stream_decodes_without_allocating() {
+        let limits = DecodeLimits::default();
+        let payloads: Vec<Vec<u8>> = (0..100_u32)
+            .map(|i| {
+                let x = f64::from(i) * 0.1 + 1e-300;
+                let sample = Sample {
+                    k: Some(u64::from(i)),
+                    t: Some(x),
+                    u: vec![x; 2],
+                    y: vec![-x; 4],
+                    p: vec![x],
+                };
+                let mut bytes = Vec::new();
+                encode_samples("c", &[sample.clone(), sample], &mut bytes).unwrap();
+                bytes
+            })
+            .collect();
+        let count = || ALLOCATIONS.with(std::cell::Cell::get);
+        let probe = count();
+        drop(std::hint::black_box(vec![0_u8; 8]));
+        assert_eq!(count(), probe + 1, "the counting allocator is installed");
+
+        let mut out = Vec::new();
+        decode_samples("c", &payloads[0], &limits, &mut out).unwrap();
+        let before = count();
+        for payload in &payloads {
+            decode_samples("c", payload, &limits, &mut out).unwrap();
+        }
+        assert_eq!(count() - before, 0, "allocations while decoding");
+        assert_eq!(out.len(), 2);
+        assert_eq!(out[1].k, Some(99));
     }
 
     #[test]

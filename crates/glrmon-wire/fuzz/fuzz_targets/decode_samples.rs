@@ -7,11 +7,21 @@ use glrmon_wire::{DecodeLimits, Sample, decode_samples, encode_samples};
 use libfuzzer_sys::fuzz_target;
 
 /// Small limits, so that the limit paths are reached with small inputs too.
-const SMALL: DecodeLimits = DecodeLimits { max_payload_bytes: 4096, max_batch: 3, max_vector_len: 4 };
+const SMALL: DecodeLimits = DecodeLimits {
+    max_payload_bytes: 4096,
+    max_batch: 3,
+    max_vector_len: 4,
+};
 
-fn bits(samples: &[Sample]) -> Vec<(Option<u64>, Option<u64>, Vec<u64>, Vec<u64>, Vec<u64>)> {
+/// A sample with every float as its bits: `PartialEq` on f64 says 0.0 == -0.0.
+type SampleBits = (Option<u64>, Option<u64>, Vec<u64>, Vec<u64>, Vec<u64>);
+
+fn bits(samples: &[Sample]) -> Vec<SampleBits> {
     let b = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-    samples.iter().map(|s| (s.k, s.t.map(f64::to_bits), b(&s.u), b(&s.y), b(&s.p))).collect()
+    samples
+        .iter()
+        .map(|s| (s.k, s.t.map(f64::to_bits), b(&s.u), b(&s.y), b(&s.p)))
+        .collect()
 }
 
 fn check(data: &[u8], limits: &DecodeLimits, out: &mut Vec<Sample>) {
@@ -20,7 +30,11 @@ fn check(data: &[u8], limits: &DecodeLimits, out: &mut Vec<Sample>) {
             assert!(out.len() <= limits.max_batch.max(1));
             for s in out.iter() {
                 assert!(s.check_finite("fuzz").is_ok());
-                assert!([&s.u, &s.y, &s.p].iter().all(|v| v.len() <= limits.max_vector_len));
+                assert!(
+                    [&s.u, &s.y, &s.p]
+                        .iter()
+                        .all(|v| v.len() <= limits.max_vector_len)
+                );
             }
             let mut bytes = Vec::new();
             encode_samples("fuzz", out, &mut bytes).expect("decoded samples are finite");
