@@ -4,7 +4,7 @@ CARGO ?= cargo
 
 .DEFAULT_GOAL := help
 
-.PHONY: help deps build test fmt fmt-check lint unit doc check-deps demo bench
+.PHONY: help deps build test fmt fmt-check lint unit doc check-deps check-config demo bench
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-11s %s\n", $$1, $$2}'
@@ -17,7 +17,7 @@ deps: ## check the toolchain (rustfmt, clippy); nothing else needs installing
 build: deps ## build everything (release)
 	$(CARGO) build --release --workspace
 
-test: deps fmt-check lint unit doc check-deps ## everything CI runs: fmt, clippy, all tests, docs, dependency rules
+test: deps fmt-check lint unit doc check-deps check-config ## everything CI runs: fmt, clippy, all tests, docs, dependency rules, configs
 
 fmt: ## format the code
 	$(CARGO) fmt --all
@@ -38,6 +38,10 @@ check-deps: ## glrmon-core's normal dependencies are nalgebra and thiserror only
 	@deps=$$($(CARGO) tree -p glrmon-core -e normal --depth 1 --prefix none | tail -n +2 | awk '{print $$1}' | sort -u | tr '\n' ' '); \
 	echo "glrmon-core depends on: $$deps"; \
 	for d in $$deps; do case $$d in nalgebra|thiserror) ;; *) echo "forbidden dependency of glrmon-core: $$d"; exit 1;; esac; done
+
+check-config: ## glrmon validate every file in config/
+	@$(CARGO) build -q -p glrmon-cli
+	@for f in config/*.toml config/examples/*.toml; do ./target/debug/glrmon validate $$f >/dev/null || { ./target/debug/glrmon validate $$f; exit 1; }; echo "valid: $$f"; done
 
 demo: ## the main job on built-in simulated channels with an injected fault
 	$(CARGO) run --release -q -p glrmon-cli -- demo

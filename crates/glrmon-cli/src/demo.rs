@@ -1,21 +1,26 @@
-//! `glrmon demo`: built-in simulated channels, one with an injected fault, through the
-//! monitors; alarms printed as `watch` prints them, then a summary.
+//! `glrmon demo`: the channels of the embedded `config/demo.toml` simulated, one fault
+//! injected a few seconds in, through the monitors; alarms printed as `watch` prints
+//! them, then a summary.
 
 use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Context as _;
 use clap::Args;
-use glrmon_core::AlarmSettings;
-use glrmon_core::threshold::chi2_upper_quantile;
-use glrmon_monitor::{Monitor, MonitorSettings};
-use glrmon_sim::{SimSample, Simulator, scenarios};
+use glrmon_monitor::Monitor;
+use glrmon_sim::{SimSample, Simulator};
 use glrmon_wire::{Sample, encode_json};
 
-use crate::print;
+use crate::{print, simulate};
+
+/// The demo's channels, embedded so the demo needs no file.
+pub(crate) const DEMO_CONFIG: &str = include_str!("../../../config/demo.toml");
 
 /// Simulated samples per second of demo time.
 const RATE_HZ: u64 = 100;
+
+/// The injected fault: channel, fault, onset, magnitude.
+const FAULT: (&str, &str, u64, f64) = ("unstable", "x0_jump", 201, 4.0);
 
 #[derive(Debug, Args)]
 pub(crate) struct DemoArgs {
@@ -33,61 +38,43 @@ pub(crate) struct DemoArgs {
 struct Channel {
     monitor: Monitor,
     sim: Simulator,
-    fault: Option<(&'static str, u64, f64)>,
-}
-
-fn channel(
-    name: &str,
-    sc: &scenarios::Scenario,
-    seed: u64,
-    fault: Option<(&'static str, u64, f64)>,
-) -> anyhow::Result<Channel> {
-    let w = sc.window;
-    let m = sc.faults.len() as f64;
-    // Bonferroni over the window's w − s onsets: a conservative per-sample rate of 10⁻⁴.
-    let threshold = chi2_upper_quantile(m, 1e-4 / (w.window - w.min_lag) as f64)
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    let sim = match fault {
-        Some((f, onset, mag)) => sc.faulty_simulator(seed, f, onset, mag)?,
-        None => sc.simulator(seed)?,
-    };
-    let settings = MonitorSettings {
-        alarm: AlarmSettings::with_threshold(threshold),
-        isolation_delay: sc.model_states() as u32,
-        isolation_alpha: 0.01,
-        groups: vec![],
-        max_gap: 100,
-    };
-    Ok(Channel {
-        monitor: Monitor::new(name, sc.detector()?, settings),
-        sim,
-        fault,
-    })
 }
 
 pub(crate) fn run(args: &DemoArgs) -> anyhow::Result<()> {
+    let cfg = glrmon_spec::parse(DEMO_CONFIG)
+        .map_err(|e| anyhow::anyhow!("embedded demo config: {e}"))?;
     let samples = args.seconds * RATE_HZ;
-    let mut channels = vec![
-        channel(
-            "unstable",
-            &scenarios::paper2014_unstable(),
-            args.seed,
-            Some(("x0_jump", 201, 4.0)),
-        )?,
-        channel("lpv", &scenarios::bench_a(), args.seed + 1, Some(("sensor_bias", 301, 1.0)))?,
-        channel("lpv_clean", &scenarios::bench_a(), args.seed + 2, None)?,
-    ];
+    let mut channels = Vec::new();
+    for (i, c) in cfg.channels.iter().enumerate() {
+        let seed = args.seed.wrapping_add(i as u64);
+        let sim = if c.name == FAULT.0 {
+            simulate::simulator(c, seed, &[FAULT.1.to_owned()], FAULT.2, &[FAULT.3])?
+        } else {
+            simulate::simulator(c, seed, &[], 0, &[])?
+        };
+        channels.push(Channel {
+            monitor: Monitor::from_channel(c)?,
+            sim,
+        });
+    }
     println!(
-        "glrmon demo: {} channels, {samples} samples each ({} s at {RATE_HZ} Hz), offline",
+        "glrmon demo: {} channels ({}), {samples} samples each ({} s at {RATE_HZ} Hz), offline",
         channels.len(),
+        cfg.channels
+            .iter()
+            .map(|c| c.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", "),
         args.seconds
     );
-    for c in &channels {
-        match c.fault {
-            Some((f, k, v)) => println!("  {}: fault {f} of magnitude {v} injected at k = {k}", c.monitor.channel()),
-            None => println!("  {}: no fault", c.monitor.channel()),
-        }
-    }
+    println!(
+        "  injected: fault {} of magnitude {} on channel {} at k = {} ({:.2} s)",
+        FAULT.1,
+        FAULT.3,
+        FAULT.0,
+        FAULT.2,
+        FAULT.2 as f64 / RATE_HZ as f64
+    );
     let mut out = match &args.output {
         Some(p) => Some(std::io::BufWriter::new(
             std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?,
@@ -102,16 +89,15 @@ pub(crate) fn run(args: &DemoArgs) -> anyhow::Result<()> {
         y: vec![],
         p: vec![],
     };
+    let mut sample = Sample::default();
     for k in 0..samples {
         for c in &mut channels {
             c.sim.next_into(&mut x);
-            let sample = Sample {
-                k: Some(x.k),
-                t: Some(k as f64 / RATE_HZ as f64),
-                u: x.u.clone(),
-                y: x.y.clone(),
-                p: x.p.clone(),
-            };
+            sample.k = Some(x.k);
+            sample.t = Some(k as f64 / RATE_HZ as f64);
+            sample.u.clone_from(&x.u);
+            sample.y.clone_from(&x.y);
+            sample.p.clone_from(&x.p);
             c.monitor.on_sample(&sample, &mut records);
         }
         for r in records.drain(..) {

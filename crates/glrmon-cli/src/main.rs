@@ -3,9 +3,14 @@
 //! Exit codes: 0 success, 1 invalid input or configuration, 2 usage error, 3 runtime
 //! failure.
 
+mod csv;
 mod demo;
 mod print;
+mod replay;
+mod simulate;
+mod validate;
 
+use std::path::Path;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
@@ -28,15 +33,46 @@ enum Command {
     /// Run the main job on built-in simulated channels with an injected fault and print
     /// the alarms (offline until the Zenoh daemon lands).
     Demo(demo::DemoArgs),
+    /// Validate a configuration; print each channel's summary and isolability report.
+    Validate(validate::ValidateArgs),
+    /// Simulate a channel's model, optionally with a fault, to a CSV file.
+    Simulate(simulate::SimulateArgs),
+    /// Run the monitor over recorded samples (CSV) and write the results as JSON lines.
+    Replay(replay::ReplayArgs),
+}
+
+/// A user's input or configuration is at fault (exit code 1).
+#[derive(Debug)]
+pub(crate) struct InvalidInput(pub(crate) String);
+
+impl std::fmt::Display for InvalidInput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for InvalidInput {}
+
+/// Loads a configuration; every problem becomes one line of an [`InvalidInput`].
+pub(crate) fn load_config(path: &Path) -> anyhow::Result<glrmon_spec::Config> {
+    glrmon_spec::load(path)
+        .map_err(|e| InvalidInput(format!("{} is invalid:\n{e}", path.display())).into())
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let result = match cli.command {
-        Command::Demo(args) => demo::run(&args),
+    let result = match &cli.command {
+        Command::Demo(args) => demo::run(args),
+        Command::Validate(args) => validate::run(args),
+        Command::Simulate(args) => simulate::run(args),
+        Command::Replay(args) => replay::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(err) if err.downcast_ref::<InvalidInput>().is_some() => {
+            eprintln!("glrmon: {err:#}");
+            ExitCode::from(1)
+        }
         Err(err) => {
             eprintln!("glrmon: {err:#}");
             ExitCode::from(3)

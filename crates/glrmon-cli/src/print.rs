@@ -14,7 +14,12 @@ pub(crate) fn line(record: &Record) -> Option<String> {
 }
 
 fn alarm_line(a: &Alarm) -> String {
-    let isolated: Vec<&str> = a.isolation.iter().filter(|i| i.isolated).map(|i| i.fault.as_str()).collect();
+    let isolated: Vec<&str> = a
+        .isolation
+        .iter()
+        .filter(|i| i.isolated)
+        .map(|i| i.fault.as_str())
+        .collect();
     let mut mag = String::new();
     for (i, (name, v)) in a.faults.iter().zip(&a.magnitude).enumerate() {
         let sep = if i == 0 { "" } else { ", " };

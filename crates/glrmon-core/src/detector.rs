@@ -243,8 +243,9 @@ impl Detector {
             });
         }
         self.filter.measure(&self.system, sample.u, sample.y)?;
-        if self.next_k.is_none() {
-            self.bank.start(sample.k);
+        match self.next_k {
+            None => self.bank.start(sample.k),
+            Some(_) => self.bank.begin(sample.k),
         }
         let (n, p, m) = (self.dims.states, self.dims.outputs, self.faults.len());
         let k = sample.k;
@@ -355,6 +356,7 @@ impl Detector {
             self.psi.as_mut_slice(),
             self.phi.as_mut_slice(),
         );
+        self.bank.begin(k);
         self.filter.predict_only(&self.system, &self.held_u);
         self.fk_phi.fill(0.0);
         self.bank.time_update(

@@ -95,7 +95,7 @@ pub enum Column {
         /// Input index i.
         input: usize,
     },
-    /// Actuator gain loss on input i: −G_k[:, i]·U_k[i] (state columns only;
+    /// Actuator gain loss on input i: `−G_k[:, i]·U_k[i]` (state columns only;
     /// §2.1, Ψ̃_k = −G_k diag(U_k)).
     GainLoss {
         /// Input index i.

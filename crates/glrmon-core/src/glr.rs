@@ -85,6 +85,11 @@ pub(crate) struct WindowBank {
     stat: Vec<f64>,
     rank: Vec<f64>,
     cutoff: Vec<f64>,
+    /// Onset k + 1 announced by the last time update, entered at the next step so that
+    /// the oldest onset's statistics stay readable between steps.
+    pending: Option<u64>,
+    /// Γ_{k+1}(k+1) = Ψ_k(k+1) for the pending onset (n×m).
+    entry: Vec<f64>,
     // Eigen scratch for θ̂ when C(r̂) is deficient.
     eig_a: Vec<f64>,
     eig_vals: Vec<f64>,
@@ -139,6 +144,8 @@ impl WindowBank {
             stat: z(slots),
             rank: z(slots),
             cutoff: z(slots),
+            pending: None,
+            entry: z(n * m),
             eig_a: z(m * m),
             eig_vals: z(m),
             eig_vecs: z(m * m),
@@ -541,16 +548,29 @@ impl WindowBank {
         if self.known {
             return;
         }
-        let next = k + 1;
-        let s = self.slot_of(next);
-        self.onset[s] = next;
+        for (j, kind) in self.kinds.iter().enumerate() {
+            let factor = kind.entry_factor();
+            for i in 0..n {
+                self.entry[i + n * j] = factor * psi[at(n, i, j)];
+            }
+        }
+        self.pending = Some(k + 1);
+    }
+
+    /// Enters the onset announced by the last time update (it replaces the oldest,
+    /// k − w): Γ_k(k) = Ψ_{k−1}(k), C = 0, d = 0. Called at the start of each step.
+    pub(crate) fn begin(&mut self, k: u64) {
+        if self.pending != Some(k) {
+            return;
+        }
+        self.pending = None;
+        let (n, m, w) = (self.n, self.m, self.slots);
+        let s = self.slot_of(k);
+        self.onset[s] = k;
         self.active[s] = 1.0;
         self.lag[s] = 0.0;
-        for (j, kind) in self.kinds.iter().enumerate() {
-            let entry = kind.entry_factor();
-            for i in 0..n {
-                self.gamma[(i + n * j) * w + s] = entry * psi[at(n, i, j)];
-            }
+        for c in 0..n * m {
+            self.gamma[c * w + s] = self.entry[c];
         }
         for a in 0..m {
             self.score[a * w + s] = 0.0;

@@ -7,6 +7,7 @@ pub mod error;
 pub mod fault;
 mod glr;
 pub mod innovation;
+pub mod isolability;
 pub mod isolation;
 mod linalg;
 pub mod model;

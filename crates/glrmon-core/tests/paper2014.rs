@@ -562,3 +562,35 @@ fn minmax_at_fixed_onset_follows_chi2_1_under_no_fault() {
         );
     }
 }
+
+/// Regression: after the step at k the oldest candidate onset k − w + 1 (which can be r̂)
+/// keeps its C, d for isolation; its slot is recycled only when the next sample arrives.
+#[test]
+fn oldest_onset_statistics_survive_until_the_next_sample() {
+    let sc = scenarios::bench_a();
+    let mut det = sc.detector().unwrap();
+    let mut sim = sc.simulator(3).unwrap();
+    let mut out = StepOutput::new(1, 2);
+    let (mut c, mut d) = (DMatrix::zeros(2, 2), DVector::zeros(2));
+    for k in 0..300u64 {
+        let x = sim.next_sample();
+        det.step(
+            &Sample {
+                k,
+                u: &x.u,
+                y: &x.y,
+                p: &x.p,
+            },
+            &mut out,
+        )
+        .unwrap();
+        if k >= 99 {
+            assert!(det.information(k - 99, &mut c, &mut d), "k = {k}");
+            assert!(c[(0, 0)] > 0.0 && c[(1, 1)] > 0.0);
+            assert!(det.fisher_statistics(k - 99).is_some());
+            if k >= 100 {
+                assert!(!det.information(k - 100, &mut c, &mut d), "k = {k}");
+            }
+        }
+    }
+}

@@ -117,6 +117,28 @@ impl Monitor {
         }
     }
 
+    /// The monitor of a validated channel of the configuration.
+    ///
+    /// # Errors
+    /// As [`glrmon_spec::Channel::detector`] (not expected after validation).
+    pub fn from_channel(channel: &glrmon_spec::Channel) -> Result<Self, glrmon_core::ModelError> {
+        let settings = MonitorSettings {
+            alarm: channel.alarm,
+            isolation_delay: channel.isolation_delay,
+            isolation_alpha: channel.isolation_alpha,
+            groups: channel
+                .groups
+                .iter()
+                .map(|(name, faults)| IsolationGroup {
+                    name: name.clone(),
+                    faults: faults.clone(),
+                })
+                .collect(),
+            max_gap: channel.max_gap,
+        };
+        Ok(Self::new(&channel.name, channel.detector()?, settings))
+    }
+
     /// The channel's name.
     #[must_use]
     pub fn channel(&self) -> &str {

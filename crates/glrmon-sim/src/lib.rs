@@ -29,8 +29,8 @@ pub struct Injection {
     pub onset: u64,
 }
 
-/// A PI controller u_k[input] = k_p e_k + I_k, I_{k+1} = I_k + k_i e_k, with
-/// e_k = setpoint − y_k[output] (the controller of Zhang & Basseville 2014, §6.1).
+/// A PI controller `u_k[input] = k_p e_k + I_k`, `I_{k+1} = I_k + k_i e_k`, with
+/// `e_k = setpoint − y_k[output]` (the controller of Zhang & Basseville 2014, §6.1).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PiController {
     /// Output index measured.
@@ -80,6 +80,7 @@ pub struct Simulator {
     held_control: f64,
     inputs: Option<SignalFn>,
     signals: Option<SignalFn>,
+    unknown: Option<(DMatrix<f64>, SignalFn, DVector<f64>)>,
     dims: Dims,
     rng: Rng,
     k: u64,
@@ -129,6 +130,7 @@ impl Simulator {
             held_control: 0.0,
             inputs: None,
             signals: None,
+            unknown: None,
             dims,
             rng: Rng::new(seed),
             k: 0,
@@ -203,6 +205,24 @@ impl Simulator {
     pub fn with_signals(mut self, signals: SignalFn) -> Self {
         self.signals = Some(signals);
         self
+    }
+
+    /// An unknown input E d_k added to the state equation (Zhang 2021, eq. (1)): the
+    /// detector does not see d_k.
+    ///
+    /// # Errors
+    /// [`SimError::Dimension`] when E does not have n rows.
+    pub fn with_unknown_input(mut self, e: DMatrix<f64>, d: SignalFn) -> Result<Self, SimError> {
+        if e.nrows() != self.dims.states {
+            return Err(SimError::Dimension(format!(
+                "E has {} rows, model has {} states",
+                e.nrows(),
+                self.dims.states
+            )));
+        }
+        let buf = DVector::zeros(e.ncols());
+        self.unknown = Some((e, d, buf));
+        Ok(self)
     }
 
     /// The model's dimensions.
@@ -282,6 +302,10 @@ impl Simulator {
             *w = self.rng.normal();
         }
         let mut x = &self.sys.f * &self.x + &self.sys.g * &u + &self.sqrt_q * &self.noise_w;
+        if let Some((e, d, buf)) = &mut self.unknown {
+            d(k, buf.as_mut_slice());
+            x += &*e * &*buf;
+        }
         if let (Some(f), Some(inj)) = (&self.faults, &self.injection) {
             for (j, fault) in f.faults().iter().enumerate() {
                 let factor = profile_factor(fault.onset, k, inj.onset, true);

@@ -8,13 +8,16 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::{Injection, PiController, SignalFn, SimError, Simulator};
 
+/// A fault of a scenario: name, onset profile, Ψ̃ column (or none), Φ̃ column (or none).
+pub type FaultColumns = (String, Onset, Option<DVector<f64>>, Option<DVector<f64>>);
+
 /// A channel: model, fault dictionary, filter start, window, and how it is driven.
 #[derive(Debug, Clone)]
 pub struct Scenario {
     /// The model.
     pub model: Lpv,
     /// The faults as (name, onset profile, Ψ̃ column or None, Φ̃ column or None).
-    pub faults: Vec<(String, Onset, Option<DVector<f64>>, Option<DVector<f64>>)>,
+    pub faults: Vec<FaultColumns>,
     /// X̂_0.
     pub x0: DVector<f64>,
     /// P_0.

@@ -1,0 +1,1122 @@
+//! glrmon's configuration: a strict TOML file describing a deployment (Zenoh and
+//! recording settings, and a list of channels with their model, fault dictionary and
+//! GLR settings), parsed and validated into core types.
+//!
+//! Every error names its path and the reason, e.g.
+//! `channels[1] "pump3": model.F is 3×2 but H has 3 columns`; all errors of a file are
+//! reported, not only the first.
+//!
+//! ```
+//! let cfg = glrmon_spec::parse(r#"
+//! [[channels]]
+//! name = "tank"
+//! model = { F = [[0.9]], H = [[1.0]], Q = 0.01, R = 0.04 }
+//! faults = [{ name = "level_bias", kind = "sensor_bias", output = 0 }]
+//! "#).unwrap();
+//! assert_eq!(cfg.channels[0].key, "plant/tank");
+//! let detector = cfg.channels[0].detector().unwrap();
+//! assert_eq!(detector.fault_count(), 1);
+//! ```
+#![warn(missing_docs)]
+
+pub mod expr;
+pub mod schema;
+
+use std::fmt;
+use std::path::Path;
+
+use glrmon_core::threshold::chi2_upper_quantile;
+use glrmon_core::{
+    AlarmSettings, Column, DEFAULT_RANK_TOLERANCE, Detector, Dims, Fault, FaultDictionary, Lpv,
+    LpvMatrix, ModelError, Onset, WindowSettings,
+};
+use nalgebra::{DMatrix, DVector};
+
+use crate::expr::{Expr, ExprColumn, ExprContext};
+use crate::schema::{
+    ChannelSpec, ConfigFile, EntrySpec, FaultSpec, MatrixSpec, RecordingSpec, ZenohSpec,
+};
+
+/// One problem in a configuration, with the path of the offending field.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problem {
+    /// Where, e.g. `channels[1] "pump3": faults[2].psi[0]`.
+    pub path: String,
+    /// Why.
+    pub message: String,
+}
+
+impl fmt::Display for Problem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // "model.F is 3×2 but …" reads as a sentence; other reasons follow a colon.
+        let verb = ["is ", "has ", "names ", "cannot ", "evaluates ", "drives "];
+        if self.path.is_empty() {
+            write!(f, "{}", self.message)
+        } else if verb.iter().any(|v| self.message.starts_with(v)) {
+            write!(f, "{} {}", self.path, self.message)
+        } else {
+            write!(f, "{}: {}", self.path, self.message)
+        }
+    }
+}
+
+/// Every error found in a configuration.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub struct SpecErrors {
+    /// The errors, in file order.
+    pub errors: Vec<Problem>,
+}
+
+impl fmt::Display for SpecErrors {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, e) in self.errors.iter().enumerate() {
+            if i > 0 {
+                writeln!(f)?;
+            }
+            write!(f, "{e}")?;
+        }
+        Ok(())
+    }
+}
+
+/// A validated configuration.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// Zenoh settings.
+    pub zenoh: ZenohSpec,
+    /// Recording settings.
+    pub recording: RecordingSpec,
+    /// The channels.
+    pub channels: Vec<Channel>,
+    /// Problems that do not prevent running (e.g. an unobservable model).
+    pub warnings: Vec<Problem>,
+    /// The TOML text the configuration was parsed from (recorded with the data).
+    pub source: String,
+}
+
+impl Config {
+    /// The channel named `name`.
+    #[must_use]
+    pub fn channel(&self, name: &str) -> Option<&Channel> {
+        self.channels.iter().find(|c| c.name == name)
+    }
+}
+
+/// How a fault column is computed.
+#[derive(Debug, Clone)]
+enum ColumnPlan {
+    Zero,
+    Constant(DVector<f64>),
+    InputBias(usize),
+    GainLoss(usize),
+    Exprs(Vec<Expr>),
+}
+
+#[derive(Debug, Clone)]
+struct FaultPlan {
+    name: String,
+    onset: Onset,
+    state: ColumnPlan,
+    output: ColumnPlan,
+}
+
+/// How the detection threshold was set.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ThresholdSource {
+    /// Given explicitly.
+    Explicit,
+    /// χ²(m) upper quantile at α/(w − s) for a per-sample false-alarm probability α.
+    Bonferroni {
+        /// α.
+        false_alarm: f64,
+    },
+}
+
+/// PI controller of a simulated channel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Controller {
+    /// Output measured.
+    pub output: usize,
+    /// Input driven.
+    pub input: usize,
+    /// Setpoint.
+    pub setpoint: f64,
+    /// Proportional gain.
+    pub kp: f64,
+    /// Integral gain.
+    pub ki: f64,
+}
+
+/// How `glrmon simulate` drives a channel: expressions of k (random functions allowed).
+#[derive(Debug, Clone, Default)]
+pub struct SimulationPlan {
+    /// U_k, one per input (missing ones are 0).
+    pub inputs: Vec<Expr>,
+    /// p(k), one per signal (missing ones are 0).
+    pub signals: Vec<Expr>,
+    /// d_k entering through E.
+    pub unknown_input: Vec<Expr>,
+    /// Optional PI controller.
+    pub controller: Option<Controller>,
+}
+
+/// A validated channel.
+#[derive(Debug, Clone)]
+pub struct Channel {
+    /// Unique name.
+    pub name: String,
+    /// Input key expression.
+    pub key: String,
+    /// Sample period in seconds, if given.
+    pub period: Option<f64>,
+    /// Dimensions.
+    pub dims: Dims,
+    /// The model.
+    pub model: Lpv,
+    /// Unknown-input matrix E (n×d), if given.
+    pub unknown_input: Option<DMatrix<f64>>,
+    /// X̂_0.
+    pub x0: DVector<f64>,
+    /// P_0.
+    pub p0: DMatrix<f64>,
+    /// GLR window.
+    pub window: WindowSettings,
+    /// Detection threshold and hysteresis.
+    pub alarm: AlarmSettings,
+    /// How the threshold was set.
+    pub threshold_source: ThresholdSource,
+    /// Samples between crossing and isolation.
+    pub isolation_delay: u32,
+    /// Type-I probability of each isolation test.
+    pub isolation_alpha: f64,
+    /// Isolation groups `(name, fault indices)`.
+    pub groups: Vec<(String, Vec<usize>)>,
+    /// Largest gap filled by predict-only steps.
+    pub max_gap: u64,
+    /// Fault names in dictionary order.
+    pub fault_names: Vec<String>,
+    /// Simulation settings.
+    pub simulation: SimulationPlan,
+    faults: Vec<FaultPlan>,
+}
+
+impl Channel {
+    /// A fresh fault dictionary (expression columns keep per-channel history, so each
+    /// detector or simulator gets its own).
+    ///
+    /// # Errors
+    /// As [`FaultDictionary::new`] (not expected after validation).
+    pub fn dictionary(&self) -> Result<FaultDictionary, ModelError> {
+        let d = self.dims;
+        let column = |plan: &ColumnPlan| match plan {
+            ColumnPlan::Zero => Column::Zero,
+            ColumnPlan::Constant(v) => Column::Constant(v.clone()),
+            ColumnPlan::InputBias(i) => Column::InputBias { input: *i },
+            ColumnPlan::GainLoss(i) => Column::GainLoss { input: *i },
+            ColumnPlan::Exprs(e) => {
+                Column::Custom(Box::new(ExprColumn::new(e.clone(), d.inputs, d.signals)))
+            }
+        };
+        let faults = self
+            .faults
+            .iter()
+            .map(|f| Fault {
+                name: f.name.clone(),
+                onset: f.onset,
+                state: column(&f.state),
+                output: column(&f.output),
+            })
+            .collect();
+        FaultDictionary::new(d, faults)
+    }
+
+    /// The channel's detector.
+    ///
+    /// # Errors
+    /// As [`Detector::new`] (not expected after validation).
+    pub fn detector(&self) -> Result<Detector, ModelError> {
+        Detector::new(
+            Box::new(self.model.clone()),
+            self.dictionary()?,
+            self.x0.clone(),
+            self.p0.clone(),
+            self.window,
+        )
+    }
+
+    /// Whether the model's matrices are constant (LTI).
+    #[must_use]
+    pub fn model_is_constant(&self) -> bool {
+        use glrmon_core::StateSpace as _;
+        self.model.is_constant()
+    }
+
+    /// The onset profiles of the faults, in dictionary order.
+    #[must_use]
+    pub fn onsets(&self) -> Vec<Onset> {
+        self.faults.iter().map(|f| f.onset).collect()
+    }
+}
+
+/// Reads and validates a configuration file.
+///
+/// # Errors
+/// [`SpecErrors`] with every problem found (an unreadable file is one problem).
+pub fn load(path: &Path) -> Result<Config, SpecErrors> {
+    let text = std::fs::read_to_string(path).map_err(|e| SpecErrors {
+        errors: vec![Problem {
+            path: path.display().to_string(),
+            message: format!("cannot read: {e}"),
+        }],
+    })?;
+    parse(&text)
+}
+
+/// Parses and validates a configuration from TOML text.
+///
+/// # Errors
+/// [`SpecErrors`] with every problem found.
+pub fn parse(text: &str) -> Result<Config, SpecErrors> {
+    let file: ConfigFile = toml::from_str(text).map_err(|e| SpecErrors {
+        errors: vec![Problem {
+            path: String::new(),
+            message: e.to_string().trim_end().to_owned(),
+        }],
+    })?;
+    let mut v = Validator::default();
+    if file.channels.is_empty() {
+        v.error(
+            String::new(),
+            "no channels: add at least one [[channels]] table".into(),
+        );
+    }
+    if let Some(mode) = &file.zenoh.mode {
+        if !matches!(mode.as_str(), "peer" | "client" | "router") {
+            v.error(
+                "zenoh.mode".into(),
+                format!("\"{mode}\" is not one of peer, client, router"),
+            );
+        }
+    }
+    let mut channels = Vec::new();
+    for (i, spec) in file.channels.iter().enumerate() {
+        let prefix = format!("channels[{i}] \"{}\"", spec.name);
+        if file.channels[..i].iter().any(|c| c.name == spec.name) {
+            v.error(
+                prefix.clone(),
+                format!("duplicate channel name \"{}\"", spec.name),
+            );
+        }
+        if let Some(c) = v.channel(&prefix, spec) {
+            channels.push(c);
+        }
+    }
+    if v.errors.is_empty() {
+        Ok(Config {
+            zenoh: file.zenoh,
+            recording: file.recording,
+            channels,
+            warnings: v.warnings,
+            source: text.to_owned(),
+        })
+    } else {
+        Err(SpecErrors { errors: v.errors })
+    }
+}
+
+#[derive(Default)]
+struct Validator {
+    errors: Vec<Problem>,
+    warnings: Vec<Problem>,
+}
+
+fn join(prefix: &str, field: &str) -> String {
+    format!("{prefix}: {field}")
+}
+
+impl Validator {
+    fn error(&mut self, path: String, message: String) {
+        self.errors.push(Problem { path, message });
+    }
+
+    fn warn(&mut self, path: String, message: String) {
+        self.warnings.push(Problem { path, message });
+    }
+
+    /// A matrix as an [`LpvMatrix`]; `square` gives n for a scalar.
+    fn matrix(
+        &mut self,
+        prefix: &str,
+        name: &str,
+        spec: &MatrixSpec,
+        square: Option<usize>,
+    ) -> Option<LpvMatrix> {
+        let path = join(prefix, &format!("model.{name}"));
+        match spec {
+            MatrixSpec::Scalar(s) => {
+                let Some(n) = square else {
+                    self.error(
+                        path,
+                        "a scalar is only allowed for square matrices whose size is known".into(),
+                    );
+                    return None;
+                };
+                if !s.is_finite() {
+                    self.error(path, "is not finite".into());
+                    return None;
+                }
+                Some(LpvMatrix::constant(DMatrix::identity(n, n) * *s))
+            }
+            MatrixSpec::Dense(rows) => self.dense(&path, rows).map(LpvMatrix::constant),
+            MatrixSpec::Lpv(table) => {
+                let Some(base_rows) = table.get("base") else {
+                    self.error(path, "an LPV matrix needs a `base` entry".into());
+                    return None;
+                };
+                let base = self.dense(&format!("{path}.base"), base_rows)?;
+                let mut terms = Vec::new();
+                for (key, rows) in table {
+                    if key == "base" {
+                        continue;
+                    }
+                    let index = key.strip_prefix('p').and_then(|d| d.parse::<usize>().ok());
+                    let Some(index) = index else {
+                        self.error(
+                            format!("{path}.{key}"),
+                            "LPV entries are `base` and `p<i>` (scheduling signal i)".into(),
+                        );
+                        continue;
+                    };
+                    let m = self.dense(&format!("{path}.{key}"), rows)?;
+                    if m.shape() != base.shape() {
+                        self.error(
+                            format!("{path}.{key}"),
+                            format!(
+                                "is {}×{} but base is {}×{}",
+                                m.nrows(),
+                                m.ncols(),
+                                base.nrows(),
+                                base.ncols()
+                            ),
+                        );
+                        continue;
+                    }
+                    terms.push((index, m));
+                }
+                LpvMatrix::new(base, terms).ok()
+            }
+        }
+    }
+
+    fn dense(&mut self, path: &str, rows: &[Vec<f64>]) -> Option<DMatrix<f64>> {
+        let cols = rows.first().map_or(0, Vec::len);
+        for (i, r) in rows.iter().enumerate() {
+            if r.len() != cols {
+                self.error(
+                    path.to_owned(),
+                    format!("row {i} has {} entries but row 0 has {cols}", r.len()),
+                );
+                return None;
+            }
+            if let Some(j) = r.iter().position(|x| !x.is_finite()) {
+                self.error(path.to_owned(), format!("entry [{i}][{j}] is not finite"));
+                return None;
+            }
+        }
+        Some(DMatrix::from_fn(rows.len(), cols, |i, j| rows[i][j]))
+    }
+
+    fn shape(
+        &mut self,
+        prefix: &str,
+        name: &str,
+        m: &LpvMatrix,
+        want: (usize, usize),
+        why: &str,
+    ) -> bool {
+        let got = m.shape();
+        if got != want {
+            self.error(
+                join(prefix, &format!("model.{name}")),
+                format!(
+                    "is {}×{} but {why} (expected {}×{})",
+                    got.0, got.1, want.0, want.1
+                ),
+            );
+            return false;
+        }
+        true
+    }
+
+    /// Symmetric, and positive (semi-)definite at the base point.
+    fn covariance(&mut self, prefix: &str, name: &str, m: &LpvMatrix, definite: bool) {
+        let path = join(prefix, &format!("model.{name}"));
+        for (label, mat) in
+            std::iter::once(("", m.base())).chain(m.terms().iter().map(|(_, t)| (" term", t)))
+        {
+            let asym = (mat - mat.transpose()).amax();
+            if asym > 1e-9 * mat.amax().max(1e-300) {
+                self.error(
+                    path.clone(),
+                    format!("is not symmetric{label} (max |M − Mᵀ| = {asym:.3e})"),
+                );
+                return;
+            }
+        }
+        let eig = m.base().clone().symmetric_eigenvalues();
+        let (lo, hi) = (eig.min(), eig.max());
+        if definite && !(lo > 1e-12 * hi.abs().max(1e-300) && lo > 0.0) {
+            self.error(
+                path,
+                format!("is not positive definite (smallest eigenvalue {lo:.3e})"),
+            );
+        } else if !definite && lo < -1e-9 * hi.abs().max(1e-300) {
+            self.error(
+                path,
+                format!("is not positive semi-definite (smallest eigenvalue {lo:.3e})"),
+            );
+        }
+    }
+
+    fn channel(&mut self, prefix: &str, spec: &ChannelSpec) -> Option<Channel> {
+        let before = self.errors.len();
+        if let Err(e) = validate_name(&spec.name) {
+            self.error(join(prefix, "name"), e);
+        }
+        self.glr_ranges(prefix, &spec.glr);
+        let model = &spec.model;
+        // Dimensions: n from F (or H), p from H, l from G (or J).
+        let h = self.matrix(prefix, "H", &model.h, None);
+        let n_hint = h.as_ref().map(|h| h.shape().1);
+        let f = self.matrix(prefix, "F", &model.f, n_hint);
+        let (Some(f), Some(h)) = (f, h) else {
+            return None;
+        };
+        let (n, n2) = f.shape();
+        if n != n2 || n == 0 {
+            let hc = h.shape().1;
+            let why = if hc != n2 {
+                format!("is {n}×{n2} but H has {hc} columns")
+            } else {
+                format!("is {n}×{n2}: it must be square and non-empty")
+            };
+            self.error(join(prefix, "model.F"), why);
+            return None;
+        }
+        let p = h.shape().0;
+        if h.shape().1 != n {
+            self.error(
+                join(prefix, "model.F"),
+                format!("is {n}×{n} but H has {} columns", h.shape().1),
+            );
+        }
+        if p == 0 {
+            self.error(
+                join(prefix, "model.H"),
+                "has no rows: the channel needs at least one output".into(),
+            );
+        }
+        let g = model
+            .g
+            .as_ref()
+            .and_then(|g| self.matrix(prefix, "G", g, None));
+        let j = model
+            .j
+            .as_ref()
+            .and_then(|j| self.matrix(prefix, "J", j, None));
+        let l = g
+            .as_ref()
+            .map(|g| g.shape().1)
+            .or(j.as_ref().map(|j| j.shape().1))
+            .unwrap_or(0);
+        let g = g.unwrap_or_else(|| LpvMatrix::constant(DMatrix::zeros(n, l)));
+        let j = j.unwrap_or_else(|| LpvMatrix::constant(DMatrix::zeros(p, l)));
+        self.shape(
+            prefix,
+            "G",
+            &g,
+            (n, l),
+            &format!("F is {n}×{n} and there are {l} inputs"),
+        );
+        self.shape(
+            prefix,
+            "J",
+            &j,
+            (p, l),
+            &format!("H has {p} rows and there are {l} inputs"),
+        );
+        let q = self.matrix(prefix, "Q", &model.q, Some(n))?;
+        let r = self.matrix(prefix, "R", &model.r, Some(p))?;
+        if self.shape(prefix, "Q", &q, (n, n), &format!("F is {n}×{n}")) {
+            self.covariance(prefix, "Q", &q, false);
+        }
+        if self.shape(prefix, "R", &r, (p, p), &format!("H has {p} rows")) {
+            self.covariance(prefix, "R", &r, true);
+        }
+        let p0 = match &model.p0 {
+            Some(s) => self.matrix(prefix, "P0", s, Some(n)),
+            None => Some(LpvMatrix::constant(DMatrix::identity(n, n))),
+        };
+        let p0 = p0.filter(|m| {
+            m.terms().is_empty() || {
+                self.error(
+                    join(prefix, "model.P0"),
+                    "cannot depend on scheduling signals".into(),
+                );
+                false
+            }
+        });
+        if let Some(m) = &p0 {
+            if self.shape(prefix, "P0", m, (n, n), &format!("F is {n}×{n}")) {
+                self.covariance(prefix, "P0", m, true);
+            }
+        }
+        let x0 = match &model.x0 {
+            Some(x) if x.len() != n => {
+                self.error(
+                    join(prefix, "model.x0"),
+                    format!("has {} entries but F is {n}×{n}", x.len()),
+                );
+                DVector::zeros(n)
+            }
+            Some(x) if x.iter().any(|v| !v.is_finite()) => {
+                self.error(join(prefix, "model.x0"), "is not finite".into());
+                DVector::zeros(n)
+            }
+            Some(x) => DVector::from_column_slice(x),
+            None => DVector::zeros(n),
+        };
+        let e = model
+            .e
+            .as_ref()
+            .and_then(|e| self.matrix(prefix, "E", e, None));
+        let e = e.and_then(|e| {
+            if !e.terms().is_empty() {
+                self.error(
+                    join(prefix, "model.E"),
+                    "cannot depend on scheduling signals".into(),
+                );
+                return None;
+            }
+            self.shape(prefix, "E", &e, (n, e.shape().1), &format!("F is {n}×{n}"))
+                .then(|| e.base().clone())
+        });
+        // Signals: explicit, or the highest LPV index + 1.
+        let lpv_max = [&f, &g, &h, &j, &q, &r]
+            .iter()
+            .flat_map(|m| m.terms().iter().map(|(i, _)| *i + 1))
+            .max()
+            .unwrap_or(0);
+        let signals = spec.signals.unwrap_or(lpv_max);
+        if signals < lpv_max {
+            self.error(
+                join(prefix, "signals"),
+                format!(
+                    "is {signals} but the model uses scheduling signal p{}",
+                    lpv_max - 1
+                ),
+            );
+        }
+        let dims = Dims {
+            states: n,
+            inputs: l,
+            outputs: p,
+            signals,
+        };
+        let faults = self.faults(prefix, spec, dims, &j);
+        if self.errors.len() > before {
+            return None;
+        }
+        let lpv = match Lpv::new(f, g, h, j, q, r, signals) {
+            Ok(m) => m,
+            Err(e) => {
+                self.error(join(prefix, "model"), e.to_string());
+                return None;
+            }
+        };
+        self.observability(prefix, &lpv);
+        let glr = &spec.glr;
+        let gpath = |f: &str| join(prefix, &format!("glr.{f}"));
+        let tolerance = glr.rank_tolerance.unwrap_or(DEFAULT_RANK_TOLERANCE);
+        if !(tolerance > 0.0 && tolerance < 1.0) {
+            self.error(
+                gpath("rank_tolerance"),
+                format!("{tolerance} is not in (0, 1)"),
+            );
+        }
+        let m = faults.len().max(1);
+        let known = faults.iter().all(|f| f.onset == Onset::Known);
+        let (threshold, threshold_source) = match (glr.threshold, glr.false_alarm) {
+            (Some(_), Some(_)) => {
+                self.error(
+                    gpath("threshold"),
+                    "give either `threshold` or `false_alarm`, not both".into(),
+                );
+                (0.0, ThresholdSource::Explicit)
+            }
+            (Some(t), None) => {
+                if !(t.is_finite() && t > 0.0) {
+                    self.error(
+                        gpath("threshold"),
+                        format!("{t} must be finite and positive"),
+                    );
+                }
+                (t, ThresholdSource::Explicit)
+            }
+            (None, alpha) => {
+                let a = alpha.unwrap_or(1e-4);
+                let onsets = if known {
+                    1
+                } else {
+                    glr.window.saturating_sub(glr.min_lag).max(1)
+                };
+                match chi2_upper_quantile(m as f64, a / onsets as f64) {
+                    Ok(t) => (t, ThresholdSource::Bonferroni { false_alarm: a }),
+                    Err(e) => {
+                        self.error(gpath("false_alarm"), e.to_string());
+                        (0.0, ThresholdSource::Explicit)
+                    }
+                }
+            }
+        };
+        let mut groups = Vec::new();
+        for (gi, g) in glr.groups.iter().enumerate() {
+            let mut idx = Vec::new();
+            for name in &g.faults {
+                match faults.iter().position(|f| &f.name == name) {
+                    Some(i) => idx.push(i),
+                    None => self.error(
+                        gpath(&format!("groups[{gi}]")),
+                        format!("unknown fault \"{name}\""),
+                    ),
+                }
+            }
+            if idx.is_empty() {
+                self.error(gpath(&format!("groups[{gi}]")), "names no fault".into());
+            }
+            groups.push((g.name.clone(), idx));
+        }
+        let simulation = self.simulation(prefix, spec, dims, e.as_ref());
+        if self.errors.len() > before {
+            return None;
+        }
+        Some(Channel {
+            name: spec.name.clone(),
+            key: spec
+                .key
+                .clone()
+                .unwrap_or_else(|| format!("plant/{}", spec.name)),
+            period: spec.period,
+            dims,
+            model: lpv,
+            unknown_input: e,
+            x0,
+            p0: p0
+                .map(|m| m.base().clone())
+                .unwrap_or_else(|| DMatrix::identity(n, n)),
+            window: WindowSettings {
+                window: glr.window,
+                min_lag: glr.min_lag,
+                rank_tolerance: tolerance,
+            },
+            alarm: AlarmSettings {
+                threshold,
+                hysteresis: glr.hysteresis,
+                clear_samples: glr.clear_samples.max(1),
+            },
+            threshold_source,
+            isolation_delay: glr.isolation_delay.unwrap_or(n as u32),
+            isolation_alpha: glr.isolation_alpha,
+            groups,
+            max_gap: glr.max_gap,
+            fault_names: faults.iter().map(|f| f.name.clone()).collect(),
+            simulation,
+            faults,
+        })
+    }
+
+    /// Checks of the GLR settings that need no model, done first so that they are
+    /// reported together with model errors.
+    fn glr_ranges(&mut self, prefix: &str, glr: &schema::GlrSpec) {
+        let gpath = |f: &str| join(prefix, &format!("glr.{f}"));
+        if glr.window < 2 {
+            self.error(
+                gpath("window"),
+                format!("w = {} must be at least 2", glr.window),
+            );
+        }
+        if glr.min_lag >= glr.window {
+            self.error(
+                gpath("min_lag"),
+                format!("s = {} must be below w = {}", glr.min_lag, glr.window),
+            );
+        }
+        if !(0.0..1.0).contains(&glr.hysteresis) {
+            self.error(
+                gpath("hysteresis"),
+                format!("{} is not in [0, 1)", glr.hysteresis),
+            );
+        }
+        if !(glr.isolation_alpha > 0.0 && glr.isolation_alpha < 1.0) {
+            self.error(
+                gpath("isolation_alpha"),
+                format!("{} is not in (0, 1)", glr.isolation_alpha),
+            );
+        }
+    }
+
+    fn observability(&mut self, prefix: &str, model: &Lpv) {
+        let [f, _, h, ..] = model.matrices();
+        let (f, h) = (f.base(), h.base());
+        let n = f.nrows();
+        let p = h.nrows();
+        let mut o = DMatrix::zeros(p * n, n);
+        let mut block = h.clone();
+        for i in 0..n {
+            o.view_mut((i * p, 0), (p, n)).copy_from(&block);
+            block = &block * f;
+        }
+        let sv = o.singular_values();
+        let smax = sv.max();
+        let rank = sv.iter().filter(|s| **s > 1e-9 * smax).count();
+        if rank < n {
+            self.warn(
+                join(prefix, "model"),
+                format!(
+                    "(F, H) is not observable at the base point: the observability matrix has rank {rank} < n = {n}"
+                ),
+            );
+        }
+    }
+
+    fn faults(
+        &mut self,
+        prefix: &str,
+        spec: &ChannelSpec,
+        dims: Dims,
+        j: &LpvMatrix,
+    ) -> Vec<FaultPlan> {
+        if spec.faults.is_empty() {
+            self.error(
+                join(prefix, "faults"),
+                "the fault dictionary is empty".into(),
+            );
+        }
+        let mut out = Vec::new();
+        for (i, f) in spec.faults.iter().enumerate() {
+            let path = join(prefix, &format!("faults[{i}]"));
+            if spec.faults[..i].iter().any(|g| g.name == f.name) {
+                self.error(path.clone(), format!("duplicate fault name \"{}\"", f.name));
+            }
+            if let Some(plan) = self.fault(&path, f, dims, j) {
+                out.push(plan);
+            }
+        }
+        let known = out.iter().filter(|f| f.onset == Onset::Known).count();
+        if known != 0 && known != out.len() {
+            self.error(
+                join(prefix, "faults"),
+                "known-profile faults cannot be mixed with step/impulse/ramp faults in one channel"
+                    .into(),
+            );
+        }
+        out
+    }
+
+    fn fault(
+        &mut self,
+        path: &str,
+        f: &FaultSpec,
+        dims: Dims,
+        j_matrix: &LpvMatrix,
+    ) -> Option<FaultPlan> {
+        let kind = f.kind.as_deref().unwrap_or("custom");
+        let default_onset = if kind == "sensor_drift" {
+            "ramp"
+        } else {
+            "step"
+        };
+        let onset_name = f.onset.as_deref().unwrap_or(default_onset);
+        let onset = match onset_name {
+            "step" => Onset::Step,
+            "impulse" => Onset::Impulse,
+            "ramp" => Onset::Ramp,
+            "known" => Onset::Known,
+            other => {
+                self.error(
+                    format!("{path}.onset"),
+                    format!("\"{other}\" is not one of step, impulse, ramp, known"),
+                );
+                return None;
+            }
+        };
+        let shortcut = kind != "custom";
+        if shortcut && (f.psi.is_some() || f.phi.is_some()) {
+            self.error(
+                path.to_owned(),
+                format!("kind \"{kind}\" defines its own columns: remove psi/phi"),
+            );
+            return None;
+        }
+        let need_input = |v: &mut Self| -> Option<usize> {
+            match f.input {
+                Some(i) if i < dims.inputs => Some(i),
+                Some(i) => {
+                    v.error(
+                        format!("{path}.input"),
+                        format!(
+                            "input u{i} does not exist (the channel has {} inputs)",
+                            dims.inputs
+                        ),
+                    );
+                    None
+                }
+                None => {
+                    v.error(
+                        format!("{path}.input"),
+                        format!("kind \"{kind}\" needs `input`"),
+                    );
+                    None
+                }
+            }
+        };
+        let need_output = |v: &mut Self| -> Option<usize> {
+            match f.output {
+                Some(j) if j < dims.outputs => Some(j),
+                Some(j) => {
+                    v.error(
+                        format!("{path}.output"),
+                        format!(
+                            "output y{j} does not exist (the channel has {} outputs)",
+                            dims.outputs
+                        ),
+                    );
+                    None
+                }
+                None => {
+                    v.error(
+                        format!("{path}.output"),
+                        format!("kind \"{kind}\" needs `output`"),
+                    );
+                    None
+                }
+            }
+        };
+        let unit =
+            |len: usize, at: usize| DVector::from_fn(len, |r, _| if r == at { 1.0 } else { 0.0 });
+        let (state, output) = match kind {
+            "actuator_bias" | "actuator_gain" => {
+                let i = need_input(self)?;
+                let jcol = j_matrix.base().column(i).into_owned();
+                let j_used = jcol.iter().any(|x| *x != 0.0) || !j_matrix.terms().is_empty();
+                if j_used {
+                    if kind == "actuator_gain" || !j_matrix.terms().is_empty() {
+                        self.error(
+                            path.to_owned(),
+                            format!("kind \"{kind}\" with a non-zero J column for u{i} is not supported: write psi/phi expressions"),
+                        );
+                        return None;
+                    }
+                    (ColumnPlan::InputBias(i), ColumnPlan::Constant(jcol))
+                } else if kind == "actuator_bias" {
+                    (ColumnPlan::InputBias(i), ColumnPlan::Zero)
+                } else {
+                    (ColumnPlan::GainLoss(i), ColumnPlan::Zero)
+                }
+            }
+            "sensor_bias" | "sensor_drift" => {
+                let j = need_output(self)?;
+                if kind == "sensor_drift" && onset != Onset::Ramp {
+                    self.error(
+                        format!("{path}.onset"),
+                        "a sensor drift is a ramp: remove `onset`".into(),
+                    );
+                }
+                (
+                    ColumnPlan::Zero,
+                    ColumnPlan::Constant(unit(dims.outputs, j)),
+                )
+            }
+            "custom" => {
+                if f.psi.is_none() && f.phi.is_none() {
+                    self.error(
+                        path.to_owned(),
+                        "a custom fault needs `psi` (state column) and/or `phi` (output column)"
+                            .into(),
+                    );
+                    return None;
+                }
+                let state =
+                    self.column(&format!("{path}.psi"), f.psi.as_deref(), dims.states, dims)?;
+                let output =
+                    self.column(&format!("{path}.phi"), f.phi.as_deref(), dims.outputs, dims)?;
+                (state, output)
+            }
+            other => {
+                self.error(
+                    format!("{path}.kind"),
+                    format!("\"{other}\" is not one of custom, actuator_bias, actuator_gain, sensor_bias, sensor_drift"),
+                );
+                return None;
+            }
+        };
+        Some(FaultPlan {
+            name: f.name.clone(),
+            onset,
+            state,
+            output,
+        })
+    }
+
+    fn column(
+        &mut self,
+        path: &str,
+        entries: Option<&[EntrySpec]>,
+        len: usize,
+        dims: Dims,
+    ) -> Option<ColumnPlan> {
+        let Some(entries) = entries else {
+            return Some(ColumnPlan::Zero);
+        };
+        if entries.len() != len {
+            self.error(
+                path.to_owned(),
+                format!("has {} entries, expected {len}", entries.len()),
+            );
+            return None;
+        }
+        let ctx = ExprContext {
+            inputs: dims.inputs,
+            signals: dims.signals,
+            allow_k: true,
+            allow_lags: true,
+            allow_random: false,
+        };
+        let mut exprs = Vec::new();
+        let mut all_constant = true;
+        let mut ok = true;
+        for (i, e) in entries.iter().enumerate() {
+            let parsed = match e {
+                EntrySpec::Number(x) if !x.is_finite() => {
+                    self.error(format!("{path}[{i}]"), "is not finite".into());
+                    ok = false;
+                    continue;
+                }
+                EntrySpec::Number(x) => Expr::parse(&format!("{x:?}"), &ctx),
+                EntrySpec::Expr(s) => Expr::parse(s, &ctx),
+            };
+            match parsed {
+                Ok(x) => {
+                    all_constant &= x.constant_value().is_some();
+                    exprs.push(x);
+                }
+                Err(err) => {
+                    self.error(format!("{path}[{i}]"), err.to_string());
+                    ok = false;
+                }
+            }
+        }
+        if !ok {
+            return None;
+        }
+        if all_constant {
+            let v = DVector::from_iterator(
+                len,
+                exprs.iter().map(|e| e.constant_value().unwrap_or(0.0)),
+            );
+            if v.iter().any(|x| !x.is_finite()) {
+                self.error(path.to_owned(), "evaluates to a non-finite value".into());
+                return None;
+            }
+            return Some(if v.iter().all(|x| *x == 0.0) {
+                ColumnPlan::Zero
+            } else {
+                ColumnPlan::Constant(v)
+            });
+        }
+        Some(ColumnPlan::Exprs(exprs))
+    }
+
+    fn simulation(
+        &mut self,
+        prefix: &str,
+        spec: &ChannelSpec,
+        dims: Dims,
+        e: Option<&DMatrix<f64>>,
+    ) -> SimulationPlan {
+        let sim = &spec.simulation;
+        let ctx = ExprContext {
+            inputs: 0,
+            signals: 0,
+            allow_k: true,
+            allow_lags: false,
+            allow_random: true,
+        };
+        let list =
+            |v: &mut Self, field: &str, src: &[String], max: usize, what: &str| -> Vec<Expr> {
+                let path = join(prefix, &format!("simulation.{field}"));
+                if src.len() > max {
+                    v.error(
+                        path.clone(),
+                        format!(
+                            "has {} expressions but the channel has {max} {what}",
+                            src.len()
+                        ),
+                    );
+                }
+                src.iter()
+                    .enumerate()
+                    .filter_map(|(i, s)| match Expr::parse(s, &ctx) {
+                        Ok(x) => Some(x),
+                        Err(err) => {
+                            v.error(format!("{path}[{i}]"), err.to_string());
+                            None
+                        }
+                    })
+                    .collect()
+            };
+        let inputs = list(self, "inputs", &sim.inputs, dims.inputs, "inputs");
+        let signals = list(self, "signals", &sim.signals, dims.signals, "signals");
+        let d = e.map_or(0, |e| e.ncols());
+        let unknown_input = list(self, "unknown_input", &sim.unknown_input, d, "columns in E");
+        let controller = sim.controller.as_ref().map(|c| Controller {
+            output: c.output,
+            input: c.input,
+            setpoint: c.setpoint,
+            kp: c.kp,
+            ki: c.ki,
+        });
+        if let Some(c) = controller {
+            if c.input >= dims.inputs || c.output >= dims.outputs {
+                self.error(
+                    join(prefix, "simulation.controller"),
+                    format!(
+                        "drives u{} from y{} but the channel has {} inputs and {} outputs",
+                        c.input, c.output, dims.inputs, dims.outputs
+                    ),
+                );
+            }
+        }
+        SimulationPlan {
+            inputs,
+            signals,
+            unknown_input,
+            controller,
+        }
+    }
+}
+
+/// A channel name must be usable in a Zenoh key expression chunk.
+fn validate_name(name: &str) -> Result<(), String> {
+    if name.is_empty() {
+        return Err("is empty".into());
+    }
+    if let Some(c) = name.chars().find(|c| {
+        matches!(c, '/' | '*' | '$' | '?' | '#' | '@') || c.is_whitespace() || c.is_control()
+    }) {
+        return Err(format!(
+            "\"{name}\" contains '{c}', which cannot appear in a key expression chunk"
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,272 @@
+//! The TOML schema, as written by users. Strict: unknown keys are errors.
+//!
+//! Matrix entries are written row by row (`H = [[1.0, 0.0]]` is 1×2). A matrix may be a
+//! scalar (times the identity; square matrices only), a dense array of rows, or an LPV
+//! table `{ base = [[..]], p0 = [[..]], p3 = [[..]] }` meaning M_0 + p0·M_p0 + p3·M_p3.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use serde::Deserialize;
+
+/// A whole configuration file: one deployment.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConfigFile {
+    /// Zenoh session settings (used by `glrmon run`).
+    #[serde(default)]
+    pub zenoh: ZenohSpec,
+    /// Recording settings (used by `glrmon run`).
+    #[serde(default)]
+    pub recording: RecordingSpec,
+    /// The monitored channels.
+    #[serde(default)]
+    pub channels: Vec<ChannelSpec>,
+}
+
+/// Zenoh session settings.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ZenohSpec {
+    /// A Zenoh JSON5 configuration file, passed through untouched.
+    pub config: Option<PathBuf>,
+    /// `peer` (default) or `client`.
+    pub mode: Option<String>,
+    /// Endpoints to connect to, e.g. `tcp/127.0.0.1:7447`.
+    #[serde(default)]
+    pub connect: Vec<String>,
+    /// Endpoints to listen on.
+    #[serde(default)]
+    pub listen: Vec<String>,
+    /// Multicast scouting (default off).
+    pub multicast_scouting: Option<bool>,
+}
+
+/// Recording settings.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecordingSpec {
+    /// Whether `glrmon run` records inputs and results.
+    #[serde(default)]
+    pub enabled: bool,
+    /// Directory of the recordings.
+    pub directory: Option<PathBuf>,
+}
+
+/// One channel of the plant.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChannelSpec {
+    /// Unique name; results are published under `glrmon/<name>/…`.
+    pub name: String,
+    /// Input key expression (default `plant/<name>`).
+    pub key: Option<String>,
+    /// Sample period in seconds, informative.
+    pub period: Option<f64>,
+    /// Number of exogenous signals p0…p{q−1} per sample (default: the highest index
+    /// used + 1).
+    pub signals: Option<usize>,
+    /// The state-space model.
+    pub model: ModelSpec,
+    /// The fault dictionary.
+    #[serde(default)]
+    pub faults: Vec<FaultSpec>,
+    /// GLR and alarm settings.
+    #[serde(default)]
+    pub glr: GlrSpec,
+    /// How `glrmon simulate` drives this channel.
+    #[serde(default)]
+    pub simulation: SimulationSpec,
+}
+
+/// Model matrices (letters of Zhang & Basseville 2014, eq. (1)).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelSpec {
+    /// F (n×n).
+    #[serde(rename = "F")]
+    pub f: MatrixSpec,
+    /// G (n×l); absent means no known inputs enter the state.
+    #[serde(rename = "G")]
+    pub g: Option<MatrixSpec>,
+    /// H (p×n).
+    #[serde(rename = "H")]
+    pub h: MatrixSpec,
+    /// J (p×l); absent means zero.
+    #[serde(rename = "J")]
+    pub j: Option<MatrixSpec>,
+    /// Q (n×n), symmetric positive semi-definite.
+    #[serde(rename = "Q")]
+    pub q: MatrixSpec,
+    /// R (p×p), symmetric positive definite.
+    #[serde(rename = "R")]
+    pub r: MatrixSpec,
+    /// Unknown-input matrix E (n×d), for the Kitanidis residuals of sparse diagnosis.
+    #[serde(rename = "E")]
+    pub e: Option<MatrixSpec>,
+    /// X̂_0 (default 0).
+    pub x0: Option<Vec<f64>>,
+    /// P_0 (default I), symmetric positive definite.
+    #[serde(rename = "P0")]
+    pub p0: Option<MatrixSpec>,
+}
+
+/// A matrix: scalar × identity, dense rows, or LPV table.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+pub enum MatrixSpec {
+    /// s·I (square matrices only).
+    Scalar(f64),
+    /// Rows.
+    Dense(Vec<Vec<f64>>),
+    /// `{ base = rows, p<i> = rows, … }`.
+    Lpv(BTreeMap<String, Vec<Vec<f64>>>),
+}
+
+/// A fault column entry: a number or an expression over the sample's signals.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+pub enum EntrySpec {
+    /// A constant.
+    Number(f64),
+    /// An expression such as `"-0.5*u0"` or `"p3"`.
+    Expr(String),
+}
+
+/// A fault of the dictionary.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FaultSpec {
+    /// Unique name within the channel.
+    pub name: String,
+    /// `custom` (default when `psi`/`phi` are given), `actuator_bias`, `actuator_gain`,
+    /// `sensor_bias` or `sensor_drift`.
+    pub kind: Option<String>,
+    /// Onset profile: `step` (default), `impulse`, `ramp` (default of `sensor_drift`) or
+    /// `known`.
+    pub onset: Option<String>,
+    /// Input index of actuator faults.
+    pub input: Option<usize>,
+    /// Output index of sensor faults.
+    pub output: Option<usize>,
+    /// Ψ̃: state column (n entries).
+    pub psi: Option<Vec<EntrySpec>>,
+    /// Φ̃: output column (p entries).
+    pub phi: Option<Vec<EntrySpec>>,
+}
+
+/// GLR window, threshold and alarm settings.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GlrSpec {
+    /// w (default 100).
+    #[serde(default = "default_window")]
+    pub window: usize,
+    /// s (default 1).
+    #[serde(default = "default_min_lag")]
+    pub min_lag: usize,
+    /// Explicit threshold λ on l_k.
+    pub threshold: Option<f64>,
+    /// Target false-alarm probability per sample (default 10⁻⁴ when no threshold is
+    /// given): λ is the χ²(m) upper quantile at α/(w − s) (Bonferroni over the window).
+    pub false_alarm: Option<f64>,
+    /// Hysteresis h: an episode ends below λ(1 − h) (default 0.1).
+    #[serde(default = "default_hysteresis")]
+    pub hysteresis: f64,
+    /// Consecutive samples below λ(1 − h) that end an episode (default 1).
+    #[serde(default = "default_clear")]
+    pub clear_samples: u32,
+    /// Samples between the crossing and the isolation tests (default n).
+    pub isolation_delay: Option<u32>,
+    /// Type-I probability of each isolation test (default 0.01).
+    #[serde(default = "default_isolation_alpha")]
+    pub isolation_alpha: f64,
+    /// Isolation groups (default: each fault against all others).
+    #[serde(default)]
+    pub groups: Vec<GroupSpec>,
+    /// Relative rank cut-off τ for C_k(r) (default 10⁻⁹).
+    pub rank_tolerance: Option<f64>,
+    /// Largest run of missing samples filled by predict-only steps (default 100).
+    #[serde(default = "default_max_gap")]
+    pub max_gap: u64,
+}
+
+impl Default for GlrSpec {
+    fn default() -> Self {
+        Self {
+            window: default_window(),
+            min_lag: default_min_lag(),
+            threshold: None,
+            false_alarm: None,
+            hysteresis: default_hysteresis(),
+            clear_samples: default_clear(),
+            isolation_delay: None,
+            isolation_alpha: default_isolation_alpha(),
+            groups: Vec::new(),
+            rank_tolerance: None,
+            max_gap: default_max_gap(),
+        }
+    }
+}
+
+fn default_window() -> usize {
+    100
+}
+fn default_min_lag() -> usize {
+    1
+}
+fn default_hysteresis() -> f64 {
+    0.1
+}
+fn default_clear() -> u32 {
+    1
+}
+fn default_isolation_alpha() -> f64 {
+    0.01
+}
+fn default_max_gap() -> u64 {
+    100
+}
+
+/// A named group of faults tested together against the others.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GroupSpec {
+    /// Name reported in alarms.
+    pub name: String,
+    /// Fault names.
+    pub faults: Vec<String>,
+}
+
+/// How `glrmon simulate` drives the channel.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimulationSpec {
+    /// U_k, one expression of `k` per input (random functions allowed); default 0.
+    #[serde(default)]
+    pub inputs: Vec<String>,
+    /// p(k), one expression of `k` per signal; default 0.
+    #[serde(default)]
+    pub signals: Vec<String>,
+    /// Unknown input d_k entering through E, one expression per column of E.
+    #[serde(default)]
+    pub unknown_input: Vec<String>,
+    /// A PI controller closing the loop (for unstable plants).
+    pub controller: Option<ControllerSpec>,
+}
+
+/// PI controller `u_k[input] = kp·e_k + I_k`, `I_{k+1} = I_k + ki·e_k`, `e_k = setpoint − y_k[output]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControllerSpec {
+    /// Output measured.
+    pub output: usize,
+    /// Input driven.
+    pub input: usize,
+    /// Setpoint.
+    pub setpoint: f64,
+    /// Proportional gain.
+    pub kp: f64,
+    /// Integral gain.
+    pub ki: f64,
+}

@@ -1,0 +1,277 @@
+//! One broken configuration per error kind: each fails with the expected path and reason.
+
+/// A valid two-state channel; tests replace one line of it.
+const BASE: &str = r#"
+[[channels]]
+name = "pump3"
+
+[channels.model]
+F = [[0.5, 1.0], [0.0, 0.8]]
+G = [[0.0], [1.0]]
+H = [[1.0, 0.0]]
+Q = 0.01
+R = 0.04
+
+[[channels.faults]]
+name = "bias"
+kind = "actuator_bias"
+input = 0
+
+[[channels.faults]]
+name = "custom"
+psi = ["0.5*u0", 1.0]
+
+[channels.glr]
+window = 50
+min_lag = 1
+"#;
+
+fn with(replace: &str, by: &str) -> String {
+    assert!(BASE.contains(replace), "fixture lacks {replace}");
+    BASE.replacen(replace, by, 1)
+}
+
+fn errors(text: &str) -> Vec<String> {
+    match glrmon_spec::parse(text) {
+        Ok(_) => panic!("expected errors for:\n{text}"),
+        Err(e) => e.errors.iter().map(ToString::to_string).collect(),
+    }
+}
+
+fn assert_error(text: &str, expected: &str) {
+    let errs = errors(text);
+    assert!(
+        errs.iter().any(|e| e.contains(expected)),
+        "wanted «{expected}» in {errs:#?}"
+    );
+}
+
+#[test]
+fn the_base_fixture_is_valid() {
+    let cfg = glrmon_spec::parse(BASE).unwrap();
+    assert_eq!(cfg.channels[0].fault_names, ["bias", "custom"]);
+    assert!(cfg.warnings.is_empty(), "{:?}", cfg.warnings);
+}
+
+#[test]
+fn unknown_key_is_an_error() {
+    assert_error(
+        &with("name = \"pump3\"", "name = \"pump3\"\ncolour = 3"),
+        "unknown field `colour`",
+    );
+    assert_error(
+        &with("window = 50", "window = 50\nwindwo = 3"),
+        "unknown field `windwo`",
+    );
+}
+
+#[test]
+fn f_not_square_names_h_columns() {
+    let text = with(
+        "F = [[0.5, 1.0], [0.0, 0.8]]",
+        "F = [[0.5, 1.0], [0.0, 0.8], [1.0, 1.0]]",
+    )
+    .replace("H = [[1.0, 0.0]]", "H = [[1.0, 0.0, 0.0]]");
+    assert_error(
+        &text,
+        r#"channels[0] "pump3": model.F is 3×2 but H has 3 columns"#,
+    );
+}
+
+#[test]
+fn ragged_rows_are_an_error() {
+    assert_error(
+        &with("F = [[0.5, 1.0], [0.0, 0.8]]", "F = [[0.5, 1.0], [0.0]]"),
+        "model.F: row 1 has 1 entries but row 0 has 2",
+    );
+}
+
+#[test]
+fn unknown_signal_in_a_fault_column_names_the_entry() {
+    assert_error(
+        &with(r#"psi = ["0.5*u0", 1.0]"#, r#"psi = ["0.5*u7", 1.0]"#),
+        r#"faults[1].psi[0]: unknown signal "u7""#,
+    );
+}
+
+#[test]
+fn fault_column_of_the_wrong_length() {
+    assert_error(
+        &with(r#"psi = ["0.5*u0", 1.0]"#, "psi = [1.0, 2.0, 3.0]"),
+        "faults[1].psi has 3 entries, expected 2",
+    );
+}
+
+#[test]
+fn non_symmetric_q() {
+    assert_error(
+        &with("Q = 0.01", "Q = [[0.01, 0.002], [0.0, 0.01]]"),
+        "model.Q is not symmetric",
+    );
+}
+
+#[test]
+fn non_psd_q() {
+    assert_error(
+        &with("Q = 0.01", "Q = [[0.01, 0.0], [0.0, -0.01]]"),
+        "model.Q is not positive semi-definite",
+    );
+}
+
+#[test]
+fn non_pd_r() {
+    assert_error(
+        &with("R = 0.04", "R = 0.0"),
+        "model.R is not positive definite",
+    );
+}
+
+#[test]
+fn non_pd_p0() {
+    assert_error(
+        &with("R = 0.04", "R = 0.04\nP0 = [[1.0, 2.0], [2.0, 1.0]]"),
+        "model.P0 is not positive definite",
+    );
+}
+
+#[test]
+fn min_lag_not_below_window() {
+    assert_error(
+        &with("min_lag = 1", "min_lag = 50"),
+        "glr.min_lag: s = 50 must be below w = 50",
+    );
+}
+
+#[test]
+fn window_below_two() {
+    assert_error(
+        &with("window = 50\nmin_lag = 1", "window = 1\nmin_lag = 0"),
+        "glr.window: w = 1 must be at least 2",
+    );
+}
+
+#[test]
+fn duplicate_channel_names() {
+    let text = format!(
+        "{BASE}\n{}",
+        BASE.replace("[channels.glr]\nwindow = 50\nmin_lag = 1", "")
+    );
+    assert_error(
+        &text,
+        r#"channels[1] "pump3": duplicate channel name "pump3""#,
+    );
+}
+
+#[test]
+fn duplicate_fault_names() {
+    assert_error(
+        &with(r#"name = "custom""#, r#"name = "bias""#),
+        r#"faults[1]: duplicate fault name "bias""#,
+    );
+}
+
+#[test]
+fn nan_and_inf_anywhere() {
+    assert_error(
+        &with(
+            "F = [[0.5, 1.0], [0.0, 0.8]]",
+            "F = [[0.5, nan], [0.0, 0.8]]",
+        ),
+        "model.F: entry [0][1] is not finite",
+    );
+    assert_error(&with("R = 0.04", "R = inf"), "model.R is not finite");
+    assert_error(
+        &with(r#"psi = ["0.5*u0", 1.0]"#, r#"psi = ["0.5*u0", -inf]"#),
+        "faults[1].psi[1] is not finite",
+    );
+}
+
+#[test]
+fn actuator_fault_on_a_missing_input() {
+    assert_error(
+        &with("input = 0", "input = 3"),
+        "faults[0].input: input u3 does not exist (the channel has 1 inputs)",
+    );
+}
+
+#[test]
+fn unknown_onset_and_kind() {
+    assert_error(
+        &with(
+            r#"kind = "actuator_bias""#,
+            r#"kind = "actuator_bias"
+onset = "sudden""#,
+        ),
+        r#"faults[0].onset: "sudden" is not one of step, impulse, ramp, known"#,
+    );
+    assert_error(
+        &with(r#"kind = "actuator_bias""#, r#"kind = "leak""#),
+        r#"faults[0].kind: "leak" is not one of"#,
+    );
+}
+
+#[test]
+fn threshold_and_false_alarm_together() {
+    assert_error(
+        &with(
+            "window = 50",
+            "window = 50\nthreshold = 20.0\nfalse_alarm = 1e-3",
+        ),
+        "give either `threshold` or `false_alarm`",
+    );
+}
+
+#[test]
+fn every_error_is_listed_not_only_the_first() {
+    let text = with("R = 0.04", "R = 0.0")
+        .replace("min_lag = 1", "min_lag = 80")
+        .replace(r#"psi = ["0.5*u0", 1.0]"#, r#"psi = ["0.5*u9", 1.0]"#);
+    let errs = errors(&text);
+    assert!(errs.len() >= 3, "{errs:#?}");
+    for want in ["model.R", "glr.min_lag", "faults[1].psi[0]"] {
+        assert!(
+            errs.iter().any(|e| e.contains(want)),
+            "{want} missing from {errs:#?}"
+        );
+    }
+}
+
+#[test]
+fn unobservable_model_is_a_warning_not_an_error() {
+    let cfg = glrmon_spec::parse(&with(
+        "F = [[0.5, 1.0], [0.0, 0.8]]",
+        "F = [[0.5, 0.0], [0.0, 0.8]]",
+    ))
+    .unwrap();
+    assert!(
+        cfg.warnings
+            .iter()
+            .any(|w| w.to_string().contains("not observable")),
+        "{:?}",
+        cfg.warnings
+    );
+}
+
+#[test]
+fn false_alarm_gives_the_bonferroni_chi2_threshold() {
+    let cfg =
+        glrmon_spec::parse(&with("window = 50", "window = 50\nfalse_alarm = 0.0049")).unwrap();
+    // χ²(2) upper quantile at α/(w − s) = 0.0049/49 = 1e-4 is −2 ln 1e-4.
+    let t = cfg.channels[0].alarm.threshold;
+    assert!((t - 18.420680743952367).abs() < 1e-9, "{t}");
+}
+
+#[test]
+fn every_shipped_config_is_valid() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config");
+    let mut files = vec![root.join("demo.toml")];
+    for e in std::fs::read_dir(root.join("examples")).unwrap() {
+        files.push(e.unwrap().path());
+    }
+    assert!(files.len() >= 4);
+    for f in files {
+        if let Err(e) = glrmon_spec::load(&f) {
+            panic!("{}:\n{e}", f.display());
+        }
+    }
+}

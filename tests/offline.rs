@@ -1,0 +1,326 @@
+//! End-to-end tests of the offline path with the real binary:
+//! `glrmon validate`, `glrmon simulate` → `glrmon replay`.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use glrmon_wire::{Alarm, Record, decode_record};
+
+fn glrmon(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_glrmon"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn config(name: &str) -> String {
+    root().join("config").join(name).display().to_string()
+}
+
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(tag: &str) -> Self {
+        let p = std::env::temp_dir().join(format!("glrmon-{tag}-{}", std::process::id()));
+        std::fs::create_dir_all(&p).unwrap();
+        Self(p)
+    }
+    fn file(&self, name: &str) -> String {
+        self.0.join(name).display().to_string()
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn ok(out: &Output) -> String {
+    assert!(
+        out.status.success(),
+        "exit {:?}\nstdout:\n{}\nstderr:\n{}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout.clone()).unwrap()
+}
+
+fn records(path: &str) -> Vec<Record> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .map(|l| decode_record(l.as_bytes()).unwrap())
+        .collect()
+}
+
+fn alarms(records: &[Record]) -> Vec<&Alarm> {
+    records
+        .iter()
+        .filter_map(|r| {
+            if let Record::Alarm(a) = r {
+                Some(a)
+            } else {
+                None
+            }
+        })
+        .collect()
+}
+
+fn isolated(a: &Alarm) -> Vec<&str> {
+    a.isolation
+        .iter()
+        .filter(|i| i.isolated)
+        .map(|i| i.fault.as_str())
+        .collect()
+}
+
+/// Simulates `samples` samples with a fault and replays them; returns the records.
+fn simulate_replay(
+    dir: &TempDir,
+    cfg: &str,
+    fault: &str,
+    onset: u64,
+    magnitude: &str,
+    samples: u64,
+    seed: u64,
+) -> Vec<Record> {
+    let csv = dir.file(&format!("{fault}-{seed}.csv"));
+    let jsonl = dir.file(&format!("{fault}-{seed}.jsonl"));
+    ok(&glrmon(&[
+        "simulate",
+        "--config",
+        cfg,
+        "--samples",
+        &samples.to_string(),
+        "--seed",
+        &seed.to_string(),
+        "--fault",
+        fault,
+        "--onset",
+        &onset.to_string(),
+        "--magnitude",
+        magnitude,
+        "--output",
+        &csv,
+    ]));
+    ok(&glrmon(&[
+        "replay", "--config", cfg, &csv, "--output", &jsonl,
+    ]));
+    records(&jsonl)
+}
+
+#[test]
+fn every_shipped_config_validates_with_an_isolability_report() {
+    let mut files = vec![config("demo.toml")];
+    for e in std::fs::read_dir(root().join("config/examples")).unwrap() {
+        files.push(e.unwrap().path().display().to_string());
+    }
+    for f in files {
+        let out = ok(&glrmon(&["validate", &f]));
+        assert!(out.contains(": valid"), "{out}");
+        assert!(out.contains("isolability over"), "{out}");
+        assert!(out.contains("condition number"), "{out}");
+    }
+}
+
+#[test]
+fn validate_lists_every_error_and_exits_1() {
+    let dir = TempDir::new("invalid");
+    let bad = dir.file("bad.toml");
+    let text = std::fs::read_to_string(config("examples/dc-motor.toml"))
+        .unwrap()
+        .replace("R = 0.0025", "R = -1.0")
+        .replace("min_lag = 1", "min_lag = 100");
+    std::fs::write(&bad, text).unwrap();
+    let out = glrmon(&["validate", &bad]);
+    assert_eq!(out.status.code(), Some(1));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains(r#"channels[0] "dc_motor": model.R is not positive definite"#),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains(r#"channels[0] "dc_motor": glr.min_lag: s = 100 must be below w = 100"#),
+        "{stdout}"
+    );
+}
+
+/// Issue 3: on the §6.1 plant the alarm lands within 5 samples of the injected onset
+/// 201 and isolates the right state (both magnitudes of the paper's Figures 3-4).
+#[test]
+fn paper2014_simulate_replay_alarm_within_5_samples_of_201_isolates_the_state() {
+    let dir = TempDir::new("p2014");
+    let cfg = config("examples/paper2014-unstable.toml");
+    for (fault, magnitude) in [("x0_jump", "4"), ("x0_jump", "1.5"), ("x1_jump", "1.5")] {
+        let recs = simulate_replay(&dir, &cfg, fault, 201, magnitude, 400, 7);
+        let a = alarms(&recs);
+        assert_eq!(a.len(), 1, "{fault} {magnitude}: {a:#?}");
+        assert!(
+            (201..=206).contains(&a[0].k),
+            "{fault} {magnitude}: alarm at {}",
+            a[0].k
+        );
+        assert!(
+            a[0].onset.abs_diff(201) <= 5,
+            "{fault} {magnitude}: onset {}",
+            a[0].onset
+        );
+        assert_eq!(
+            isolated(a[0]),
+            [fault],
+            "{fault} {magnitude}: {:#?}",
+            a[0].isolation
+        );
+        let stats = recs.iter().filter(|r| matches!(r, Record::Stat(_))).count();
+        assert_eq!(stats, 400);
+    }
+}
+
+/// Issue 3: on the DC motor each fault is isolated correctly.
+#[test]
+fn dc_motor_each_fault_is_detected_and_isolated() {
+    let dir = TempDir::new("dcmotor");
+    let cfg = config("examples/dc-motor.toml");
+    for (fault, magnitude) in [("speed_sensor_drift", "0.01"), ("actuator_bias", "0.5")] {
+        let recs = simulate_replay(&dir, &cfg, fault, 300, magnitude, 600, 3);
+        let a = alarms(&recs);
+        assert_eq!(a.len(), 1, "{fault}: {a:#?}");
+        assert!(
+            a[0].k >= 300 && a[0].k < 340,
+            "{fault}: alarm at {}",
+            a[0].k
+        );
+        assert_eq!(isolated(a[0]), [fault], "{fault}: {:#?}", a[0].isolation);
+    }
+}
+
+#[test]
+fn replaying_the_same_csv_twice_gives_byte_identical_jsonl() {
+    let dir = TempDir::new("twice");
+    let cfg = config("examples/paper2014-unstable.toml");
+    let csv = dir.file("in.csv");
+    ok(&glrmon(&[
+        "simulate",
+        "--config",
+        &cfg,
+        "--samples",
+        "500",
+        "--fault",
+        "x1_jump",
+        "--onset",
+        "250",
+        "--magnitude",
+        "2",
+        "--output",
+        &csv,
+    ]));
+    let (a, b) = (dir.file("a.jsonl"), dir.file("b.jsonl"));
+    ok(&glrmon(&["replay", "--config", &cfg, &csv, "--output", &a]));
+    ok(&glrmon(&["replay", "--config", &cfg, &csv, "--output", &b]));
+    let (a, b) = (std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
+    assert!(a.len() > 50_000);
+    assert_eq!(a, b);
+    // Same seed, same file.
+    let csv2 = dir.file("in2.csv");
+    ok(&glrmon(&[
+        "simulate",
+        "--config",
+        &cfg,
+        "--samples",
+        "500",
+        "--fault",
+        "x1_jump",
+        "--onset",
+        "250",
+        "--magnitude",
+        "2",
+        "--output",
+        &csv2,
+    ]));
+    assert_eq!(std::fs::read(&csv).unwrap(), std::fs::read(&csv2).unwrap());
+}
+
+#[test]
+fn bad_rows_become_error_records_and_the_replay_continues() {
+    let dir = TempDir::new("badrows");
+    let cfg = config("examples/paper2014-unstable.toml");
+    let csv = dir.file("in.csv");
+    ok(&glrmon(&[
+        "simulate",
+        "--config",
+        &cfg,
+        "--samples",
+        "300",
+        "--output",
+        &csv,
+    ]));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    lines[11] = "10,1.0".into(); // wrong column count
+    let parts: Vec<&str> = lines[31].split(',').collect();
+    lines[31] = format!("{},{},{},abc", parts[0], parts[1], parts[2]); // not a number
+    let parts: Vec<String> = lines[41].split(',').map(str::to_owned).collect();
+    lines[41] = format!("{},{},{},inf", parts[0], parts[1], parts[2]); // non-finite
+    lines.insert(61, lines[60].clone()); // k repeats
+    lines.insert(80, lines[50].clone()); // k goes backwards
+    std::fs::write(&csv, lines.join("\n") + "\n").unwrap();
+    let out = dir.file("out.jsonl");
+    ok(&glrmon(&[
+        "replay", "--config", &cfg, &csv, "--output", &out,
+    ]));
+    let recs = records(&out);
+    let errors: Vec<(String, String)> = recs
+        .iter()
+        .filter_map(|r| {
+            if let Record::Error(e) = r {
+                Some((e.code.as_str().to_owned(), e.message.clone()))
+            } else {
+                None
+            }
+        })
+        .collect();
+    let codes: Vec<&str> = errors
+        .iter()
+        .map(|e| e.0.as_str())
+        .filter(|c| *c != "gap")
+        .collect();
+    assert_eq!(
+        codes,
+        [
+            "wrong_dimension",
+            "wrong_type",
+            "non_finite",
+            "duplicate",
+            "out_of_order"
+        ],
+        "{errors:#?}"
+    );
+    // Each rejected row leaves a one-sample gap, filled by a predict-only step.
+    assert_eq!(
+        errors.iter().filter(|e| e.0 == "gap").count(),
+        3,
+        "{errors:#?}"
+    );
+    let errors: Vec<_> = errors.into_iter().filter(|e| e.0 != "gap").collect();
+    assert!(
+        errors[0]
+            .1
+            .contains("row 12: has 2 columns, the header has 4"),
+        "{errors:#?}"
+    );
+    assert!(
+        errors[1]
+            .1
+            .contains(r#"row 32: column y0: "abc" is not a number"#),
+        "{errors:#?}"
+    );
+    // The three rejected rows were missing samples: filled as gaps; the rest processed.
+    let stats = recs.iter().filter(|r| matches!(r, Record::Stat(_))).count();
+    assert_eq!(stats, 297);
+}
