@@ -163,6 +163,13 @@ impl Monitor {
         self.alarm.is_active()
     }
 
+    /// Records that `n` samples were lost before reaching the monitor (dropped at
+    /// intake): the next sample without an explicit `k` is then seen after a gap and
+    /// the filter takes predict-only steps for the missing ones.
+    pub fn note_missing(&mut self, n: u64) {
+        self.arrivals += n;
+    }
+
     /// Processes one decoded sample and appends the resulting records: a `stat` per
     /// processed sample, `alarm` / `alarm_end` at episode edges, `error` for a rejected
     /// sample (the channel's state is then unchanged) and for each filled gap.

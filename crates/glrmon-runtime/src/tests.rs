@@ -1,0 +1,203 @@
+use super::*;
+use glrmon_wire::encode_sample;
+
+struct NoEvents;
+impl RuntimeEvents for NoEvents {
+    fn sink_error(&self, _: &SinkError) {}
+}
+
+fn demo_monitors() -> (glrmon_spec::Config, Vec<Monitor>) {
+    // A long max_gap: every dropped run is filled, none rejected.
+    let text = include_str!("../../../config/demo.toml")
+        .replace("false_alarm = 1e-4", "false_alarm = 1e-4\nmax_gap = 100000");
+    let cfg = glrmon_spec::parse(&text).unwrap();
+    let monitors = cfg
+        .channels
+        .iter()
+        .map(|c| Monitor::from_channel(c).unwrap())
+        .collect();
+    (cfg, monitors)
+}
+
+fn payloads(cfg: &glrmon_spec::Config, n: u64) -> Vec<Vec<Vec<u8>>> {
+    cfg.channels
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let mut sim =
+                glrmon_sim::Simulator::new(Box::new(c.model.clone()), c.x0.clone(), i as u64)
+                    .unwrap();
+            (0..n)
+                .map(|_| {
+                    let x = sim.next_sample();
+                    let s = Sample {
+                        k: Some(x.k),
+                        t: None,
+                        u: x.u,
+                        y: x.y,
+                        p: x.p,
+                    };
+                    let mut b = Vec::new();
+                    encode_sample(c.name.as_str(), &s, &mut b).unwrap();
+                    b
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Results through the runtime equal the monitor run directly, record for record.
+#[test]
+fn runtime_gives_the_same_records_as_direct_monitoring() {
+    let (cfg, monitors) = demo_monitors();
+    let data = payloads(&cfg, 400);
+    let sink = MemorySink::default();
+    let got = sink.records();
+    let settings = RuntimeSettings {
+        workers: 2,
+        worker_queue: 100_000,
+        stat_every: 1,
+        ..RuntimeSettings::default()
+    };
+    let rt = Runtime::start(
+        monitors,
+        vec![Box::new(sink)],
+        &settings,
+        Arc::new(NoEvents),
+    );
+    let intake = rt.intake();
+    for k in 0..400 {
+        for (ch, d) in data.iter().enumerate() {
+            let offer = intake.offer(
+                ch,
+                Payload {
+                    bytes: d[k].clone(),
+                    received: Instant::now(),
+                },
+            );
+            assert_eq!(offer, Offer::Accepted);
+        }
+    }
+    let (in_time, _) = rt.shutdown(Duration::from_secs(30));
+    assert!(in_time);
+    let (_, mut direct) = demo_monitors();
+    for (ch, d) in data.iter().enumerate() {
+        let mut want = Vec::new();
+        for p in d {
+            for s in decode_one(&cfg.channels[ch].name, p).unwrap() {
+                direct[ch].on_sample(&s, &mut want);
+            }
+        }
+        let got: Vec<Record> = got
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|o| o.record.channel() == cfg.channels[ch].name)
+            .map(|o| o.record.clone())
+            .collect();
+        assert_eq!(got, want, "channel {ch}");
+    }
+}
+
+/// A full worker queue drops payloads at intake, counts them per channel, and the
+/// channel fills the hole with predict-only steps when samples carry no k.
+#[test]
+fn full_queue_drops_are_counted_and_become_gaps() {
+    let (cfg, monitors) = demo_monitors();
+    let data = payloads(&cfg, 2000);
+    let settings = RuntimeSettings {
+        workers: 1,
+        worker_queue: 4,
+        stat_every: 0,
+        ..RuntimeSettings::default()
+    };
+    let rt = Runtime::start(monitors, vec![], &settings, Arc::new(NoEvents));
+    let intake = rt.intake();
+    let stats = rt.stats();
+    let mut dropped = 0;
+    let mut accepted = 0;
+    // The DC motor (channel 1): stable in open loop, like the payloads fed here. Bursts
+    // of 10 into a queue of 4 drop some of each burst; the producer then waits (on the
+    // condition, not on time) until the worker has caught up, so drops and accepted
+    // payloads interleave.
+    for burst in data[1].chunks(10) {
+        for p in burst {
+            // Strip k so that the runtime's drop accounting is what reveals the gaps.
+            let s = String::from_utf8(p.clone()).unwrap();
+            let without_k = s.replacen(r#""k":"#, r#""ignored":"#, 1);
+            let json = without_k
+                .split_once(',')
+                .map(|(_, rest)| format!("{{{rest}"))
+                .unwrap();
+            match intake.offer(
+                1,
+                Payload {
+                    bytes: json.into_bytes(),
+                    received: Instant::now(),
+                },
+            ) {
+                Offer::Dropped => dropped += 1,
+                Offer::Accepted => accepted += 1,
+                other => panic!("{other:?}"),
+            }
+        }
+        while stats[1].samples.load(Ordering::Relaxed) < accepted {
+            std::thread::yield_now();
+        }
+    }
+    let (in_time, _) = rt.shutdown(Duration::from_secs(30));
+    assert!(in_time);
+    assert!(dropped > 0, "the flood must overflow a queue of 4");
+    let st = &stats[1];
+    assert_eq!(st.dropped.load(Ordering::Relaxed), dropped);
+    let processed = st.samples.load(Ordering::Relaxed);
+    let errors = st.errors.lock().unwrap().clone();
+    assert_eq!(
+        processed + dropped,
+        2000,
+        "every payload is either processed or counted as dropped: {errors:?}"
+    );
+    // Every drop followed by an accepted payload becomes a filled gap at its place.
+    let gaps = errors.get("gap").copied().unwrap_or(0);
+    assert!(
+        gaps > 0 || processed < 2,
+        "{errors:?} dropped {dropped} processed {processed}"
+    );
+    assert_eq!(
+        errors.keys().filter(|k| **k != "gap").count(),
+        0,
+        "{errors:?}"
+    );
+}
+
+#[test]
+fn oversized_payloads_and_unknown_channels_are_refused() {
+    let (_, monitors) = demo_monitors();
+    let settings = RuntimeSettings {
+        limits: DecodeLimits {
+            max_payload_bytes: 100,
+            ..DecodeLimits::default()
+        },
+        ..RuntimeSettings::default()
+    };
+    let rt = Runtime::start(monitors, vec![], &settings, Arc::new(NoEvents));
+    let intake = rt.intake();
+    let big = Payload {
+        bytes: vec![b' '; 101],
+        received: Instant::now(),
+    };
+    assert_eq!(intake.offer(0, big), Offer::TooLarge);
+    let p = Payload {
+        bytes: b"{}".to_vec(),
+        received: Instant::now(),
+    };
+    assert_eq!(intake.offer(99, p), Offer::UnknownChannel);
+    let stats = rt.stats();
+    let (_, _) = rt.shutdown(Duration::from_secs(5));
+    assert_eq!(stats[0].errors.lock().unwrap().get("too_large"), Some(&1));
+    let p = Payload {
+        bytes: b"{}".to_vec(),
+        received: Instant::now(),
+    };
+    assert_eq!(intake.offer(0, p), Offer::Closed);
+}
