@@ -15,7 +15,7 @@ fn demo_prints_one_alarm_for_the_faulty_channel_with_the_right_isolation() {
     std::fs::create_dir_all(&dir).unwrap();
     let jsonl = dir.join("demo.jsonl");
     let out = glrmon()
-        .args(["demo", "--seconds", "6", "--output"])
+        .args(["demo", "--seconds", "6", "--rate", "0", "--output"])
         .arg(&jsonl)
         .output()
         .unwrap();

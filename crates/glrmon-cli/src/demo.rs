@@ -1,50 +1,118 @@
-//! `glrmon demo`: the channels of the embedded `config/demo.toml` simulated, one fault
-//! injected a few seconds in, through the monitors; alarms printed as `watch` prints
-//! them, then a summary.
+//! `glrmon demo`: the main job on an embedded default. One in-process peer-mode Zenoh
+//! session; the channels of the embedded `config/demo.toml` are simulated and published
+//! on their keys, one fault injected a few seconds in; the daemon's runtime monitors them
+//! and publishes results on `glrmon/<channel>/…`; a subscriber prints the alarms as
+//! `glrmon watch` does; a summary at the end.
 
 use std::io::Write;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use clap::Args;
 use glrmon_monitor::Monitor;
-use glrmon_sim::{SimSample, Simulator};
-use glrmon_wire::{Sample, encode_json};
+use glrmon_runtime::{FnSink, Output, Runtime, Sink};
+use glrmon_sim::SimSample;
+use glrmon_wire::{Record, Sample, decode_record, encode_sample};
+use glrmon_zenoh::{SessionSettings, ZenohSink, ZenohSource};
+use zenoh::Wait as _;
 
+use crate::run::{LogEvents, runtime_settings};
 use crate::{print, simulate};
 
 /// The demo's channels, embedded so the demo needs no file.
 pub(crate) const DEMO_CONFIG: &str = include_str!("../../../config/demo.toml");
-
-/// Simulated samples per second of demo time.
-const RATE_HZ: u64 = 100;
 
 /// The injected fault: channel, fault, onset, magnitude.
 const FAULT: (&str, &str, u64, f64) = ("unstable", "x0_jump", 201, 4.0);
 
 #[derive(Debug, Args)]
 pub(crate) struct DemoArgs {
-    /// Simulated duration in seconds (100 samples per second per channel).
+    /// Simulated duration in seconds.
     #[arg(long, default_value_t = 10)]
     seconds: u64,
+    /// Samples per second per channel; 0 publishes as fast as possible.
+    #[arg(long, default_value_t = 100.0)]
+    rate: f64,
     /// Seed of the simulated noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Also listen on this endpoint (e.g. tcp/127.0.0.1:7447) so that `glrmon watch`
+    /// in another terminal sees the results.
+    #[arg(long)]
+    listen: Vec<String>,
     /// Also write every record (stat, alarm, alarm_end, error) as JSON lines here.
     #[arg(long)]
     output: Option<PathBuf>,
 }
 
-struct Channel {
-    monitor: Monitor,
-    sim: Simulator,
+pub(crate) fn run(args: &DemoArgs) -> anyhow::Result<()> {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?;
+    rt.block_on(demo(args))
 }
 
-pub(crate) fn run(args: &DemoArgs) -> anyhow::Result<()> {
+async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let cfg = glrmon_spec::parse(DEMO_CONFIG)
         .map_err(|e| anyhow::anyhow!("embedded demo config: {e}"))?;
-    let samples = args.seconds * RATE_HZ;
-    let mut channels = Vec::new();
+    let rate_hz = if args.rate > 0.0 { args.rate } else { 100.0 };
+    let samples = (args.seconds as f64 * rate_hz).round() as u64;
+    let session = glrmon_zenoh::open(&SessionSettings {
+        mode: Some("peer".into()),
+        listen: args.listen.clone(),
+        multicast_scouting: Some(false),
+        ..SessionSettings::default()
+    })
+    .await?;
+
+    // The watcher: alarms as `glrmon watch` prints them.
+    let alarms_seen = Arc::new(AtomicU64::new(0));
+    let seen = alarms_seen.clone();
+    let watcher = session
+        .declare_subscriber("glrmon/*/alarm$*")
+        .callback(move |s| {
+            if let Ok(r) = decode_record(&s.payload().to_bytes()) {
+                if let Some(line) = print::line(&r) {
+                    println!("{line}");
+                }
+                if matches!(r, Record::Alarm(_)) {
+                    seen.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        })
+        .await
+        .map_err(|e| anyhow::anyhow!("subscribing to alarms: {e}"))?;
+
+    // The daemon: runtime, Zenoh sink (and optionally a JSONL file), Zenoh source.
+    let monitors = cfg
+        .channels
+        .iter()
+        .map(Monitor::from_channel)
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut sinks: Vec<Box<dyn Sink>> = vec![Box::new(ZenohSink::new(session.clone()))];
+    if let Some(p) = &args.output {
+        let file = std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?;
+        let w = Mutex::new(std::io::BufWriter::new(file));
+        sinks.push(Box::new(FnSink("jsonl", move |o: &Output| {
+            if let Ok(mut w) = w.lock() {
+                let _ = w
+                    .write_all(&o.json)
+                    .and_then(|()| w.write_all(b"\n"))
+                    .and_then(|()| w.flush());
+            }
+        })));
+    }
+    let mut settings = runtime_settings(&cfg);
+    settings.stat_every = 1;
+    let runtime = Runtime::start(monitors, sinks, &settings, Arc::new(LogEvents));
+    let keys: Vec<String> = cfg.channels.iter().map(|c| c.key.clone()).collect();
+    let source = ZenohSource::declare(&session, &keys, &runtime.intake()).await?;
+
+    // The plant: each channel simulated and published on its key.
+    let mut plants = Vec::new();
     for (i, c) in cfg.channels.iter().enumerate() {
         let seed = args.seed.wrapping_add(i as u64);
         let sim = if c.name == FAULT.0 {
@@ -52,20 +120,24 @@ pub(crate) fn run(args: &DemoArgs) -> anyhow::Result<()> {
         } else {
             simulate::simulator(c, seed, &[], 0, &[])?
         };
-        channels.push(Channel {
-            monitor: Monitor::from_channel(c)?,
-            sim,
-        });
+        let publisher = session
+            .declare_publisher(c.key.clone())
+            .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
+            .congestion_control(zenoh::qos::CongestionControl::Block)
+            .await
+            .map_err(|e| anyhow::anyhow!("declaring a publisher on {}: {e}", c.key))?;
+        plants.push((c.name.clone(), sim, publisher));
     }
     println!(
-        "glrmon demo: {} channels ({}), {samples} samples each ({} s at {RATE_HZ} Hz), offline",
-        channels.len(),
-        cfg.channels
-            .iter()
-            .map(|c| c.name.as_str())
-            .collect::<Vec<_>>()
-            .join(", "),
-        args.seconds
+        "glrmon demo: in-process Zenoh peer session {}, {} channels ({}), {samples} samples each at {}",
+        session.zid(),
+        plants.len(),
+        keys.join(", "),
+        if args.rate > 0.0 {
+            format!("{rate_hz} Hz")
+        } else {
+            "full speed".into()
+        }
     );
     println!(
         "  injected: fault {} of magnitude {} on channel {} at k = {} ({:.2} s)",
@@ -73,16 +145,11 @@ pub(crate) fn run(args: &DemoArgs) -> anyhow::Result<()> {
         FAULT.3,
         FAULT.0,
         FAULT.2,
-        FAULT.2 as f64 / RATE_HZ as f64
+        FAULT.2 as f64 / rate_hz
     );
-    let mut out = match &args.output {
-        Some(p) => Some(std::io::BufWriter::new(
-            std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?,
-        )),
-        None => None,
-    };
-    let mut records = Vec::new();
-    let mut buf = Vec::new();
+    let started = Instant::now();
+    let mut interval =
+        (args.rate > 0.0).then(|| tokio::time::interval(Duration::from_secs_f64(1.0 / rate_hz)));
     let mut x = SimSample {
         k: 0,
         u: vec![],
@@ -90,46 +157,63 @@ pub(crate) fn run(args: &DemoArgs) -> anyhow::Result<()> {
         p: vec![],
     };
     let mut sample = Sample::default();
+    let mut buf = Vec::new();
     for k in 0..samples {
-        for c in &mut channels {
-            c.sim.next_into(&mut x);
+        if let Some(i) = &mut interval {
+            i.tick().await;
+        }
+        for (name, sim, publisher) in &mut plants {
+            sim.next_into(&mut x);
             sample.k = Some(x.k);
-            sample.t = Some(k as f64 / RATE_HZ as f64);
+            sample.t = Some(k as f64 / rate_hz);
             sample.u.clone_from(&x.u);
             sample.y.clone_from(&x.y);
             sample.p.clone_from(&x.p);
-            c.monitor.on_sample(&sample, &mut records);
-        }
-        for r in records.drain(..) {
-            if let Some(line) = print::line(&r) {
-                println!("{line}");
-            }
-            if let Some(w) = &mut out {
-                buf.clear();
-                encode_json(&r, &mut buf)?;
-                buf.push(b'\n');
-                w.write_all(&buf)?;
-            }
+            buf.clear();
+            encode_sample(name, &sample, &mut buf)?;
+            publisher
+                .put(buf.clone())
+                .wait()
+                .map_err(|e| anyhow::anyhow!("publishing on {name}: {e}"))?;
         }
     }
-    if let Some(mut w) = out {
-        w.flush()?;
+    // Wait until every published sample has been processed (a condition, bounded).
+    let stats = runtime.stats();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while stats
+        .iter()
+        .any(|s| s.samples.load(Ordering::Relaxed) + s.dropped.load(Ordering::Relaxed) < samples)
+        && Instant::now() < deadline
+    {
+        tokio::time::sleep(Duration::from_millis(5)).await;
     }
-    println!("summary:");
-    for c in &channels {
-        let n = c.monitor.counters();
-        let errors: u64 = n.errors.values().sum();
+    drop(source);
+    let (in_time, sinks) =
+        tokio::task::spawn_blocking(move || runtime.shutdown(Duration::from_secs(10))).await?;
+    drop(sinks);
+    let raised: u64 = stats.iter().map(|s| s.alarms.load(Ordering::Relaxed)).sum();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while alarms_seen.load(Ordering::Relaxed) < raised && Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    drop(watcher);
+    println!("summary ({:.1} s):", started.elapsed().as_secs_f64());
+    for (name, st) in cfg.channels.iter().map(|c| &c.name).zip(stats.iter()) {
+        let errors: u64 = st.errors.lock().map(|e| e.values().sum()).unwrap_or(0);
         println!(
-            "  {:<10} samples={} alarms={} errors={} active={}",
-            c.monitor.channel(),
-            n.samples,
-            n.alarms,
+            "  {:<10} samples={} alarms={} errors={} dropped={} active={}",
+            name,
+            st.samples.load(Ordering::Relaxed),
+            st.alarms.load(Ordering::Relaxed),
             errors,
-            c.monitor.alarm_active()
+            st.dropped.load(Ordering::Relaxed),
+            st.alarm_active.load(Ordering::Relaxed) != 0
         );
     }
     if let Some(p) = &args.output {
         println!("records written to {}", p.display());
     }
+    let _ = session.close().await;
+    anyhow::ensure!(in_time, "the runtime did not drain in time");
     Ok(())
 }

@@ -5,10 +5,13 @@
 
 mod csv;
 mod demo;
+mod net;
 mod print;
 mod replay;
+mod run;
 mod simulate;
 mod validate;
+mod watch;
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -30,8 +33,8 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Run the main job on built-in simulated channels with an injected fault and print
-    /// the alarms (offline until the Zenoh daemon lands).
+    /// The main job on an embedded default: an in-process Zenoh session, simulated
+    /// channels with an injected fault, the monitor; alarms printed.
     Demo(demo::DemoArgs),
     /// Validate a configuration; print each channel's summary and isolability report.
     Validate(validate::ValidateArgs),
@@ -39,7 +42,14 @@ enum Command {
     Simulate(simulate::SimulateArgs),
     /// Run the monitor over recorded samples (CSV) and write the results as JSON lines.
     Replay(replay::ReplayArgs),
+    /// The daemon: monitor every configured channel on Zenoh, publish the results.
+    Run(run::RunArgs),
+    /// Subscribe to alarms and diagnoses and print them.
+    Watch(watch::WatchArgs),
 }
+
+/// Where `run` listens and `watch`/`simulate --publish` connect when nothing is given.
+pub(crate) const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7447";
 
 /// A user's input or configuration is at fault (exit code 1).
 #[derive(Debug)]
@@ -61,11 +71,19 @@ pub(crate) fn load_config(path: &Path) -> anyhow::Result<glrmon_spec::Config> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    let filter = tracing_subscriber::EnvFilter::try_from_env("GLRMON_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,zenoh=warn"));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .init();
     let result = match &cli.command {
         Command::Demo(args) => demo::run(args),
         Command::Validate(args) => validate::run(args),
         Command::Simulate(args) => simulate::run(args),
         Command::Replay(args) => replay::run(args),
+        Command::Run(args) => run::run(args),
+        Command::Watch(args) => watch::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -2,13 +2,15 @@
 
 use std::fmt::Write as _;
 
-use glrmon_wire::{Alarm, AlarmEnd, Record};
+use glrmon_wire::{Alarm, AlarmEnd, Diagnosis, ErrorRecord, Record};
 
 /// One line for an alarm or alarm end; `None` for other records.
 pub(crate) fn line(record: &Record) -> Option<String> {
     match record {
         Record::Alarm(a) => Some(alarm_line(a)),
         Record::AlarmEnd(e) => Some(end_line(e)),
+        Record::Diagnosis(d) => Some(diagnosis_line(d)),
+        Record::Error(e) => Some(error_line(e)),
         _ => None,
     }
 }
@@ -47,5 +49,34 @@ fn end_line(e: &AlarmEnd) -> String {
     format!(
         "END   {} k={} onset={} duration={} peak_glr={:.1}",
         e.channel, e.k, e.onset, e.duration, e.peak_glr
+    )
+}
+
+fn diagnosis_line(d: &Diagnosis) -> String {
+    let est: Vec<String> = d
+        .estimate
+        .iter()
+        .map(|(k, v)| format!("{k} {v:.3}"))
+        .collect();
+    format!(
+        "DIAG  {} k={} span={}..{} residual={} support=[{}] estimate=[{}] lambda={:.3e}",
+        d.channel,
+        d.k,
+        d.from,
+        d.to,
+        d.residual,
+        d.support.join(", "),
+        est.join(", "),
+        d.lambda
+    )
+}
+
+fn error_line(e: &ErrorRecord) -> String {
+    let k = e.k.map_or_else(|| "-".to_owned(), |k| k.to_string());
+    format!(
+        "ERROR {} k={k} {}: {}",
+        e.channel,
+        e.code.as_str(),
+        e.message
     )
 }

@@ -37,8 +37,17 @@ pub(crate) struct SimulateArgs {
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     magnitude: Vec<f64>,
     /// Output CSV file.
+    #[arg(long, required_unless_present = "publish")]
+    output: Option<PathBuf>,
+    /// Publish the samples on the channel's key expression instead of (or as well as)
+    /// writing a file.
     #[arg(long)]
-    output: PathBuf,
+    publish: bool,
+    /// Samples per second when publishing (0: as fast as possible).
+    #[arg(long, default_value_t = 100.0)]
+    rate: f64,
+    #[command(flatten)]
+    zenoh: crate::net::ZenohArgs,
 }
 
 /// The simulator's random draws for expressions (`uniform`, `normal`).
@@ -174,27 +183,108 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let cfg = load_config(&args.config)?;
     let channel = pick(&cfg, args.channel.as_deref())?;
     let mut sim = simulator(channel, args.seed, &args.fault, args.onset, &args.magnitude)?;
-    let file = std::fs::File::create(&args.output)
-        .with_context(|| format!("creating {}", args.output.display()))?;
-    let mut out = std::io::BufWriter::new(file);
-    csv::write_header(&mut out, channel.dims, channel.period.is_some())?;
+    let mut csv_out = match &args.output {
+        Some(path) => {
+            let file = std::fs::File::create(path)
+                .with_context(|| format!("creating {}", path.display()))?;
+            let mut out = std::io::BufWriter::new(file);
+            csv::write_header(&mut out, channel.dims, channel.period.is_some())?;
+            Some(out)
+        }
+        None => None,
+    };
     let mut x = SimSample {
         k: 0,
         u: vec![],
         y: vec![],
         p: vec![],
     };
+    let mut samples = Vec::new();
     for _ in 0..args.samples {
         sim.next_into(&mut x);
         let t = channel.period.map(|dt| x.k as f64 * dt);
-        csv::write_row(&mut out, x.k, t, &x.u, &x.y, &x.p)?;
+        if let Some(out) = &mut csv_out {
+            csv::write_row(out, x.k, t, &x.u, &x.y, &x.p)?;
+        }
+        if args.publish {
+            samples.push(glrmon_wire::Sample {
+                k: Some(x.k),
+                t,
+                u: x.u.clone(),
+                y: x.y.clone(),
+                p: x.p.clone(),
+            });
+        }
     }
-    out.flush()?;
+    if let Some(mut out) = csv_out {
+        out.flush()?;
+    }
+    if args.publish {
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .enable_all()
+            .build()?;
+        rt.block_on(publish(channel, &samples, args))?;
+    }
     eprintln!(
-        "glrmon simulate: {} samples of channel \"{}\" written to {}",
+        "glrmon simulate: {} samples of channel \"{}\"{}{}",
         args.samples,
         channel.name,
-        args.output.display()
+        args.output
+            .as_ref()
+            .map_or_else(String::new, |p| format!(" written to {}", p.display())),
+        if args.publish {
+            format!(" published on {}", channel.key)
+        } else {
+            String::new()
+        }
     );
+    Ok(())
+}
+
+/// Publishes the samples on the channel's key, once a subscriber matches (so that the
+/// first samples are not lost), paced at `--rate`.
+async fn publish(
+    channel: &Channel,
+    samples: &[glrmon_wire::Sample],
+    args: &SimulateArgs,
+) -> anyhow::Result<()> {
+    use zenoh::Wait as _;
+    let session = glrmon_zenoh::open(&crate::watch::client_settings(&args.zenoh)).await?;
+    let publisher = session
+        .declare_publisher(channel.key.clone())
+        .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
+        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .await
+        .map_err(|e| anyhow::anyhow!("declaring a publisher on {}: {e}", channel.key))?;
+    let start = std::time::Instant::now();
+    while !publisher
+        .matching_status()
+        .await
+        .is_ok_and(|m| m.matching())
+    {
+        if start.elapsed() > std::time::Duration::from_secs(10) {
+            anyhow::bail!(
+                "no subscriber on {} after 10 s: is `glrmon run` reachable?",
+                channel.key
+            );
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+    }
+    let mut interval = (args.rate > 0.0)
+        .then(|| tokio::time::interval(std::time::Duration::from_secs_f64(1.0 / args.rate)));
+    let mut buf = Vec::new();
+    for s in samples {
+        if let Some(i) = &mut interval {
+            i.tick().await;
+        }
+        buf.clear();
+        glrmon_wire::encode_sample(&channel.name, s, &mut buf)?;
+        publisher
+            .put(buf.clone())
+            .wait()
+            .map_err(|e| anyhow::anyhow!("publishing: {e}"))?;
+    }
+    drop(publisher);
+    let _ = session.close().await;
     Ok(())
 }

@@ -9,8 +9,10 @@ mod glr;
 pub mod innovation;
 pub mod isolability;
 pub mod isolation;
+pub mod kitanidis;
 mod linalg;
 pub mod model;
+pub mod sparse;
 pub mod threshold;
 
 pub use alarm::{AlarmSettings, AlarmState, AlarmTransition};

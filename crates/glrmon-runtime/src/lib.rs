@@ -39,6 +39,9 @@ pub struct Payload {
     pub bytes: Vec<u8>,
     /// When it was received.
     pub received: Instant,
+    /// The transport's source timestamp (seconds since the Unix epoch), used as the
+    /// samples' `t` where they carry none.
+    pub source_time: Option<f64>,
 }
 
 /// A record on its way to the sinks, encoded once.
@@ -134,6 +137,8 @@ impl Default for RuntimeSettings {
 enum Job {
     /// A payload and the number of payloads of its channel dropped just before it.
     Payload(ChannelIndex, Payload, u64),
+    /// A payload refused at intake, reported as an `error` record by its worker.
+    Reject(ChannelIndex, ErrorCode, String),
     /// Queued behind every accepted payload at shutdown.
     Stop,
 }
@@ -185,11 +190,25 @@ impl Intake {
             return Offer::UnknownChannel;
         };
         if payload.bytes.len() > self.limits.max_payload_bytes {
-            let mut e = stats
-                .errors
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner);
-            *e.entry(ErrorCode::TooLarge.as_str()).or_insert(0) += 1;
+            // Reported as an `error` record by the channel's worker (which counts it);
+            // if even that cannot be queued, counted here.
+            let msg = format!(
+                "payload of {} bytes exceeds the limit of {} bytes: dropped",
+                payload.bytes.len(),
+                self.limits.max_payload_bytes
+            );
+            let job = Job::Reject(channel, ErrorCode::TooLarge, msg);
+            let queued = self
+                .queues
+                .get(channel % self.queues.len().max(1))
+                .is_some_and(|q| q.try_send(job).is_ok());
+            if !queued {
+                let mut e = stats
+                    .errors
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner);
+                *e.entry(ErrorCode::TooLarge.as_str()).or_insert(0) += 1;
+            }
             return Offer::TooLarge;
         }
         let Some(queue) = self.queues.get(channel % self.queues.len().max(1)) else {
@@ -382,8 +401,24 @@ fn worker(
 ) {
     let mut samples = Vec::new();
     let mut records = Vec::new();
-    while let Ok(Job::Payload(channel, payload, dropped_before)) = rx.recv() {
-        // `Job::Stop` ends the loop: everything accepted before it has been processed.
+    loop {
+        let (channel, payload, dropped_before) = match rx.recv() {
+            Ok(Job::Payload(c, p, d)) => (c, Some(p), d),
+            Ok(Job::Reject(c, code, message)) => {
+                if let Some((_, ch)) = shard.iter_mut().find(|(i, _)| *i == c) {
+                    records.push(Record::Error(ErrorRecord {
+                        channel: ch.monitor.channel().to_owned(),
+                        k: None,
+                        code,
+                        message: format!("channel \"{}\": {message}", ch.monitor.channel()),
+                        stage: Stage::Receiving,
+                    }));
+                }
+                (c, None, 0)
+            }
+            // `Job::Stop`, or every sender gone: all accepted payloads are processed.
+            Ok(Job::Stop) | Err(_) => return,
+        };
         let Some((_, ch)) = shard.iter_mut().find(|(i, _)| *i == channel) else {
             continue;
         };
@@ -392,17 +427,22 @@ fn worker(
         if dropped_before > 0 {
             ch.monitor.note_missing(dropped_before);
         }
-        match decode_samples(ch.monitor.channel(), &payload.bytes, &limits, &mut samples) {
-            Ok(()) => {
-                for s in &samples {
-                    ch.monitor.on_sample(s, &mut records);
+        if let Some(payload) = payload {
+            match decode_samples(ch.monitor.channel(), &payload.bytes, &limits, &mut samples) {
+                Ok(()) => {
+                    for s in &mut samples {
+                        if s.t.is_none() {
+                            s.t = payload.source_time;
+                        }
+                        ch.monitor.on_sample(s, &mut records);
+                    }
                 }
+                Err(e) => records.push(Record::Error(ErrorRecord::from_decode_error(
+                    &e,
+                    None,
+                    Stage::Receiving,
+                ))),
             }
-            Err(e) => records.push(Record::Error(ErrorRecord::from_decode_error(
-                &e,
-                None,
-                Stage::Receiving,
-            ))),
         }
         let c = ch.monitor.counters();
         ch.stats.samples.store(c.samples, Ordering::Relaxed);

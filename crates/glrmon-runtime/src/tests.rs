@@ -73,6 +73,7 @@ fn runtime_gives_the_same_records_as_direct_monitoring() {
                 Payload {
                     bytes: d[k].clone(),
                     received: Instant::now(),
+                    source_time: None,
                 },
             );
             assert_eq!(offer, Offer::Accepted);
@@ -134,6 +135,7 @@ fn full_queue_drops_are_counted_and_become_gaps() {
                 Payload {
                     bytes: json.into_bytes(),
                     received: Instant::now(),
+                    source_time: None,
                 },
             ) {
                 Offer::Dropped => dropped += 1,
@@ -185,11 +187,13 @@ fn oversized_payloads_and_unknown_channels_are_refused() {
     let big = Payload {
         bytes: vec![b' '; 101],
         received: Instant::now(),
+        source_time: None,
     };
     assert_eq!(intake.offer(0, big), Offer::TooLarge);
     let p = Payload {
         bytes: b"{}".to_vec(),
         received: Instant::now(),
+        source_time: None,
     };
     assert_eq!(intake.offer(99, p), Offer::UnknownChannel);
     let stats = rt.stats();
@@ -198,6 +202,7 @@ fn oversized_payloads_and_unknown_channels_are_refused() {
     let p = Payload {
         bytes: b"{}".to_vec(),
         received: Instant::now(),
+        source_time: None,
     };
     assert_eq!(intake.offer(0, p), Offer::Closed);
 }

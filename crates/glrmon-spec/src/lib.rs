@@ -34,7 +34,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::expr::{Expr, ExprColumn, ExprContext};
 use crate::schema::{
-    ChannelSpec, ConfigFile, EntrySpec, FaultSpec, MatrixSpec, RecordingSpec, ZenohSpec,
+    ChannelSpec, ConfigFile, DaemonSpec, EntrySpec, FaultSpec, MatrixSpec, RecordingSpec, ZenohSpec,
 };
 
 /// One problem in a configuration, with the path of the offending field.
@@ -86,6 +86,8 @@ pub struct Config {
     pub zenoh: ZenohSpec,
     /// Recording settings.
     pub recording: RecordingSpec,
+    /// Daemon settings.
+    pub daemon: DaemonSpec,
     /// The channels.
     pub channels: Vec<Channel>,
     /// Problems that do not prevent running (e.g. an unobservable model).
@@ -298,6 +300,23 @@ pub fn parse(text: &str) -> Result<Config, SpecErrors> {
             );
         }
     }
+    let d = &file.daemon;
+    if d.workers == Some(0)
+        || d.worker_queue == 0
+        || d.output_queue == 0
+        || d.max_payload_bytes == 0
+    {
+        v.error(
+            "daemon".into(),
+            "workers, worker_queue, output_queue and max_payload_bytes must be positive".into(),
+        );
+    }
+    if !(d.shutdown_timeout.is_finite() && d.shutdown_timeout > 0.0) {
+        v.error(
+            "daemon.shutdown_timeout".into(),
+            format!("{} must be finite and positive", d.shutdown_timeout),
+        );
+    }
     let mut channels = Vec::new();
     for (i, spec) in file.channels.iter().enumerate() {
         let prefix = format!("channels[{i}] \"{}\"", spec.name);
@@ -315,6 +334,7 @@ pub fn parse(text: &str) -> Result<Config, SpecErrors> {
         Ok(Config {
             zenoh: file.zenoh,
             recording: file.recording,
+            daemon: file.daemon,
             channels,
             warnings: v.warnings,
             source: text.to_owned(),

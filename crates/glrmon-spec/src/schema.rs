@@ -19,6 +19,9 @@ pub struct ConfigFile {
     /// Recording settings (used by `glrmon run`).
     #[serde(default)]
     pub recording: RecordingSpec,
+    /// Daemon settings (used by `glrmon run`).
+    #[serde(default)]
+    pub daemon: DaemonSpec,
     /// The monitored channels.
     #[serde(default)]
     pub channels: Vec<ChannelSpec>,
@@ -40,6 +43,61 @@ pub struct ZenohSpec {
     pub listen: Vec<String>,
     /// Multicast scouting (default off).
     pub multicast_scouting: Option<bool>,
+}
+
+/// Daemon settings: workers, queues, output decimation, shutdown.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DaemonSpec {
+    /// Worker threads over which channels are sharded (default: available cores).
+    pub workers: Option<usize>,
+    /// Capacity of each worker's queue in payloads (default 4096); a full queue drops.
+    #[serde(default = "default_worker_queue")]
+    pub worker_queue: usize,
+    /// Capacity of the output queue in records (default 16384).
+    #[serde(default = "default_output_queue")]
+    pub output_queue: usize,
+    /// Publish one `stat` record in this many per channel (default 10; 0: none).
+    #[serde(default = "default_stat_every")]
+    pub stat_every: u64,
+    /// Largest accepted payload in bytes (default 1 MiB).
+    #[serde(default = "default_max_payload")]
+    pub max_payload_bytes: usize,
+    /// Bound on the shutdown drain in seconds (default 5).
+    #[serde(default = "default_shutdown")]
+    pub shutdown_timeout: f64,
+    /// Instance name for the status queryable and liveliness token (default: host-pid).
+    pub instance: Option<String>,
+}
+
+impl Default for DaemonSpec {
+    fn default() -> Self {
+        Self {
+            workers: None,
+            worker_queue: default_worker_queue(),
+            output_queue: default_output_queue(),
+            stat_every: default_stat_every(),
+            max_payload_bytes: default_max_payload(),
+            shutdown_timeout: default_shutdown(),
+            instance: None,
+        }
+    }
+}
+
+fn default_worker_queue() -> usize {
+    4096
+}
+fn default_output_queue() -> usize {
+    16384
+}
+fn default_stat_every() -> u64 {
+    10
+}
+fn default_max_payload() -> usize {
+    1 << 20
+}
+fn default_shutdown() -> f64 {
+    5.0
 }
 
 /// Recording settings.

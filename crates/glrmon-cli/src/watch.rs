@@ -1,0 +1,88 @@
+//! `glrmon watch [KEYEXPR] [--json]`: alarms and diagnoses, one line each.
+
+use clap::Args;
+use glrmon_wire::{Record, decode_record};
+
+use crate::net::ZenohArgs;
+use crate::print;
+
+#[derive(Debug, Args)]
+pub(crate) struct WatchArgs {
+    /// Key expression to watch.
+    #[arg(default_value = "glrmon/**")]
+    key: String,
+    /// Print the records as JSON lines instead of text.
+    #[arg(long)]
+    json: bool,
+    /// Also print `stat` and `error` records.
+    #[arg(long)]
+    all: bool,
+    /// Exit after this many printed records.
+    #[arg(long)]
+    count: Option<u64>,
+    #[command(flatten)]
+    zenoh: ZenohArgs,
+}
+
+pub(crate) fn run(args: &WatchArgs) -> anyhow::Result<()> {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?;
+    rt.block_on(watch(args))
+}
+
+/// Settings for a tool that talks to a daemon: client mode (a peer's `open` can wait
+/// for the 500 ms scouting delay, a client's does not; the daemon, a peer, routes for its
+/// clients) connecting to the local default endpoint, unless told otherwise.
+pub(crate) fn client_settings(z: &ZenohArgs) -> glrmon_zenoh::SessionSettings {
+    let mut s = z.settings(None);
+    if s.config_file.is_none() {
+        if s.mode.is_none() {
+            s.mode = Some("client".into());
+        }
+        if s.connect.is_empty() && s.listen.is_empty() {
+            s.connect = vec![crate::DEFAULT_ENDPOINT.to_owned()];
+        }
+    }
+    s
+}
+
+async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
+    let session = glrmon_zenoh::open(&client_settings(&args.zenoh)).await?;
+    let sub = session
+        .declare_subscriber(args.key.as_str())
+        .await
+        .map_err(|e| anyhow::anyhow!("subscribing to {}: {e}", args.key))?;
+    let mut printed = 0u64;
+    loop {
+        let sample = tokio::select! {
+            s = sub.recv_async() => match s { Ok(s) => s, Err(_) => break },
+            _ = tokio::signal::ctrl_c() => break,
+        };
+        let bytes = sample.payload().to_bytes();
+        let record = match decode_record(&bytes) {
+            Ok(r) => r,
+            Err(e) => {
+                eprintln!("glrmon watch: {}: {e}", sample.key_expr());
+                continue;
+            }
+        };
+        if !args.all && matches!(record, Record::Stat(_) | Record::Error(_)) {
+            continue;
+        }
+        if args.json {
+            println!("{}", String::from_utf8_lossy(&bytes));
+        } else {
+            match print::line(&record) {
+                Some(line) => println!("{line}"),
+                None => println!("{}", String::from_utf8_lossy(&bytes)),
+            }
+        }
+        printed += 1;
+        if args.count.is_some_and(|c| printed >= c) {
+            break;
+        }
+    }
+    let _ = session.close().await;
+    Ok(())
+}

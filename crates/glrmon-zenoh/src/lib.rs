@@ -1,0 +1,425 @@
+//! The Zenoh adapter: the session, a subscriber source feeding the runtime's intake, a
+//! publisher sink for results, the status queryable and the instance's liveliness token.
+//!
+//! Key expressions (docs/WIRE.md): inputs on each channel's key (default
+//! `plant/<channel>`); results on `glrmon/<channel>/<type>`; status at
+//! `glrmon/@status/<instance>`; liveliness tokens at `glrmon/@instances/<instance>`.
+//! (`@` chunks are verbatim in Zenoh: `glrmon/**` does not match them, so watchers of
+//! results never see status traffic.)
+#![warn(missing_docs)]
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Instant;
+
+use glrmon_runtime::{ChannelStats, Intake, Output, Payload, Sink, SinkError};
+use glrmon_wire::Record;
+use zenoh::bytes::Encoding;
+use zenoh::liveliness::LivelinessToken;
+use zenoh::pubsub::{Publisher, Subscriber};
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::query::Queryable;
+use zenoh::{Config, Session, Wait};
+
+/// Where a session comes from: a JSON5 file passed through untouched, and/or the
+/// settings users expect on the command line (Zenoh's own flag names).
+#[derive(Debug, Clone, Default)]
+pub struct SessionSettings {
+    /// A Zenoh JSON5 configuration file (TLS, authentication, access control…).
+    pub config_file: Option<PathBuf>,
+    /// `peer` or `client` (default `peer`).
+    pub mode: Option<String>,
+    /// Endpoints to connect to.
+    pub connect: Vec<String>,
+    /// Endpoints to listen on.
+    pub listen: Vec<String>,
+    /// Multicast scouting; off unless set to true.
+    pub multicast_scouting: Option<bool>,
+}
+
+/// Errors of the Zenoh adapter.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ZenohError {
+    /// The configuration could not be built or loaded.
+    #[error("zenoh configuration: {0}")]
+    Config(String),
+    /// The session could not be opened or a declaration failed.
+    #[error("zenoh {what}: {message}")]
+    Session {
+        /// What was being done.
+        what: &'static str,
+        /// Zenoh's message.
+        message: String,
+    },
+}
+
+fn session_err(what: &'static str) -> impl Fn(zenoh::Error) -> ZenohError {
+    move |e| ZenohError::Session {
+        what,
+        message: e.to_string(),
+    }
+}
+
+/// Builds the Zenoh configuration: the file if given, then the explicit settings on top.
+/// Defaults: peer mode, multicast scouting off, timestamping on (so that every sample
+/// carries a source timestamp), and no listening on all interfaces by accident.
+///
+/// # Errors
+/// [`ZenohError::Config`] for an unreadable file or a rejected value.
+pub fn build_config(s: &SessionSettings) -> Result<Config, ZenohError> {
+    let cfg_err = |e: Box<dyn std::error::Error + Send + Sync>| ZenohError::Config(e.to_string());
+    let mut c = match &s.config_file {
+        Some(p) => {
+            Config::from_file(p).map_err(|e| ZenohError::Config(format!("{}: {e}", p.display())))?
+        }
+        None => Config::default(),
+    };
+    let from_file = s.config_file.is_some();
+    let json = |v: &Vec<String>| serde_json_list(v);
+    if let Some(mode) = &s.mode {
+        if !matches!(mode.as_str(), "peer" | "client") {
+            return Err(ZenohError::Config(format!(
+                "mode \"{mode}\" is not peer or client"
+            )));
+        }
+        c.insert_json5("mode", &format!("\"{mode}\""))
+            .map_err(cfg_err)?;
+    } else if !from_file {
+        c.insert_json5("mode", "\"peer\"").map_err(cfg_err)?;
+    }
+    if !s.connect.is_empty() {
+        c.insert_json5("connect/endpoints", &json(&s.connect))
+            .map_err(cfg_err)?;
+    }
+    if !s.listen.is_empty() || !from_file {
+        // Zenoh's default peer listener is tcp/[::]:0 on every interface: never implicit.
+        c.insert_json5("listen/endpoints", &json(&s.listen))
+            .map_err(cfg_err)?;
+    }
+    match s.multicast_scouting {
+        Some(on) => c
+            .insert_json5(
+                "scouting/multicast/enabled",
+                if on { "true" } else { "false" },
+            )
+            .map_err(cfg_err)?,
+        None if !from_file => c
+            .insert_json5("scouting/multicast/enabled", "false")
+            .map_err(cfg_err)?,
+        None => {}
+    }
+    if !from_file {
+        c.insert_json5("timestamping/enabled", "true")
+            .map_err(cfg_err)?;
+    }
+    Ok(c)
+}
+
+fn serde_json_list(v: &[String]) -> String {
+    let items: Vec<String> = v
+        .iter()
+        .map(|s| format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\"")))
+        .collect();
+    format!("[{}]", items.join(","))
+}
+
+/// Opens a session.
+///
+/// # Errors
+/// [`ZenohError`] when the configuration is invalid or the session cannot open (e.g. a
+/// listen endpoint already in use).
+pub async fn open(s: &SessionSettings) -> Result<Session, ZenohError> {
+    let cfg = build_config(s)?;
+    zenoh::open(cfg).await.map_err(session_err("open"))
+}
+
+/// The subscribers feeding the runtime; dropping it undeclares them (stops intake).
+#[derive(Debug)]
+pub struct ZenohSource {
+    subscribers: Vec<Subscriber<()>>,
+}
+
+impl ZenohSource {
+    /// Subscribes to each channel's key expression (`keys[i]` for channel index i). The
+    /// callbacks never block: a full queue drops (counted by the runtime).
+    ///
+    /// # Errors
+    /// [`ZenohError::Session`] when a declaration fails.
+    pub async fn declare(
+        session: &Session,
+        keys: &[String],
+        intake: &Intake,
+    ) -> Result<Self, ZenohError> {
+        let mut subscribers = Vec::new();
+        for (index, key) in keys.iter().enumerate() {
+            let intake = intake.clone();
+            let sub = session
+                .declare_subscriber(key.as_str())
+                .callback(move |sample| {
+                    let source_time = sample.timestamp().map(|t| {
+                        let st = t.get_time().to_system_time();
+                        st.duration_since(std::time::UNIX_EPOCH)
+                            .map_or(0.0, |d| d.as_secs_f64())
+                    });
+                    let bytes = sample.payload().to_bytes().into_owned();
+                    let _ = intake.offer(
+                        index,
+                        Payload {
+                            bytes,
+                            received: Instant::now(),
+                            source_time,
+                        },
+                    );
+                })
+                .await
+                .map_err(session_err("declare subscriber"))?;
+            subscribers.push(sub);
+        }
+        Ok(Self { subscribers })
+    }
+
+    /// Number of subscriptions.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.subscribers.len()
+    }
+
+    /// Whether there are none.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.subscribers.is_empty()
+    }
+}
+
+/// Publishes records on `glrmon/<channel>/<type>`: alarms, alarm ends, diagnoses and
+/// errors reliably (congestion control Block, high priority, express); `stat` may be
+/// dropped under congestion.
+pub struct ZenohSink {
+    session: Session,
+    publishers: HashMap<String, Publisher<'static>>,
+}
+
+impl std::fmt::Debug for ZenohSink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ZenohSink")
+            .field("publishers", &self.publishers.len())
+            .finish()
+    }
+}
+
+impl ZenohSink {
+    /// A sink on `session` (publishers are declared on first use of each key).
+    #[must_use]
+    pub fn new(session: Session) -> Self {
+        Self {
+            session,
+            publishers: HashMap::new(),
+        }
+    }
+}
+
+impl Sink for ZenohSink {
+    fn name(&self) -> &str {
+        "zenoh"
+    }
+
+    fn write(&mut self, output: &Output) -> Result<(), SinkError> {
+        let key = output.record.key();
+        let err = |what: &str, e: zenoh::Error| SinkError {
+            sink: "zenoh".into(),
+            message: format!("{what} {key}: {e}"),
+        };
+        if !self.publishers.contains_key(&key) {
+            let reliable = !matches!(output.record, Record::Stat(_));
+            let builder = self
+                .session
+                .declare_publisher(key.clone())
+                .encoding(Encoding::APPLICATION_JSON);
+            let builder = if reliable {
+                builder
+                    .congestion_control(CongestionControl::Block)
+                    .priority(Priority::InteractiveHigh)
+                    .express(true)
+            } else {
+                builder
+                    .congestion_control(CongestionControl::Drop)
+                    .priority(Priority::DataLow)
+            };
+            let p = builder.wait().map_err(|e| err("declare publisher", e))?;
+            self.publishers.insert(key.clone(), p);
+        }
+        if let Some(p) = self.publishers.get(&key) {
+            p.put(output.json.clone())
+                .wait()
+                .map_err(|e| err("put", e))?;
+        }
+        Ok(())
+    }
+}
+
+/// What the status queryable reports about the instance.
+#[derive(Debug, Clone)]
+pub struct StatusSource {
+    /// Instance name.
+    pub instance: String,
+    /// Channel names by index.
+    pub channels: Vec<String>,
+    /// Counters by channel index.
+    pub stats: Arc<Vec<Arc<ChannelStats>>>,
+    /// Start time.
+    pub started: Instant,
+}
+
+impl StatusSource {
+    /// The status as JSON: instance, uptime, and per channel samples, alarms, active
+    /// alarm, errors by code, drops and last k.
+    #[must_use]
+    pub fn to_json(&self) -> String {
+        let mut channels = Vec::new();
+        for (name, st) in self.channels.iter().zip(self.stats.iter()) {
+            let errors = st.errors.lock().map(|e| e.clone()).unwrap_or_default();
+            let errs: Vec<String> = errors.iter().map(|(k, v)| format!("\"{k}\":{v}")).collect();
+            let next = st.next_k.load(Ordering::Relaxed);
+            let last_k = if next == 0 {
+                "null".to_owned()
+            } else {
+                (next - 1).to_string()
+            };
+            channels.push(format!(
+                "{{\"channel\":{},\"samples\":{},\"alarms\":{},\"alarm_active\":{},\"dropped\":{},\"last_k\":{},\"errors\":{{{}}}}}",
+                json_string(name),
+                st.samples.load(Ordering::Relaxed),
+                st.alarms.load(Ordering::Relaxed),
+                st.alarm_active.load(Ordering::Relaxed) != 0,
+                st.dropped.load(Ordering::Relaxed),
+                last_k,
+                errs.join(",")
+            ));
+        }
+        format!(
+            "{{\"instance\":{},\"uptime\":{:.3},\"channels\":[{}]}}",
+            json_string(&self.instance),
+            self.started.elapsed().as_secs_f64(),
+            channels.join(",")
+        )
+    }
+}
+
+fn json_string(s: &str) -> String {
+    let mut out = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            c if c.is_control() => out.push_str(&format!("\\u{:04x}", c as u32)),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+/// The status queryable and the liveliness token of an instance; dropping undeclares.
+#[derive(Debug)]
+pub struct Presence {
+    _queryable: Queryable<()>,
+    _token: LivelinessToken,
+}
+
+/// Key of an instance's status queryable.
+#[must_use]
+pub fn status_key(instance: &str) -> String {
+    format!("glrmon/@status/{instance}")
+}
+
+/// Key of an instance's liveliness token.
+#[must_use]
+pub fn liveliness_key(instance: &str) -> String {
+    format!("glrmon/@instances/{instance}")
+}
+
+impl Presence {
+    /// Declares the status queryable and the liveliness token.
+    ///
+    /// # Errors
+    /// [`ZenohError::Session`] when a declaration fails.
+    pub async fn declare(session: &Session, status: StatusSource) -> Result<Self, ZenohError> {
+        let key = status_key(&status.instance);
+        let reply_key = key.clone();
+        let queryable = session
+            .declare_queryable(key.as_str())
+            .callback(move |query| {
+                let _ = query
+                    .reply(reply_key.as_str(), status.to_json())
+                    .encoding(Encoding::APPLICATION_JSON)
+                    .wait();
+            })
+            .await
+            .map_err(session_err("declare queryable"))?;
+        let instance = key.trim_start_matches("glrmon/@status/").to_owned();
+        let token = session
+            .liveliness()
+            .declare_token(liveliness_key(&instance))
+            .await
+            .map_err(session_err("declare liveliness token"))?;
+        Ok(Self {
+            _queryable: queryable,
+            _token: token,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn config_defaults_are_loopback_safe() {
+        let c = build_config(&SessionSettings::default()).unwrap();
+        assert_eq!(c.get_json("mode").unwrap(), "\"peer\"");
+        assert_eq!(c.get_json("listen/endpoints").unwrap(), "[]");
+        assert_eq!(c.get_json("scouting/multicast/enabled").unwrap(), "false");
+        assert_eq!(c.get_json("timestamping/enabled").unwrap(), "true");
+    }
+
+    #[test]
+    fn explicit_settings_are_applied_and_bad_mode_rejected() {
+        let s = SessionSettings {
+            mode: Some("client".into()),
+            connect: vec!["tcp/127.0.0.1:7447".into()],
+            ..SessionSettings::default()
+        };
+        let c = build_config(&s).unwrap();
+        assert_eq!(c.get_json("mode").unwrap(), "\"client\"");
+        assert_eq!(
+            c.get_json("connect/endpoints").unwrap(),
+            "[\"tcp/127.0.0.1:7447\"]"
+        );
+        let bad = SessionSettings {
+            mode: Some("router-ish".into()),
+            ..SessionSettings::default()
+        };
+        assert!(
+            build_config(&bad)
+                .unwrap_err()
+                .to_string()
+                .contains("router-ish")
+        );
+    }
+
+    #[test]
+    fn status_json_escapes_names() {
+        let st = StatusSource {
+            instance: "a\"b".into(),
+            channels: vec!["c1".into()],
+            stats: Arc::new(vec![Arc::new(ChannelStats::default())]),
+            started: Instant::now(),
+        };
+        let j = st.to_json();
+        assert!(j.starts_with("{\"instance\":\"a\\\"b\""), "{j}");
+        assert!(j.contains("\"last_k\":null"), "{j}");
+    }
+}
