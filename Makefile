@@ -4,7 +4,7 @@ CARGO ?= cargo
 
 .DEFAULT_GOAL := help
 
-.PHONY: help deps build test fmt fmt-check lint unit doc check-deps check-config demo bench
+.PHONY: help deps build test fmt fmt-check lint unit doc check-deps check-config demo bench bench-e2e
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-11s %s\n", $$1, $$2}'
@@ -48,3 +48,7 @@ demo: ## the main job on built-in simulated channels with an injected fault
 
 bench: ## criterion benchmarks of the per-sample step (figures in docs/PERFORMANCE.md)
 	$(CARGO) bench -p glrmon-core --bench step
+
+bench-e2e: ## end-to-end load through Zenoh on loopback, 100 and 1000 channels (figures in docs/PERFORMANCE.md)
+	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 100 --samples 2000 --batch 10
+	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 1000 --samples 300 --batch 10

@@ -136,6 +136,10 @@ pub struct Detector {
     held_p: Vec<f64>,
     next_k: Option<u64>,
     last_measured: Option<u64>,
+    /// Running mean and sum of squared deviations of each input (Welford's algorithm).
+    input_moments: Vec<(f64, f64)>,
+    input_count: u64,
+    input_variance: Vec<f64>,
 }
 
 impl Detector {
@@ -218,6 +222,9 @@ impl Detector {
             held_p: vec![0.0; dims.signals],
             next_k: None,
             last_measured: None,
+            input_moments: vec![(0.0, 0.0); dims.inputs],
+            input_count: 0,
+            input_variance: vec![0.0; dims.inputs],
         })
     }
 
@@ -311,6 +318,13 @@ impl Detector {
         );
         self.held_u.copy_from_slice(sample.u);
         self.held_p.copy_from_slice(sample.p);
+        self.input_count += 1;
+        let count = self.input_count as f64;
+        for ((mean, m2), u) in self.input_moments.iter_mut().zip(sample.u) {
+            let delta = u - *mean;
+            *mean += delta / count;
+            *m2 += delta * (u - *mean);
+        }
         self.next_k = Some(k + 1);
         self.last_measured = Some(k);
         Ok(())
@@ -318,7 +332,9 @@ impl Detector {
 
     /// Predict-only step for a missing sample k: no measurement, so C and d do not
     /// change; X̂, P and every Γ advance with K_k = 0, using the last sample's inputs and
-    /// signals (held). A missing sample is thereby neither skipped nor invented.
+    /// signals (held), and P grows by G diag(σ²_u) Gᵀ with σ²_u the inputs' running
+    /// variance, since the missing input is unknown. A missing sample is thereby neither
+    /// skipped nor invented.
     ///
     /// # Errors
     /// [`StepError::OutOfOrder`] when k is not the next index or no sample has been
@@ -357,7 +373,13 @@ impl Detector {
             self.phi.as_mut_slice(),
         );
         self.bank.begin(k);
-        self.filter.predict_only(&self.system, &self.held_u);
+        // The missing sample's input is unknown: the held value with the inputs' running
+        // variance (added to P through G), so a gap does not look like a fault.
+        let n = self.input_count as f64;
+        for (v, (_, m2)) in self.input_variance.iter_mut().zip(&self.input_moments) {
+            *v = if n > 1.0 { m2 / (n - 1.0) } else { 0.0 };
+        }
+        self.filter.predict_only(&self.system, &self.held_u, &self.input_variance);
         self.fk_phi.fill(0.0);
         self.bank.time_update(
             k,

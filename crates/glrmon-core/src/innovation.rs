@@ -295,13 +295,27 @@ impl InnovationFilter {
     }
 
     /// Predict-only step for a missing sample: X̂_{k+1} = F_kX̂_k + G_kU_k,
-    /// P_{k+1} = F_kP_kF_kᵀ + Q_k, A_k = F_k, F_kK_k = 0 (no measurement, no gain).
-    pub fn predict_only(&mut self, sys: &SystemMatrices, u: &[f64]) {
+    /// P_{k+1} = F_kP_kF_kᵀ + Q_k + G_k diag(σ²_u) G_kᵀ, A_k = F_k, F_kK_k = 0 (no
+    /// measurement, no gain). The input of a missing sample is unknown: `u` is a guess
+    /// (the last one seen) and `input_variance` (σ²_u per input, or empty for none) its
+    /// uncertainty, so that the prediction error it causes is covered by P instead of
+    /// showing up as a fault after the gap.
+    pub fn predict_only(&mut self, sys: &SystemMatrices, u: &[f64], input_variance: &[f64]) {
         self.tmp_n.copy_from(&self.state);
         self.tmp_nn.copy_from(&self.cov);
         self.closed_loop.copy_from(&sys.f);
         self.predictor_gain.fill(0.0);
         self.propagate(sys, u);
+        let n = self.n;
+        for (i, var) in input_variance.iter().enumerate().take(sys.g.ncols()) {
+            if *var > 0.0 && var.is_finite() {
+                for c in 0..n {
+                    for r in 0..n {
+                        self.cov[(r, c)] += sys.g[(r, i)] * var * sys.g[(c, i)];
+                    }
+                }
+            }
+        }
     }
 
     /// X̂_{k+1} = F tmp_n + G u, P_{k+1} = F tmp_nn Fᵀ + Q.
