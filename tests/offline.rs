@@ -324,3 +324,55 @@ fn bad_rows_become_error_records_and_the_replay_continues() {
     let stats = recs.iter().filter(|r| matches!(r, Record::Stat(_))).count();
     assert_eq!(stats, 297);
 }
+
+/// Issue 3: scheduling signals may come from a file instead of expressions of k.
+#[test]
+fn simulate_takes_scheduling_signals_from_a_file() {
+    let dir = TempDir::new("signals");
+    let cfg = config("demo.toml");
+    let sig = dir.file("p.csv");
+    let rows: Vec<String> = (0..50)
+        .map(|k| format!("{}", (k as f64 * 0.1).cos()))
+        .collect();
+    std::fs::write(&sig, format!("p0\n{}\n", rows.join("\n"))).unwrap();
+    let out = dir.file("out.csv");
+    ok(&glrmon(&[
+        "simulate",
+        "--config",
+        &cfg,
+        "--channel",
+        "lpv",
+        "--samples",
+        "50",
+        "--signals",
+        &sig,
+        "--output",
+        &out,
+    ]));
+    let text = std::fs::read_to_string(&out).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let p0 = header.iter().position(|h| *h == "p0").unwrap();
+    for (k, line) in text.lines().skip(1).enumerate() {
+        let v: f64 = line.split(',').nth(p0).unwrap().parse().unwrap();
+        assert_eq!(v, (k as f64 * 0.1).cos(), "k = {k}");
+    }
+    // Too few rows is an input error (exit 1) naming the file.
+    let short = glrmon(&[
+        "simulate",
+        "--config",
+        &cfg,
+        "--channel",
+        "lpv",
+        "--samples",
+        "60",
+        "--signals",
+        &sig,
+        "--output",
+        &out,
+    ]);
+    assert_eq!(short.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&short.stderr)
+            .contains("has 50 rows of signals, 60 samples requested")
+    );
+}

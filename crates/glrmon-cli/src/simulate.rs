@@ -36,6 +36,10 @@ pub(crate) struct SimulateArgs {
     /// Magnitude(s) θ, one per fault given in --fault.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     magnitude: Vec<f64>,
+    /// Exogenous signals p(k) from a CSV file (header `p0,p1,…`, one row per sample)
+    /// instead of the config's `simulation.signals` expressions.
+    #[arg(long)]
+    signals: Option<PathBuf>,
     /// Output CSV file.
     #[arg(long, required_unless_present = "publish")]
     output: Option<PathBuf>,
@@ -183,6 +187,14 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let cfg = load_config(&args.config)?;
     let channel = pick(&cfg, args.channel.as_deref())?;
     let mut sim = simulator(channel, args.seed, &args.fault, args.onset, &args.magnitude)?;
+    if let Some(path) = &args.signals {
+        let rows = read_signals(path, channel.dims.signals, args.samples)?;
+        sim = sim.with_signals(Box::new(move |k, out: &mut [f64]| {
+            if let Some(row) = rows.get(k as usize) {
+                out.copy_from_slice(row);
+            }
+        }));
+    }
     let mut csv_out = match &args.output {
         Some(path) => {
             let file = std::fs::File::create(path)
@@ -239,6 +251,58 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         }
     );
     Ok(())
+}
+
+/// Reads `samples` rows of the channel's `q` signals from a CSV file with a `p0…p{q−1}`
+/// header (other columns are ignored).
+fn read_signals(path: &std::path::Path, q: usize, samples: u64) -> anyhow::Result<Vec<Vec<f64>>> {
+    let bad =
+        |m: String| -> anyhow::Error { InvalidInput(format!("{}: {m}", path.display())).into() };
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines
+        .next()
+        .unwrap_or("")
+        .split(',')
+        .map(str::trim)
+        .collect();
+    let cols: Vec<usize> = (0..q)
+        .map(|i| {
+            header
+                .iter()
+                .position(|h| *h == format!("p{i}"))
+                .ok_or_else(|| bad(format!("column p{i} is missing from the header")))
+        })
+        .collect::<Result<_, _>>()?;
+    let mut rows = Vec::new();
+    for (n, line) in lines.enumerate().take(samples as usize) {
+        let fields: Vec<&str> = line.split(',').collect();
+        let row = cols
+            .iter()
+            .map(|&c| {
+                let f = fields.get(c).map_or("", |f| f.trim());
+                f.parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| {
+                        bad(format!(
+                            "row {}: column {}: \"{f}\" is not a finite number",
+                            n + 2,
+                            header[c]
+                        ))
+                    })
+            })
+            .collect::<Result<Vec<f64>, _>>()?;
+        rows.push(row);
+    }
+    if (rows.len() as u64) < samples {
+        return Err(bad(format!(
+            "has {} rows of signals, {samples} samples requested",
+            rows.len()
+        )));
+    }
+    Ok(rows)
 }
 
 /// Publishes the samples on the channel's key, once a subscriber matches (so that the
