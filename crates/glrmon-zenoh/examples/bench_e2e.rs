@@ -174,8 +174,8 @@ async fn main() {
                 }
             }
         }
-        for (i, p) in publishers.iter().enumerate() {
-            let (last_k, bytes) = &payloads[i][b];
+        for (i, (p, channel)) in publishers.iter().zip(&payloads).enumerate() {
+            let (last_k, bytes) = &channel[b];
             p.put(bytes.clone()).wait().expect("put");
             if i % faulty_every == 0 && *last_k >= onset {
                 sent_at.insert((i, *last_k), Instant::now());
