@@ -5,6 +5,7 @@
 
 mod csv;
 mod demo;
+mod diagnose;
 mod net;
 mod print;
 mod replay;
@@ -42,6 +43,9 @@ enum Command {
     Simulate(simulate::SimulateArgs),
     /// Run the monitor over recorded samples (CSV) and write the results as JSON lines.
     Replay(replay::ReplayArgs),
+    /// Batch sparse fault diagnosis (Zhang 2021) over a recorded span of a CSV file;
+    /// prints the isolated faults and their magnitudes (JSON with --json).
+    Diagnose(diagnose::DiagnoseArgs),
     /// The daemon: monitor every configured channel on Zenoh, publish the results.
     Run(run::RunArgs),
     /// Subscribe to alarms and diagnoses and print them.
@@ -82,6 +86,7 @@ fn main() -> ExitCode {
         Command::Validate(args) => validate::run(args),
         Command::Simulate(args) => simulate::run(args),
         Command::Replay(args) => replay::run(args),
+        Command::Diagnose(args) => diagnose::run(args),
         Command::Run(args) => run::run(args),
         Command::Watch(args) => watch::run(args),
     };

@@ -379,7 +379,8 @@ impl Detector {
         for (v, (_, m2)) in self.input_variance.iter_mut().zip(&self.input_moments) {
             *v = if n > 1.0 { m2 / (n - 1.0) } else { 0.0 };
         }
-        self.filter.predict_only(&self.system, &self.held_u, &self.input_variance);
+        self.filter
+            .predict_only(&self.system, &self.held_u, &self.input_variance);
         self.fk_phi.fill(0.0);
         self.bank.time_update(
             k,

@@ -2,7 +2,8 @@
 //! running variance enters P through G, so the transient after a gap stays within Σ.
 
 fn alarms_with_gaps(gap_len: u64, every: u64) -> usize {
-    let text = include_str!("../../../config/demo.toml").replace("false_alarm = 1e-4", "false_alarm = 1e-4\nmax_gap = 1000");
+    let text = include_str!("../../../config/demo.toml")
+        .replace("false_alarm = 1e-4", "false_alarm = 1e-4\nmax_gap = 1000");
     let cfg = glrmon_spec::parse(&text).unwrap();
     let mut mon = glrmon_monitor::Monitor::from_channel(cfg.channel("lpv").unwrap()).unwrap();
     let mut sim = glrmon_sim::scenarios::bench_a().simulator(5).unwrap();
@@ -12,10 +13,19 @@ fn alarms_with_gaps(gap_len: u64, every: u64) -> usize {
         if every > 0 && k > 100 && k % every < gap_len {
             continue;
         }
-        let s = glrmon_wire::Sample { k: Some(k), t: None, u: x.u, y: x.y, p: x.p };
+        let s = glrmon_wire::Sample {
+            k: Some(k),
+            t: None,
+            u: x.u,
+            y: x.y,
+            p: x.p,
+        };
         mon.on_sample(&s, &mut records);
     }
-    records.iter().filter(|r| matches!(r, glrmon_wire::Record::Alarm(_))).count()
+    records
+        .iter()
+        .filter(|r| matches!(r, glrmon_wire::Record::Alarm(_)))
+        .count()
 }
 
 /// Regression (found by the end-to-end load benchmark: overload gaps raised thousands of

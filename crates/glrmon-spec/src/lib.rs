@@ -25,6 +25,8 @@ pub mod schema;
 use std::fmt;
 use std::path::Path;
 
+use glrmon_core::kitanidis::unknown_input_rank;
+use glrmon_core::sparse::LassoSettings;
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{
     AlarmSettings, Column, DEFAULT_RANK_TOLERANCE, Detector, Dims, Fault, FaultDictionary, Lpv,
@@ -34,7 +36,8 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::expr::{Expr, ExprColumn, ExprContext};
 use crate::schema::{
-    ChannelSpec, ConfigFile, DaemonSpec, EntrySpec, FaultSpec, MatrixSpec, RecordingSpec, ZenohSpec,
+    ChannelSpec, ConfigFile, DaemonSpec, DiagnosisSpec, EntrySpec, FaultSpec, MatrixSpec,
+    RecordingSpec, ZenohSpec,
 };
 
 /// One problem in a configuration, with the path of the offending field.
@@ -162,6 +165,49 @@ pub struct SimulationPlan {
     pub controller: Option<Controller>,
 }
 
+/// The residual generator of sparse diagnosis (Zhang 2021, §III).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ResidualKind {
+    /// The Kalman filter's updated output error ỹ_{k|k} (Zhang 2021, §III-A, eqs. (4)-(7)):
+    /// assumes no unknown input.
+    Kalman,
+    /// The Kitanidis filter's output error ỹ_k (Zhang 2021, §III-B, eqs. (24)-(27)):
+    /// decoupled from the unknown input E d_k; needs E and Assumption (iv).
+    Kitanidis,
+}
+
+impl ResidualKind {
+    /// `"kalman"` or `"kitanidis"`, as in the configuration and the `diagnosis` record.
+    #[must_use]
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            ResidualKind::Kalman => "kalman",
+            ResidualKind::Kitanidis => "kitanidis",
+        }
+    }
+}
+
+impl fmt::Display for ResidualKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Sparse diagnosis settings of a channel (`[channels.diagnosis]`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DiagnosisSettings {
+    /// Whether the monitor runs a diagnosis at every alarm.
+    pub enabled: bool,
+    /// The residual generator.
+    pub residual: ResidualKind,
+    /// Largest number of samples in the regression (`None`: from r̂ to the alarm).
+    pub span: Option<usize>,
+    /// Samples of filter quantities kept for the regression (at least 2).
+    pub history: usize,
+    /// The Lasso path (Zhang 2021, eq. (39)).
+    pub lasso: LassoSettings,
+}
+
 /// A validated channel.
 #[derive(Debug, Clone)]
 pub struct Channel {
@@ -199,6 +245,8 @@ pub struct Channel {
     pub fault_names: Vec<String>,
     /// Simulation settings.
     pub simulation: SimulationPlan,
+    /// Sparse diagnosis settings.
+    pub diagnosis: DiagnosisSettings,
     faults: Vec<FaultPlan>,
 }
 
@@ -621,6 +669,7 @@ impl Validator {
             self.shape(prefix, "E", &e, (n, e.shape().1), &format!("F is {n}×{n}"))
                 .then(|| e.base().clone())
         });
+        let diagnosis = self.diagnosis(prefix, spec, &h, e.as_ref());
         // Signals: explicit, or the highest LPV index + 1.
         let lpv_max = [&f, &g, &h, &j, &q, &r]
             .iter()
@@ -751,6 +800,7 @@ impl Validator {
             max_gap: glr.max_gap,
             fault_names: faults.iter().map(|f| f.name.clone()).collect(),
             simulation,
+            diagnosis,
             faults,
         })
     }
@@ -782,6 +832,108 @@ impl Validator {
                 gpath("isolation_alpha"),
                 format!("{} is not in (0, 1)", glr.isolation_alpha),
             );
+        }
+    }
+
+    /// `[channels.diagnosis]`: ranges, the residual kind, and Assumption (iv) of Zhang
+    /// 2021 for the Kitanidis residual (H·E of full column rank, checked at the base
+    /// point of H).
+    fn diagnosis(
+        &mut self,
+        prefix: &str,
+        spec: &ChannelSpec,
+        h: &LpvMatrix,
+        e: Option<&DMatrix<f64>>,
+    ) -> DiagnosisSettings {
+        let d: &DiagnosisSpec = &spec.diagnosis;
+        let dpath = |f: &str| join(prefix, &format!("diagnosis.{f}"));
+        let residual = match d.residual.as_deref() {
+            None if spec.model.e.is_some() => ResidualKind::Kitanidis,
+            None => ResidualKind::Kalman,
+            Some("kalman") => ResidualKind::Kalman,
+            Some("kitanidis") => {
+                if spec.model.e.is_none() {
+                    self.error(
+                        dpath("residual"),
+                        "is \"kitanidis\" but the model has no unknown-input matrix E: \
+                         add model.E or use residual = \"kalman\""
+                            .into(),
+                    );
+                }
+                ResidualKind::Kitanidis
+            }
+            Some(other) => {
+                self.error(
+                    dpath("residual"),
+                    format!("\"{other}\" is not one of kalman, kitanidis"),
+                );
+                ResidualKind::Kalman
+            }
+        };
+        if let Some(e) = e {
+            if let Err(err) = unknown_input_rank(h.base(), e) {
+                let text = format!(
+                    "{err} (H·E must have full column rank for the Kitanidis residual of sparse \
+                     diagnosis{})",
+                    if h.terms().is_empty() {
+                        ""
+                    } else {
+                        "; checked at the base point of H"
+                    }
+                );
+                if residual == ResidualKind::Kitanidis {
+                    self.error(join(prefix, "model.E"), text);
+                } else {
+                    self.warn(join(prefix, "model.E"), text);
+                }
+            }
+        }
+        let window = spec.glr.window;
+        let history = d.history.unwrap_or(window.saturating_mul(2));
+        if history < 2 {
+            self.error(
+                dpath("history"),
+                format!("{history} must be at least 2 samples"),
+            );
+        }
+        if d.span == Some(0) {
+            self.error(dpath("span"), "0 must be at least 1 sample".into());
+        }
+        if let Some(span) = d.span {
+            if span > history {
+                self.warn(
+                    dpath("span"),
+                    format!(
+                        "{span} exceeds diagnosis.history = {history}: the regression holds at \
+                         most {history} samples"
+                    ),
+                );
+            }
+        }
+        let defaults = LassoSettings::default();
+        let lasso = LassoSettings {
+            path_points: d.lasso.path_points.unwrap_or(defaults.path_points),
+            ratio: d.lasso.ratio.unwrap_or(defaults.ratio),
+            ..defaults
+        };
+        if lasso.path_points < 2 {
+            self.error(
+                dpath("lasso.path_points"),
+                format!("{} must be at least 2", lasso.path_points),
+            );
+        }
+        if !(lasso.ratio > 0.0 && lasso.ratio < 1.0) {
+            self.error(
+                dpath("lasso.ratio"),
+                format!("{} is not in (0, 1) (λ_min/λ_max)", lasso.ratio),
+            );
+        }
+        DiagnosisSettings {
+            enabled: d.enabled,
+            residual,
+            span: d.span,
+            history,
+            lasso,
         }
     }
 

@@ -135,6 +135,9 @@ pub struct ChannelSpec {
     /// How `glrmon simulate` drives this channel.
     #[serde(default)]
     pub simulation: SimulationSpec,
+    /// Sparse fault diagnosis (Zhang 2021) at alarms and in `glrmon diagnose`.
+    #[serde(default)]
+    pub diagnosis: DiagnosisSpec,
 }
 
 /// Model matrices (letters of Zhang & Basseville 2014, eq. (1)).
@@ -327,4 +330,40 @@ pub struct ControllerSpec {
     pub kp: f64,
     /// Integral gain.
     pub ki: f64,
+}
+
+/// `[channels.diagnosis]`: sparse fault diagnosis (Zhang 2021, *Dynamic system fault
+/// diagnosis under sparseness assumption*): when an alarm fires, the residuals of a
+/// Kalman or Kitanidis filter from the onset r̂ to the alarm are regressed on the fault
+/// signatures and the few active faults selected by the Lasso (eq. (39)).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DiagnosisSpec {
+    /// Run a diagnosis at every alarm of the channel (default false). `glrmon diagnose`
+    /// works whatever this says.
+    #[serde(default)]
+    pub enabled: bool,
+    /// Residual generator: `kitanidis` (rejects the unknown input E d_k, Zhang 2021
+    /// §III-B; the default when the model has E) or `kalman` (§III-A; the default
+    /// otherwise).
+    pub residual: Option<String>,
+    /// Largest number of samples in the regression (default: every sample from r̂ to
+    /// the alarm that the history holds).
+    pub span: Option<usize>,
+    /// Samples of filter quantities kept to rebuild the regression at an alarm (default
+    /// 2 × `glr.window`).
+    pub history: Option<usize>,
+    /// Settings of the Lasso path.
+    #[serde(default)]
+    pub lasso: LassoSpec,
+}
+
+/// `[channels.diagnosis.lasso]`: the λ path of Zhang 2021, eq. (39).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LassoSpec {
+    /// Number of log-spaced λ values from λ_max down (default 100, at least 2).
+    pub path_points: Option<usize>,
+    /// λ_min/λ_max, in (0, 1) (default 1e-4).
+    pub ratio: Option<f64>,
 }

@@ -275,3 +275,69 @@ fn every_shipped_config_is_valid() {
         }
     }
 }
+
+/// Zhang 2021, Assumption (iv): the Kitanidis residual needs H·E of full column rank; an
+/// unknown input on the unmeasured second state cannot be decoupled.
+#[test]
+fn unknown_input_invisible_to_the_outputs_fails_assumption_iv() {
+    let text = with("R = 0.04", "R = 0.04\nE = [[0.0], [1.0]]");
+    assert_error(
+        &text,
+        r#"channels[0] "pump3": model.E: Assumption (iv) of Zhang 2021 fails: C_{k+1}E_k (1×1) has numerical rank 0, not full column rank 1"#,
+    );
+    // More unknown-input directions than outputs.
+    let text = with("R = 0.04", "R = 0.04\nE = [[1.0, 0.0], [0.0, 1.0]]");
+    assert_error(&text, r#"channels[0] "pump3": model.E: Assumption (iv)"#);
+    // The same E is fine when the outputs see it…
+    let ok = with("R = 0.04", "R = 0.04\nE = [[1.0], [0.0]]");
+    let cfg = glrmon_spec::parse(&ok).unwrap();
+    let d = cfg.channels[0].diagnosis;
+    assert_eq!(d.residual, glrmon_spec::ResidualKind::Kitanidis);
+    assert!(!d.enabled);
+    assert_eq!(d.history, 100);
+    // …and a rank-deficient E only warns when the Kalman residual is chosen.
+    let kalman = with("R = 0.04", "R = 0.04\nE = [[0.0], [1.0]]")
+        + "\n[channels.diagnosis]\nresidual = \"kalman\"\n";
+    let cfg = glrmon_spec::parse(&kalman).unwrap();
+    assert!(
+        cfg.warnings
+            .iter()
+            .any(|w| w.to_string().contains("model.E: Assumption (iv)")),
+        "{:?}",
+        cfg.warnings
+    );
+}
+
+#[test]
+fn diagnosis_table_is_strict_and_checked() {
+    let diag = |body: &str| format!("{BASE}\n[channels.diagnosis]\n{body}\n");
+    assert_error(&diag("enabeld = true"), "unknown field `enabeld`");
+    assert_error(
+        &diag("residual = \"kitanidis\""),
+        r#"channels[0] "pump3": diagnosis.residual is "kitanidis" but the model has no unknown-input matrix E"#,
+    );
+    assert_error(
+        &diag("residual = \"luenberger\""),
+        r#"channels[0] "pump3": diagnosis.residual: "luenberger" is not one of kalman, kitanidis"#,
+    );
+    assert_error(&diag("history = 1"), "diagnosis.history");
+    assert_error(&diag("span = 0"), "diagnosis.span");
+    assert_error(
+        &diag("lasso = { ratio = 1.5 }"),
+        r#"channels[0] "pump3": diagnosis.lasso.ratio"#,
+    );
+    assert_error(
+        &diag("lasso = { path_points = 1 }"),
+        "diagnosis.lasso.path_points",
+    );
+    assert_error(&diag("lasso = { points = 10 }"), "unknown field `points`");
+    let cfg = glrmon_spec::parse(&diag(
+        "enabled = true\nspan = 30\nhistory = 60\nlasso = { path_points = 50, ratio = 1e-3 }",
+    ))
+    .unwrap();
+    let d = cfg.channels[0].diagnosis;
+    assert!(d.enabled);
+    assert_eq!(d.residual, glrmon_spec::ResidualKind::Kalman);
+    assert_eq!((d.span, d.history), (Some(30), 60));
+    assert_eq!((d.lasso.path_points, d.lasso.ratio), (50, 1e-3));
+}

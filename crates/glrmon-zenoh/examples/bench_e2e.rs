@@ -80,10 +80,16 @@ async fn main() {
     let rate = arg("--rate", 0) as f64;
     let onset = samples / 2;
 
-    let text: String = (0..channels).map(|i| CHANNEL.replace("NAME", &format!("ch{i}"))).collect();
+    let text: String = (0..channels)
+        .map(|i| CHANNEL.replace("NAME", &format!("ch{i}")))
+        .collect();
     let cfg = glrmon_spec::parse(&text).expect("config");
     let rss0 = rss_kib();
-    let monitors: Vec<Monitor> = cfg.channels.iter().map(|c| Monitor::from_channel(c).expect("monitor")).collect();
+    let monitors: Vec<Monitor> = cfg
+        .channels
+        .iter()
+        .map(|c| Monitor::from_channel(c).expect("monitor"))
+        .collect();
     let rss1 = rss_kib();
 
     // Data: bench-A simulated; every `faulty_every`-th channel gets a sensor bias of 1.0.
@@ -91,14 +97,21 @@ async fn main() {
     let mut payloads: Vec<Vec<(u64, Vec<u8>)>> = Vec::with_capacity(channels);
     for (i, c) in cfg.channels.iter().enumerate() {
         let mut sim = if i % faulty_every == 0 {
-            sc.faulty_simulator(i as u64, "sensor_bias", onset, 1.0).expect("sim")
+            sc.faulty_simulator(i as u64, "sensor_bias", onset, 1.0)
+                .expect("sim")
         } else {
             sc.simulator(i as u64).expect("sim")
         };
         let all: Vec<Sample> = (0..samples)
             .map(|_| {
                 let x = sim.next_sample();
-                Sample { k: Some(x.k), t: None, u: x.u, y: x.y, p: x.p }
+                Sample {
+                    k: Some(x.k),
+                    t: None,
+                    u: x.u,
+                    y: x.y,
+                    p: x.p,
+                }
             })
             .collect();
         payloads.push(
@@ -112,7 +125,11 @@ async fn main() {
         );
     }
 
-    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let daemon = glrmon_zenoh::open(&SessionSettings {
         mode: Some("peer".into()),
@@ -122,10 +139,21 @@ async fn main() {
     })
     .await
     .expect("daemon session");
-    let settings = RuntimeSettings { workers, stat_every: 0, ..RuntimeSettings::default() };
-    let runtime = Runtime::start(monitors, vec![Box::new(ZenohSink::new(daemon.clone()))], &settings, Arc::new(Quiet));
+    let settings = RuntimeSettings {
+        workers,
+        stat_every: 0,
+        ..RuntimeSettings::default()
+    };
+    let runtime = Runtime::start(
+        monitors,
+        vec![Box::new(ZenohSink::new(daemon.clone()))],
+        &settings,
+        Arc::new(Quiet),
+    );
     let keys: Vec<String> = cfg.channels.iter().map(|c| c.key.clone()).collect();
-    let _source = ZenohSource::declare(&daemon, &keys, &runtime.intake()).await.expect("source");
+    let _source = ZenohSource::declare(&daemon, &keys, &runtime.intake())
+        .await
+        .expect("source");
 
     let plant = glrmon_zenoh::open(&SessionSettings {
         mode: Some("client".into()),
@@ -153,7 +181,12 @@ async fn main() {
             .congestion_control(zenoh::qos::CongestionControl::Block)
             .await
             .expect("publisher");
-        while !p.matching_status().await.map(|m| m.matching()).unwrap_or(false) {
+        while !p
+            .matching_status()
+            .await
+            .map(|m| m.matching())
+            .unwrap_or(false)
+        {
             tokio::time::sleep(Duration::from_millis(1)).await;
         }
         publishers.push(p);
@@ -163,7 +196,11 @@ async fn main() {
     let mut sent_at: HashMap<(usize, u64), Instant> = HashMap::new();
     let start = Instant::now();
     let batches = payloads[0].len();
-    let round = Duration::from_secs_f64(if rate > 0.0 { (channels * batch) as f64 / rate } else { 0.0 });
+    let round = Duration::from_secs_f64(if rate > 0.0 {
+        (channels * batch) as f64 / rate
+    } else {
+        0.0
+    });
     for b in 0..batches {
         if rate > 0.0 {
             let due = start + round * b as u32;
@@ -191,7 +228,10 @@ async fn main() {
             .map(|s| {
                 s.samples.load(Ordering::Relaxed)
                     + s.dropped.load(Ordering::Relaxed)
-                    + s.errors.lock().map(|e| e.values().sum::<u64>()).unwrap_or(0)
+                    + s.errors
+                        .lock()
+                        .map(|e| e.values().sum::<u64>())
+                        .unwrap_or(0)
             })
             .sum()
     };
@@ -206,8 +246,14 @@ async fn main() {
         }
     }
     let elapsed = finished.duration_since(start);
-    let processed: u64 = stats.iter().map(|s| s.samples.load(Ordering::Relaxed)).sum();
-    let dropped: u64 = stats.iter().map(|s| s.dropped.load(Ordering::Relaxed)).sum();
+    let processed: u64 = stats
+        .iter()
+        .map(|s| s.samples.load(Ordering::Relaxed))
+        .sum();
+    let dropped: u64 = stats
+        .iter()
+        .map(|s| s.dropped.load(Ordering::Relaxed))
+        .sum();
     let alarms = received.lock().unwrap().clone();
     let mut lat: Vec<f64> = alarms
         .iter()
@@ -220,7 +266,11 @@ async fn main() {
         })
         .collect();
     lat.sort_by(f64::total_cmp);
-    let pct = |p: f64| lat.get(((lat.len() as f64 - 1.0) * p).round() as usize).copied().unwrap_or(f64::NAN);
+    let pct = |p: f64| {
+        lat.get(((lat.len() as f64 - 1.0) * p).round() as usize)
+            .copied()
+            .unwrap_or(f64::NAN)
+    };
     let expected_alarms = (0..channels).filter(|i| i % faulty_every == 0).count();
     println!(
         "channels={channels} samples/channel={samples} batch={batch} workers={workers} target rate={rate} samples/s: \

@@ -1,0 +1,276 @@
+//! `glrmon diagnose`: batch sparse fault diagnosis (Zhang 2021) over a recorded span of
+//! a CSV file. The channel's residual filter (Kitanidis when the model has E, else
+//! Kalman, or as `[channels.diagnosis]` says) runs from the first row; the regression
+//! of Zhang 2021, eq. (36), is stacked over `--from`…`--to` (default: the whole file);
+//! the Lasso path (eq. (39)), the plateau λ (§IV) and the least-squares refit (§V) give
+//! the isolated faults and their magnitudes. Step, impulse and ramp faults are taken to
+//! begin at `--onset` (default `--from`); known-profile faults act from the first row.
+//! The same engine runs in the monitor at every alarm ([`glrmon_monitor::diagnosis`]).
+
+use std::fmt::Write as _;
+use std::io::{BufRead, Write as _};
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use clap::{Args, ValueEnum};
+use glrmon_monitor::{DiagnosisEngine, SpanDiagnosis};
+use glrmon_spec::ResidualKind;
+use glrmon_wire::{Record, Sample, encode_json};
+
+use crate::csv::CsvReader;
+use crate::simulate::pick;
+use crate::{InvalidInput, load_config};
+
+#[derive(Debug, Args)]
+pub(crate) struct DiagnoseArgs {
+    /// Configuration file.
+    #[arg(long)]
+    config: PathBuf,
+    /// Channel the samples belong to (optional when the file has one channel).
+    #[arg(long)]
+    channel: Option<String>,
+    /// Recorded samples (CSV: k, t, u0…, y0…, p0…).
+    input: PathBuf,
+    /// First sample index of the regression (default: the first row).
+    #[arg(long)]
+    from: Option<u64>,
+    /// Last sample index of the regression (default: the last row).
+    #[arg(long)]
+    to: Option<u64>,
+    /// Onset r of step, impulse and ramp faults (default: --from; ignored for
+    /// known-profile faults).
+    #[arg(long)]
+    onset: Option<u64>,
+    /// Residual generator, overriding the configuration.
+    #[arg(long, value_enum)]
+    residual: Option<Residual>,
+    /// Print the `diagnosis` record as JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum Residual {
+    /// Kalman filter (Zhang 2021, §III-A): no unknown input.
+    Kalman,
+    /// Kitanidis filter (§III-B): rejects the unknown input E d_k; needs E.
+    Kitanidis,
+}
+
+/// Index, first and last sample of a file, after checking that the rows are usable.
+struct Extent {
+    first: u64,
+    last: u64,
+}
+
+fn open(path: &Path, dims: glrmon_core::Dims) -> anyhow::Result<CsvReader<impl BufRead>> {
+    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let reader = std::io::BufReader::with_capacity(1 << 16, file);
+    Ok(CsvReader::new(reader, dims)
+        .map_err(|e| InvalidInput(format!("{}: {e}", path.display())))?)
+}
+
+/// Calls `visit` with every sample of the file and its index k (the row's `k`, or its
+/// position). Bad rows and gaps are errors: the regression needs consecutive samples.
+fn for_each_sample(
+    path: &Path,
+    dims: glrmon_core::Dims,
+    mut visit: impl FnMut(u64, &Sample) -> anyhow::Result<bool>,
+) -> anyhow::Result<Option<Extent>> {
+    let mut csv = open(path, dims)?;
+    let mut sample = Sample::default();
+    let mut extent: Option<Extent> = None;
+    let mut position = 0u64;
+    while let Some(row) = csv.next_into(&mut sample) {
+        if let Err(e) = row {
+            return Err(InvalidInput(format!(
+                "{}: {} ({})",
+                path.display(),
+                e.message,
+                e.code.as_str()
+            ))
+            .into());
+        }
+        let k = sample.k.unwrap_or(position);
+        position = k + 1;
+        match &mut extent {
+            None => extent = Some(Extent { first: k, last: k }),
+            Some(x) if k == x.last + 1 => x.last = k,
+            Some(x) => {
+                return Err(InvalidInput(format!(
+                    "{}: sample k = {k} follows k = {}: sparse diagnosis needs consecutive \
+                     samples (no gaps, no repeats)",
+                    path.display(),
+                    x.last
+                ))
+                .into());
+            }
+        }
+        if !visit(k, &sample)? {
+            break;
+        }
+    }
+    Ok(extent)
+}
+
+pub(crate) fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
+    let cfg = load_config(&args.config)?;
+    let mut channel = pick(&cfg, args.channel.as_deref())?.clone();
+    if let Some(r) = args.residual {
+        channel.diagnosis.residual = match r {
+            Residual::Kalman => ResidualKind::Kalman,
+            Residual::Kitanidis => ResidualKind::Kitanidis,
+        };
+    }
+    if channel.diagnosis.residual == ResidualKind::Kitanidis && channel.unknown_input.is_none() {
+        return Err(InvalidInput(format!(
+            "channel \"{}\" has no unknown-input matrix E: the Kitanidis residual needs one \
+             (use --residual kalman)",
+            channel.name
+        ))
+        .into());
+    }
+    if let Some(e) = &channel.unknown_input {
+        if channel.diagnosis.residual == ResidualKind::Kitanidis {
+            glrmon_core::kitanidis::unknown_input_rank(channel.model.matrices()[2].base(), e)
+                .map_err(|e| InvalidInput(format!("channel \"{}\": {e}", channel.name)))?;
+        }
+    }
+    if args
+        .input
+        .extension()
+        .is_some_and(|x| x.eq_ignore_ascii_case("mcap"))
+    {
+        return Err(InvalidInput(format!(
+            "{}: MCAP input is not supported by diagnose yet: give a CSV file",
+            args.input.display()
+        ))
+        .into());
+    }
+    // First pass: the file's extent, so that the span and the history are known.
+    let extent = for_each_sample(&args.input, channel.dims, |_, _| Ok(true))?
+        .ok_or_else(|| InvalidInput(format!("{}: no samples", args.input.display())))?;
+    let from = args.from.unwrap_or(extent.first);
+    let to = args.to.unwrap_or(extent.last);
+    if from > to || from < extent.first || to > extent.last {
+        return Err(InvalidInput(format!(
+            "span {from}..={to} is not within the file's samples {}..={}",
+            extent.first, extent.last
+        ))
+        .into());
+    }
+    let onset = args.onset.unwrap_or(from);
+    // The ring must hold the span and the sample before it (an impulse's entry).
+    let history = usize::try_from(to - from + 2).unwrap_or(usize::MAX);
+    let mut engine = DiagnosisEngine::new(&channel, history)
+        .map_err(|e| InvalidInput(format!("channel \"{}\": {e}", channel.name)))?;
+    for_each_sample(&args.input, channel.dims, |k, s| {
+        let sample = glrmon_core::Sample {
+            k,
+            u: &s.u,
+            y: &s.y,
+            p: &s.p,
+        };
+        engine.step(&sample).map_err(|e| {
+            InvalidInput(format!(
+                "{}: sample k = {k}: residual filter: {e}",
+                args.input.display()
+            ))
+        })?;
+        Ok(k < to)
+    })?;
+    let d = engine.diagnose(to, onset, from, to).map_err(|e| {
+        InvalidInput(format!(
+            "channel \"{}\", samples {from}..={to}: {e}",
+            channel.name
+        ))
+    })?;
+    let mut out = std::io::stdout().lock();
+    if args.json {
+        let mut buf = Vec::new();
+        encode_json(&Record::Diagnosis(d.record), &mut buf)?;
+        buf.push(b'\n');
+        out.write_all(&buf)?;
+    } else {
+        out.write_all(text(&d, channel.fault_names.len()).as_bytes())?;
+    }
+    out.flush()?;
+    Ok(())
+}
+
+/// The human-readable report.
+fn text(d: &SpanDiagnosis, faults: usize) -> String {
+    let r = &d.record;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "sparse diagnosis of channel \"{}\" over k = {}..={} ({} samples), {} residual, {faults} candidate faults",
+        r.channel, r.from, r.to, d.samples, r.residual
+    );
+    let _ = writeln!(
+        s,
+        "  support:   {}",
+        if r.support.is_empty() {
+            "(none)".to_owned()
+        } else {
+            format!("{} ({} faults)", r.support.join(", "), r.support.len())
+        }
+    );
+    let mut est = String::new();
+    for name in &r.support {
+        if let Some(v) = r.estimate.get(name) {
+            let sep = if est.is_empty() { "" } else { ", " };
+            let _ = write!(est, "{sep}{name} = {v:.4}");
+        }
+    }
+    let _ = writeln!(s, "  estimate:  {est}  (least squares on the support)");
+    let mut lasso = String::new();
+    for (i, &(j, v)) in d.detail.lasso.iter().enumerate() {
+        let sep = if i == 0 { "" } else { ", " };
+        let name = r
+            .support
+            .get(i)
+            .map_or_else(|| format!("#{j}"), Clone::clone);
+        let _ = write!(lasso, "{sep}{name} = {v:.4}");
+    }
+    let _ = writeln!(s, "  lasso:     {lasso}  (θ̂(λ), shrunk by the penalty)");
+    let run = d
+        .detail
+        .path
+        .iter()
+        .filter(|&&(l, _)| l >= r.plateau[0] && l <= r.plateau[1])
+        .count();
+    let _ = writeln!(
+        s,
+        "  lambda:    {:.4e}, middle of the plateau [{:.4e}, {:.4e}] ({} of {} path points with {} faults)",
+        r.lambda,
+        r.plateau[0],
+        r.plateau[1],
+        run,
+        d.detail.path.len(),
+        r.support.len()
+    );
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    for &c in &r.path_support_sizes {
+        match runs.last_mut() {
+            Some((last, n)) if *last == c => *n += 1,
+            _ => runs.push((c, 1)),
+        }
+    }
+    let summary: Vec<String> = runs.iter().map(|(c, n)| format!("{c}×{n}")).collect();
+    let (hi, lo) = (
+        d.detail.path.first().map_or(0.0, |p| p.0),
+        d.detail.path.last().map_or(0.0, |p| p.0),
+    );
+    let _ = writeln!(
+        s,
+        "  path:      λ {hi:.3e} → {lo:.3e}, support size × points: {}{}",
+        summary.join(" "),
+        if d.detail.converged {
+            ""
+        } else {
+            " (coordinate descent did not converge everywhere)"
+        }
+    );
+    s
+}
