@@ -152,6 +152,20 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
         .map(|(n, o)| format!("{n} ({})", format!("{o:?}").to_lowercase()))
         .collect();
     let _ = writeln!(s, "  faults: {}", faults.join(", "));
+    let diag = &channel.diagnosis;
+    if diag.enabled {
+        let span = diag.span.map_or_else(
+            || "from r̂ to the alarm".to_owned(),
+            |n| format!("at most {n} samples"),
+        );
+        let _ = writeln!(
+            s,
+            "  sparse diagnosis at alarms: {:?} residual, span {span}, history {} samples, λ path of {} points down to {:e}·λ_max",
+            diag.residual, diag.history, diag.lasso.path_points, diag.lasso.ratio
+        );
+    } else {
+        let _ = writeln!(s, "  sparse diagnosis at alarms: off");
+    }
     let (info, steady, samples) = window_information(channel)?;
     match steady {
         Some(sigma) => {
