@@ -33,7 +33,7 @@ fn alarm_line(a: &Alarm) -> String {
         let _ = write!(tests, "{sep}{} {:.1}/{:.1}", t.fault, t.minmax, t.threshold);
     }
     format!(
-        "ALARM {} k={} onset={} glr={:.1} (threshold {:.1}) isolated=[{}] magnitude=[{}] minmax=[{}]",
+        "ALARM {} k={} onset={} glr={:.1} (threshold {:.1}) isolated=[{}] magnitude=[{}] minmax=[{}]{}",
         a.channel,
         a.k,
         a.onset,
@@ -41,14 +41,20 @@ fn alarm_line(a: &Alarm) -> String {
         a.threshold,
         isolated.join(", "),
         mag,
-        tests
+        tests,
+        time(a.t)
     )
 }
 
 fn end_line(e: &AlarmEnd) -> String {
     format!(
-        "END   {} k={} onset={} duration={} peak_glr={:.1}",
-        e.channel, e.k, e.onset, e.duration, e.peak_glr
+        "END   {} k={} onset={} duration={} peak_glr={:.1}{}",
+        e.channel,
+        e.k,
+        e.onset,
+        e.duration,
+        e.peak_glr,
+        time(e.t)
     )
 }
 
@@ -79,4 +85,41 @@ fn error_line(e: &ErrorRecord) -> String {
         e.code.as_str(),
         e.message
     )
+}
+
+/// ` t=…` (the sample's time in seconds) when the record carries one.
+fn time(t: Option<f64>) -> String {
+    t.map_or_else(String::new, |t| format!(" t={t:.3}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glrmon_wire::IsolationResult;
+
+    #[test]
+    fn alarm_line_names_channel_time_onset_isolated_fault_and_magnitude() {
+        let a = Alarm {
+            channel: "pump3".into(),
+            k: 203,
+            t: Some(2.03),
+            glr: 1805.1,
+            threshold: 27.6,
+            onset: 201,
+            magnitude: vec![3.981, 0.005],
+            isolation: vec![IsolationResult {
+                fault: "x0_jump".into(),
+                minmax: 1213.1,
+                sensitivity: 1300.0,
+                threshold: 6.6,
+                isolated: true,
+            }],
+            faults: vec!["x0_jump".into(), "x1_jump".into()],
+        };
+        let line = line(&Record::Alarm(a)).unwrap();
+        assert_eq!(
+            line,
+            "ALARM pump3 k=203 onset=201 glr=1805.1 (threshold 27.6) isolated=[x0_jump] magnitude=[x0_jump 3.981, x1_jump 0.005] minmax=[x0_jump 1213.1/6.6] t=2.030"
+        );
+    }
 }
