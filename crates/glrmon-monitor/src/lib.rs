@@ -649,22 +649,35 @@ enabled = true
 lasso = { ratio = 1e-2 }
 "#;
 
-    fn small_run(text: &str) -> (Monitor, Vec<Record>) {
-        let cfg = glrmon_spec::parse(text).unwrap();
-        let ch = &cfg.channels[0];
-        let mut theta = glrmon_core::kitanidis::ResidualRow::zeros(4, 0).residual;
-        theta[2] = 1.0; // s1
-        let mut sim = glrmon_sim::Simulator::new(Box::new(ch.model.clone()), ch.x0.clone(), 11)
+    /// The `SMALL` channel simulated with fault `fault` (dictionary index) of magnitude
+    /// `magnitude` from sample `onset`, input u0 = sin(0.2k).
+    fn small_sim(
+        ch: &glrmon_spec::Channel,
+        seed: u64,
+        fault: usize,
+        magnitude: f64,
+        onset: u64,
+    ) -> glrmon_sim::Simulator {
+        let theta = (0..ch.fault_names.len())
+            .map(|j| if j == fault { magnitude } else { 0.0 })
+            .collect::<Vec<f64>>();
+        glrmon_sim::Simulator::new(Box::new(ch.model.clone()), ch.x0.clone(), seed)
             .unwrap()
             .with_inputs(Box::new(|k, u: &mut [f64]| u[0] = (0.2 * k as f64).sin()))
             .with_fault(
                 ch.dictionary().unwrap(),
                 glrmon_sim::Injection {
-                    magnitude: theta,
-                    onset: 100,
+                    magnitude: theta.into(),
+                    onset,
                 },
             )
-            .unwrap();
+            .unwrap()
+    }
+
+    fn small_run(text: &str) -> (Monitor, Vec<Record>) {
+        let cfg = glrmon_spec::parse(text).unwrap();
+        let ch = &cfg.channels[0];
+        let mut sim = small_sim(ch, 11, 2, 1.0, 100); // s1
         let mut mon = Monitor::from_channel(ch).unwrap();
         let mut records = Vec::new();
         for _ in 0..200 {
@@ -735,19 +748,7 @@ lasso = { ratio = 1e-2 }
     fn diagnosis_survives_a_gap() {
         let cfg = glrmon_spec::parse(SMALL).unwrap();
         let ch = &cfg.channels[0];
-        let mut theta = glrmon_core::kitanidis::ResidualRow::zeros(4, 0).residual;
-        theta[1] = -1.0; // s0
-        let mut sim = glrmon_sim::Simulator::new(Box::new(ch.model.clone()), ch.x0.clone(), 5)
-            .unwrap()
-            .with_inputs(Box::new(|k, u: &mut [f64]| u[0] = (0.2 * k as f64).sin()))
-            .with_fault(
-                ch.dictionary().unwrap(),
-                glrmon_sim::Injection {
-                    magnitude: theta,
-                    onset: 120,
-                },
-            )
-            .unwrap();
+        let mut sim = small_sim(ch, 5, 1, -1.0, 120); // s0
         let mut mon = Monitor::from_channel(ch).unwrap();
         let mut records = Vec::new();
         for i in 0..200 {
