@@ -849,6 +849,8 @@ pub struct Diagnosis {
     pub path: Vec<(f64, usize)>,
     /// Whether coordinate descent met the tolerance at every λ of the path.
     pub converged: bool,
+    /// The whole regularisation path θ̂(λ_i), for plots like Zhang 2021, Fig. 2.
+    pub lasso_path: LassoPath,
 }
 
 /// Sparse fault isolation of Zhang 2021, §IV: the Lasso path (eq. (39)) by
@@ -882,6 +884,7 @@ pub fn diagnose(
         plateau: (sizes[plateau.last].0, sizes[plateau.first].0),
         path: sizes,
         converged: path.converged(),
+        lasso_path: path,
     })
 }
 

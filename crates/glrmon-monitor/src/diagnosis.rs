@@ -477,6 +477,11 @@ impl DiagnosisEngine {
             plateau: [detail.plateau.0, detail.plateau.1],
             residual: self.residual_kind().as_str().to_owned(),
             path_support_sizes: detail.path.iter().map(|&(_, c)| c).collect(),
+            faults: (0..self.channel.fault_names.len()).map(name).collect(),
+            path_lambda: detail.lasso_path.lambdas().to_vec(),
+            path_coefficients: (0..detail.lasso_path.len())
+                .filter_map(|i| detail.lasso_path.coefficients(i).map(<[f64]>::to_vec))
+                .collect(),
         };
         Ok(SpanDiagnosis {
             record,

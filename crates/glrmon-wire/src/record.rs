@@ -116,6 +116,13 @@ pub struct Diagnosis {
     pub residual: String,
     /// Support size at each λ along the regularisation path.
     pub path_support_sizes: Vec<usize>,
+    /// The fault dictionary, in the order of the columns of `path_coefficients`.
+    pub faults: Vec<String>,
+    /// The λ values of the regularisation path, decreasing (Zhang 2021, eq. (39)).
+    pub path_lambda: Vec<f64>,
+    /// The Lasso estimate θ̂(λ) at each λ of `path_lambda`: one row per λ, one value
+    /// per fault of `faults` (the path plotted in Zhang 2021, Fig. 2).
+    pub path_coefficients: Vec<Vec<f64>>,
 }
 
 impl Diagnosis {
@@ -295,6 +302,10 @@ impl Record {
                     c.one(&format!("estimate.{name}"), *v)?;
                 }
                 c.one("lambda", r.lambda)?;
+                c.all("path_lambda", &r.path_lambda)?;
+                for (i, row) in r.path_coefficients.iter().enumerate() {
+                    c.all(&format!("path_coefficients[{i}]"), row)?;
+                }
                 c.all("plateau", &r.plateau)
             }
             Record::Error(_) => Ok(()),
@@ -476,6 +487,7 @@ enum Ty {
     Str,
     Bool,
     VecF64,
+    MatrixF64,
     VecUsize,
     VecStr,
     MapF64,
@@ -499,6 +511,7 @@ impl Ty {
             Ty::Str => "a string",
             Ty::Bool => "a boolean",
             Ty::VecF64 => "an array of numbers",
+            Ty::MatrixF64 => "an array of arrays of numbers",
             Ty::VecUsize => "an array of non-negative integers",
             Ty::VecStr => "an array of strings",
             Ty::MapF64 => "an object of numbers",
@@ -560,6 +573,9 @@ const DIAGNOSIS_SCHEMA: Schema = &[
     ("plateau", Ty::Pair),
     ("residual", Ty::Str),
     ("path_support_sizes", Ty::VecUsize),
+    ("faults", Ty::VecStr),
+    ("path_lambda", Ty::VecF64),
+    ("path_coefficients", Ty::MatrixF64),
 ];
 const ERROR_SCHEMA: Schema = &[
     ("channel", Ty::Str),
@@ -614,6 +630,7 @@ fn locate_value(value: &Value, path: String, ty: Ty) -> Option<Located> {
         Ty::Str => value.is_string(),
         Ty::Bool => value.is_boolean(),
         Ty::VecF64 => return locate_elements(value, path, ty, Ty::F64),
+        Ty::MatrixF64 => return locate_elements(value, path, ty, Ty::VecF64),
         Ty::VecUsize => return locate_elements(value, path, ty, Ty::Usize),
         Ty::VecStr => return locate_elements(value, path, ty, Ty::Str),
         Ty::Pair => match value.as_array() {
@@ -747,6 +764,14 @@ mod tests {
             plateau: [0.01, 0.2],
             residual: Diagnosis::RESIDUAL_KITANIDIS.into(),
             path_support_sizes: vec![0, 1, 1, 2],
+            faults: vec!["leak".into(), "bias".into()],
+            path_lambda: vec![0.4, 0.2, 0.1, 0.05],
+            path_coefficients: vec![
+                vec![0.0, 0.0],
+                vec![0.3, 0.0],
+                vec![0.5, 0.0],
+                vec![0.7, -0.01],
+            ],
         }
     }
 
