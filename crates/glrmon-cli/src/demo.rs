@@ -46,6 +46,12 @@ pub(crate) struct DemoArgs {
     /// Also write every record (stat, alarm, alarm_end, error) as JSON lines here.
     #[arg(long)]
     output: Option<PathBuf>,
+    /// The MCAP recording of every input and result (`glrmon replay` re-runs it).
+    #[arg(long, default_value = "glrmon-demo.mcap")]
+    record: PathBuf,
+    /// Do not write the MCAP recording.
+    #[arg(long)]
+    no_record: bool,
 }
 
 pub(crate) fn run(args: &DemoArgs) -> anyhow::Result<()> {
@@ -105,6 +111,27 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
             }
         })));
     }
+    let recorder_stats = if args.no_record {
+        None
+    } else {
+        let directory = match args.record.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
+            _ => PathBuf::from("."),
+        };
+        let settings = glrmon_record::RecorderSettings {
+            directory,
+            prefix: ".glrmon-demo".into(),
+            max_file_bytes: None,
+            max_file_duration: None,
+            ..glrmon_record::RecorderSettings::default()
+        };
+        let recorder =
+            glrmon_record::Recorder::start(settings, crate::recording::file_header(&cfg, "demo"))
+                .map_err(|e| anyhow::anyhow!("starting the recorder: {e}"))?;
+        let stats = recorder.stats();
+        sinks.push(Box::new(recorder));
+        Some(stats)
+    };
     let mut settings = runtime_settings(&cfg);
     settings.stat_every = 1;
     let runtime = Runtime::start(monitors, sinks, &settings, Arc::new(LogEvents));
@@ -212,6 +239,20 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     }
     if let Some(p) = &args.output {
         println!("records written to {}", p.display());
+    }
+    if let Some(stats) = recorder_stats {
+        let finished = stats.finished.lock().map(|f| f.clone()).unwrap_or_default();
+        if let Some(file) = finished.last() {
+            std::fs::rename(file, &args.record).with_context(|| {
+                format!("renaming {} to {}", file.display(), args.record.display())
+            })?;
+            println!(
+                "recording: {} ({} messages); replay it with: glrmon replay {} --report report.html",
+                args.record.display(),
+                stats.messages.load(Ordering::Relaxed),
+                args.record.display()
+            );
+        }
     }
     let _ = session.close().await;
     anyhow::ensure!(in_time, "the runtime did not drain in time");

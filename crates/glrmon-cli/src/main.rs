@@ -6,9 +6,13 @@
 mod csv;
 mod demo;
 mod diagnose;
+mod mcapin;
 mod net;
 mod print;
+mod recording;
+mod recover;
 mod replay;
+mod report;
 mod run;
 mod simulate;
 mod validate;
@@ -41,8 +45,12 @@ enum Command {
     Validate(validate::ValidateArgs),
     /// Simulate a channel's model, optionally with a fault, to a CSV file.
     Simulate(simulate::SimulateArgs),
-    /// Run the monitor over recorded samples (CSV) and write the results as JSON lines.
+    /// Run the monitors over recorded samples (CSV, or an MCAP recording with its
+    /// configuration) to the same numbers as live; JSON lines, MCAP, HTML report.
     Replay(replay::ReplayArgs),
+    /// Rewrite an unfinished or damaged MCAP recording as a finished file with
+    /// everything readable in it.
+    Recover(recover::RecoverArgs),
     /// Batch sparse fault diagnosis (Zhang 2021) over a recorded span of a CSV file;
     /// prints the isolated faults and their magnitudes (JSON with --json).
     Diagnose(diagnose::DiagnoseArgs),
@@ -86,6 +94,7 @@ fn main() -> ExitCode {
         Command::Validate(args) => validate::run(args),
         Command::Simulate(args) => simulate::run(args),
         Command::Replay(args) => replay::run(args),
+        Command::Recover(args) => recover::run(args),
         Command::Diagnose(args) => diagnose::run(args),
         Command::Run(args) => run::run(args),
         Command::Watch(args) => watch::run(args),

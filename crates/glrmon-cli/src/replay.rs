@@ -1,35 +1,259 @@
-//! `glrmon replay`: the monitor over recorded samples, as fast as possible, writing every
-//! result record as JSON lines. The same input gives byte-identical output.
+//! `glrmon replay`: the monitors over recorded samples, as fast as possible, to the same
+//! numbers as live. Input: a CSV file of one channel, or an MCAP recording (all its
+//! channels, with the configuration recorded in it unless `--config` is given). Every
+//! result goes to each output sink: JSON lines (default: standard output), an MCAP file
+//! (inputs and results, self-describing), an HTML report.
 
-use std::io::{BufRead, Write};
+use std::collections::HashMap;
+use std::io::{BufRead, IsTerminal as _, Write};
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
 
 use anyhow::Context as _;
 use clap::Args;
 use glrmon_monitor::Monitor;
-use glrmon_wire::{ErrorRecord, Record, Sample, Stage, encode_json};
+use glrmon_record::{FileHeader, McapFileSink};
+use glrmon_runtime::{InputItem, InputOutput, Output, Sink};
+use glrmon_wire::{
+    DecodeLimits, ErrorRecord, IntakeEvent, Record, Sample, Stage, encode_intake, encode_json,
+    encode_sample,
+};
 
 use crate::csv::CsvReader;
+use crate::mcapin::{McapInput, is_mcap};
 use crate::simulate::pick;
 use crate::{InvalidInput, load_config, print};
 
 #[derive(Debug, Args)]
 pub(crate) struct ReplayArgs {
-    /// Configuration file.
+    /// Configuration file (optional for MCAP input: the recorded one is used).
     #[arg(long)]
-    config: PathBuf,
-    /// Channel the samples belong to (optional when the file has one channel).
+    config: Option<PathBuf>,
+    /// Channel to replay (CSV: optional when the config has one channel; MCAP: default
+    /// every recorded channel).
     #[arg(long)]
     channel: Option<String>,
-    /// Recorded samples (CSV).
+    /// Recorded samples: CSV (one channel) or MCAP (a `glrmon run` or `demo` recording).
     input: PathBuf,
-    /// Output JSON lines (default: standard output).
+    /// Output: JSON lines, or an MCAP file when the name ends in .mcap (default: JSON
+    /// lines on standard output).
     #[arg(long)]
     output: Option<PathBuf>,
+    /// Also write a self-contained HTML report (plots of the innovation, l_k, onset and
+    /// magnitude, isolation tests, Lasso paths).
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+/// The result sinks of a replay, fed on this thread in order.
+struct Outputs {
+    sinks: Vec<Box<dyn Sink>>,
+    inputs_wanted: bool,
+    /// Per channel, the `stat` records so far.
+    stat_counts: HashMap<Arc<str>, u64>,
+    alarm_lines: Vec<String>,
+    records: u64,
+    json: Vec<u8>,
+}
+
+impl Outputs {
+    fn new(sinks: Vec<Box<dyn Sink>>) -> Self {
+        let inputs_wanted = sinks.iter().any(|s| s.interest().inputs);
+        Self {
+            sinks,
+            inputs_wanted,
+            stat_counts: HashMap::new(),
+            alarm_lines: Vec::new(),
+            records: 0,
+            json: Vec::with_capacity(512),
+        }
+    }
+
+    fn input(&mut self, name: &Arc<str>, item: &InputItem, log_time_ns: u64) -> anyhow::Result<()> {
+        if !self.inputs_wanted {
+            return Ok(());
+        }
+        let mut json = Vec::with_capacity(128);
+        match item {
+            InputItem::Sample(s) => encode_sample(name, s, &mut json)?,
+            InputItem::Intake(e) => encode_intake(name, e, &mut json)?,
+        }
+        let input = InputOutput {
+            channel: 0,
+            name: name.clone(),
+            item: item.clone(),
+            json,
+            log_time_ns,
+        };
+        for s in &mut self.sinks {
+            if s.interest().inputs {
+                s.write_input(&input).map_err(|e| anyhow::anyhow!("{e}"))?;
+            }
+        }
+        Ok(())
+    }
+
+    fn records(
+        &mut self,
+        name: &Arc<str>,
+        records: &mut Vec<Record>,
+        log_time_ns: u64,
+    ) -> anyhow::Result<()> {
+        for record in records.drain(..) {
+            self.records += 1;
+            if let Some(line) = print::line(&record) {
+                if !matches!(record, Record::Error(_)) {
+                    self.alarm_lines.push(line);
+                }
+            }
+            let stat_index = if matches!(record, Record::Stat(_)) {
+                let n = self.stat_counts.entry(name.clone()).or_insert(0);
+                *n += 1;
+                Some(*n - 1)
+            } else {
+                None
+            };
+            self.json.clear();
+            encode_json(&record, &mut self.json)?;
+            let output = Output {
+                record,
+                json: std::mem::take(&mut self.json),
+                log_time_ns,
+                stat_index,
+            };
+            for s in &mut self.sinks {
+                if let Some(i) = stat_index {
+                    let every = s.interest().stat_every.unwrap_or(1);
+                    if every == 0 || i % every != 0 {
+                        continue;
+                    }
+                }
+                s.write(&output).map_err(|e| anyhow::anyhow!("{e}"))?;
+            }
+            self.json = output.json;
+        }
+        Ok(())
+    }
+
+    fn finish(self) -> anyhow::Result<()> {
+        for mut s in self.sinks {
+            s.flush().map_err(|e| anyhow::anyhow!("{e}"))?;
+        }
+        Ok(())
+    }
+}
+
+/// JSON lines of every record.
+struct JsonLines<W: Write + Send>(W);
+
+impl<W: Write + Send + 'static> Sink for JsonLines<W> {
+    fn name(&self) -> &str {
+        "jsonl"
+    }
+    fn interest(&self) -> glrmon_runtime::Interest {
+        glrmon_runtime::Interest {
+            inputs: false,
+            stat_every: Some(1),
+        }
+    }
+    fn write(&mut self, output: &Output) -> Result<(), glrmon_runtime::SinkError> {
+        self.0
+            .write_all(&output.json)
+            .and_then(|()| self.0.write_all(b"\n"))
+            .map_err(|e| glrmon_runtime::SinkError {
+                sink: "jsonl".into(),
+                message: e.to_string(),
+            })
+    }
+    fn flush(&mut self) -> Result<(), glrmon_runtime::SinkError> {
+        self.0.flush().map_err(|e| glrmon_runtime::SinkError {
+            sink: "jsonl".into(),
+            message: e.to_string(),
+        })
+    }
+}
+
+/// An MCAP output, finished when the replay ends.
+struct McapOut(Option<McapFileSink>);
+
+impl Sink for McapOut {
+    fn name(&self) -> &str {
+        "mcap"
+    }
+    fn interest(&self) -> glrmon_runtime::Interest {
+        glrmon_runtime::Interest {
+            inputs: true,
+            stat_every: Some(1),
+        }
+    }
+    fn write(&mut self, output: &Output) -> Result<(), glrmon_runtime::SinkError> {
+        self.0.as_mut().map_or(Ok(()), |s| s.write(output))
+    }
+    fn write_input(&mut self, input: &InputOutput) -> Result<(), glrmon_runtime::SinkError> {
+        self.0.as_mut().map_or(Ok(()), |s| s.write_input(input))
+    }
+    fn flush(&mut self) -> Result<(), glrmon_runtime::SinkError> {
+        match self.0.take() {
+            Some(s) => s
+                .finish()
+                .map(|_| ())
+                .map_err(|e| glrmon_runtime::SinkError {
+                    sink: "mcap".into(),
+                    message: e.to_string(),
+                }),
+            None => Ok(()),
+        }
+    }
+}
+
+fn output_sinks(args: &ReplayArgs, header: &FileHeader) -> anyhow::Result<Vec<Box<dyn Sink>>> {
+    let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
+    match &args.output {
+        Some(p) if is_mcap(p) => {
+            let sink = McapFileSink::create(p, header)
+                .with_context(|| format!("creating {}", p.display()))?;
+            sinks.push(Box::new(McapOut(Some(sink))));
+        }
+        Some(p) => {
+            let file =
+                std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?;
+            sinks.push(Box::new(JsonLines(std::io::BufWriter::with_capacity(
+                1 << 16,
+                file,
+            ))));
+        }
+        None => sinks.push(Box::new(JsonLines(std::io::BufWriter::with_capacity(
+            1 << 16,
+            std::io::stdout(),
+        )))),
+    }
+    if let Some(p) = &args.report {
+        sinks.push(Box::new(crate::report::ReportSink::new(p, &args.input)));
+    }
+    Ok(sinks)
 }
 
 pub(crate) fn run(args: &ReplayArgs) -> anyhow::Result<()> {
-    let cfg = load_config(&args.config)?;
+    if is_mcap(&args.input) {
+        replay_mcap(args)
+    } else {
+        replay_csv(args)
+    }
+}
+
+fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
+    let Some(config) = &args.config else {
+        return Err(InvalidInput(format!(
+            "{}: a CSV file needs --config (only MCAP recordings carry their configuration)",
+            args.input.display()
+        ))
+        .into());
+    };
+    let cfg = load_config(config)?;
     let channel = pick(&cfg, args.channel.as_deref())?;
     let file = std::fs::File::open(&args.input)
         .with_context(|| format!("opening {}", args.input.display()))?;
@@ -37,77 +261,212 @@ pub(crate) fn run(args: &ReplayArgs) -> anyhow::Result<()> {
     let mut csv = CsvReader::new(reader, channel.dims)
         .map_err(|e| InvalidInput(format!("{}: {e}", args.input.display())))?;
     let mut monitor = Monitor::from_channel(channel)?;
-    let to_stdout = args.output.is_none();
-    let mut out: Box<dyn Write> = match &args.output {
-        Some(p) => Box::new(std::io::BufWriter::with_capacity(
-            1 << 16,
-            std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?,
-        )),
-        None => Box::new(std::io::BufWriter::new(std::io::stdout().lock())),
+    let header = FileHeader {
+        config: cfg.source.clone(),
+        channels: vec![channel.name.clone()],
+        extra: std::collections::BTreeMap::from([(
+            "source".to_owned(),
+            args.input.display().to_string(),
+        )]),
     };
-    let summary = replay_into(&mut csv, &mut monitor, &mut out)?;
-    out.flush()?;
-    drop(out);
+    let mut outputs = Outputs::new(output_sinks(args, &header)?);
+    let rows = replay_csv_into(&mut csv, &mut monitor, &mut outputs)?;
+    let alarm_lines = std::mem::take(&mut outputs.alarm_lines);
+    outputs.finish()?;
     let c = monitor.counters();
     let errors: u64 = c.errors.values().sum();
-    let msg = format!(
-        "glrmon replay: channel \"{}\": {} rows, {} samples, {} alarms, {} errors{}",
-        channel.name,
-        summary.rows,
-        c.samples,
-        c.alarms,
-        errors,
-        if to_stdout { "" } else { "; alarms:" }
+    eprintln!(
+        "glrmon replay: channel \"{}\": {rows} rows, {} samples, {} alarms, {errors} errors",
+        channel.name, c.samples, c.alarms,
     );
-    eprintln!("{msg}");
-    if !to_stdout {
-        for line in &summary.alarm_lines {
+    if args.output.is_some() {
+        for line in &alarm_lines {
             eprintln!("  {line}");
         }
     }
     Ok(())
 }
 
-pub(crate) struct Summary {
-    pub(crate) rows: u64,
-    pub(crate) alarm_lines: Vec<String>,
-}
-
-/// Feeds every row to the monitor and writes the records; bad rows become `error`
-/// records and the replay continues.
-pub(crate) fn replay_into<R: BufRead>(
+/// Feeds every row to the monitor; bad rows become `error` records and the replay
+/// continues. Returns the number of rows.
+fn replay_csv_into<R: BufRead>(
     csv: &mut CsvReader<R>,
     monitor: &mut Monitor,
-    out: &mut dyn Write,
-) -> anyhow::Result<Summary> {
+    outputs: &mut Outputs,
+) -> anyhow::Result<u64> {
+    let name: Arc<str> = Arc::from(monitor.channel());
     let mut sample = Sample::default();
     let mut records = Vec::new();
-    let mut buf = Vec::with_capacity(512);
-    let mut summary = Summary {
-        rows: 0,
-        alarm_lines: Vec::new(),
-    };
+    let mut rows = 0;
     while let Some(row) = csv.next_into(&mut sample) {
-        summary.rows += 1;
+        rows += 1;
+        let log_time = glrmon_record::publish_time(sample.t, 0);
         match row {
-            Ok(()) => monitor.on_sample(&sample, &mut records),
-            Err(e) => records.push(Record::Error(ErrorRecord {
-                channel: monitor.channel().to_owned(),
-                k: e.k,
-                code: e.code,
-                message: format!("channel \"{}\": {}", monitor.channel(), e.message),
-                stage: Stage::Receiving,
-            })),
-        }
-        for r in records.drain(..) {
-            if let Some(line) = print::line(&r) {
-                summary.alarm_lines.push(line);
+            Ok(()) => {
+                outputs.input(&name, &InputItem::Sample(sample.clone()), log_time)?;
+                monitor.on_sample(&sample, &mut records);
             }
-            buf.clear();
-            encode_json(&r, &mut buf)?;
-            buf.push(b'\n');
-            out.write_all(&buf)?;
+            Err(e) => {
+                let message = format!("channel \"{}\": {}", monitor.channel(), e.message);
+                outputs.input(
+                    &name,
+                    &InputItem::Intake(IntakeEvent::Rejected {
+                        code: e.code,
+                        message: message.clone(),
+                        payload: None,
+                    }),
+                    log_time,
+                )?;
+                records.push(Record::Error(ErrorRecord {
+                    channel: monitor.channel().to_owned(),
+                    k: e.k,
+                    code: e.code,
+                    message,
+                    stage: Stage::Receiving,
+                }));
+            }
+        }
+        outputs.records(&name, &mut records, log_time)?;
+    }
+    Ok(rows)
+}
+
+fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
+    let mut input = McapInput::open(&args.input)?;
+    let cfg = match (&args.config, &input.header) {
+        (Some(path), _) => load_config(path)?,
+        (None, Some(h)) if !h.config.is_empty() => glrmon_spec::parse(&h.config).map_err(|e| {
+            InvalidInput(format!(
+                "{}: the recorded configuration is invalid:\n{e}",
+                args.input.display()
+            ))
+        })?,
+        _ => {
+            return Err(InvalidInput(format!(
+                "{}: no glrmon configuration is recorded in this file: give --config",
+                args.input.display()
+            ))
+            .into());
+        }
+    };
+    if let Some(name) = &args.channel {
+        if cfg.channel(name).is_none() {
+            return Err(InvalidInput(format!(
+                "no channel \"{name}\" in the configuration (channels: {})",
+                cfg.channels
+                    .iter()
+                    .map(|c| c.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+            .into());
         }
     }
-    Ok(summary)
+    input.set_limits(DecodeLimits {
+        max_payload_bytes: cfg.daemon.max_payload_bytes,
+        ..DecodeLimits::default()
+    });
+    let mut monitors: HashMap<Arc<str>, Monitor> = HashMap::new();
+    let mut order: Vec<Arc<str>> = Vec::new();
+    for c in &cfg.channels {
+        if args.channel.as_ref().is_none_or(|n| *n == c.name) {
+            monitors.insert(Arc::from(c.name.as_str()), Monitor::from_channel(c)?);
+            order.push(Arc::from(c.name.as_str()));
+        }
+    }
+    let header = FileHeader {
+        config: cfg.source.clone(),
+        channels: order.iter().map(|c| c.to_string()).collect(),
+        extra: std::collections::BTreeMap::from([(
+            "source".to_owned(),
+            args.input.display().to_string(),
+        )]),
+    };
+    let mut outputs = Outputs::new(output_sinks(args, &header)?);
+    let progress = (!args.quiet && std::io::stderr().is_terminal()).then(|| {
+        let bar = indicatif::ProgressBar::new(input.progress.1);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:40} {bytes}/{total_bytes} {bytes_per_sec} eta {eta} {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar
+    });
+    let mut records = Vec::new();
+    let mut unknown: HashMap<Arc<str>, u64> = HashMap::new();
+    let mut rejected: HashMap<Arc<str>, u64> = HashMap::new();
+    let mut inputs = 0u64;
+    let started = std::time::Instant::now();
+    while let Some(recorded) = input.next_input()? {
+        inputs += 1;
+        if inputs % 65_536 == 0 {
+            if let Some(bar) = &progress {
+                bar.set_position(input.progress.0.load(Ordering::Relaxed));
+            }
+        }
+        let Some(monitor) = monitors.get_mut(&recorded.channel) else {
+            if args.channel.is_none() {
+                *unknown.entry(recorded.channel.clone()).or_insert(0) += 1;
+            }
+            continue;
+        };
+        let log_time = recorded.log_time_ns;
+        outputs.input(&recorded.channel, &recorded.item, log_time)?;
+        match &recorded.item {
+            InputItem::Sample(s) => monitor.on_sample(s, &mut records),
+            InputItem::Intake(IntakeEvent::Dropped { count }) => monitor.note_missing(*count),
+            InputItem::Intake(IntakeEvent::Rejected { code, message, .. }) => {
+                *rejected.entry(recorded.channel.clone()).or_insert(0) += 1;
+                records.push(Record::Error(ErrorRecord {
+                    channel: recorded.channel.to_string(),
+                    k: None,
+                    code: *code,
+                    message: message.clone(),
+                    stage: Stage::Receiving,
+                }));
+            }
+        }
+        outputs.records(&recorded.channel, &mut records, log_time)?;
+    }
+    if let Some(bar) = progress {
+        bar.finish_and_clear();
+    }
+    let elapsed = started.elapsed().as_secs_f64();
+    let alarm_lines = std::mem::take(&mut outputs.alarm_lines);
+    let written = outputs.records;
+    outputs.finish()?;
+    eprintln!(
+        "glrmon replay: {}: {} messages, {inputs} inputs replayed in {elapsed:.2} s, {written} records written",
+        args.input.display(),
+        input.messages(),
+    );
+    for name in &order {
+        let c = monitors[name].counters();
+        let errors: u64 = c.errors.values().sum::<u64>() + rejected.get(name).copied().unwrap_or(0);
+        eprintln!(
+            "  channel \"{name}\": {} samples, {} alarms, {errors} errors",
+            c.samples, c.alarms
+        );
+    }
+    for (name, n) in &unknown {
+        eprintln!("  channel \"{name}\": {n} inputs skipped: not in the configuration");
+    }
+    if args.output.is_some() {
+        for line in &alarm_lines {
+            eprintln!("  {line}");
+        }
+    }
+    let (lines, damaged) = input.damage_report();
+    for line in &lines {
+        eprintln!("glrmon replay: {}: {line}", args.input.display());
+    }
+    if damaged {
+        return Err(InvalidInput(format!(
+            "{}: the file is damaged; the readable part was replayed",
+            args.input.display()
+        ))
+        .into());
+    }
+    Ok(())
 }

@@ -13,8 +13,10 @@ use glrmon_runtime::{Output, Runtime, RuntimeEvents, RuntimeSettings, Sink, Sink
 use glrmon_wire::{DecodeLimits, Record};
 use glrmon_zenoh::{Presence, StatusSource, ZenohSink, ZenohSource};
 
+use glrmon_record::Recorder;
+
 use crate::net::ZenohArgs;
-use crate::{load_config, print};
+use crate::{load_config, print, recording};
 
 #[derive(Debug, Args)]
 pub(crate) struct RunArgs {
@@ -123,10 +125,27 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         .iter()
         .map(Monitor::from_channel)
         .collect::<Result<Vec<_>, _>>()?;
-    let sinks: Vec<Box<dyn Sink>> = vec![
+    let mut sinks: Vec<Box<dyn Sink>> = vec![
         Box::new(ZenohSink::new(session.clone())),
         Box::new(LogSink::new()),
     ];
+    let mut recorder_stats = None;
+    if cfg.recording.enabled {
+        let settings = recording::recorder_settings(&cfg.recording);
+        for f in recording::leftovers(&settings.directory) {
+            tracing::warn!(
+                file = %f.display(),
+                "An unfinished recording from an earlier run: `glrmon recover {}` rewrites it as a finished file.",
+                f.display()
+            );
+        }
+        let directory = settings.directory.clone();
+        let recorder = Recorder::start(settings, recording::file_header(&cfg, &instance))
+            .map_err(|e| anyhow::anyhow!("starting the recorder: {e}"))?;
+        recorder_stats = Some(recorder.stats());
+        tracing::info!(directory = %directory.display(), "Recording inputs and results (MCAP).");
+        sinks.push(Box::new(recorder));
+    }
     let runtime = Runtime::start(
         monitors,
         sinks,
@@ -170,7 +189,17 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
             .map_or((true, Vec::new()), |r| r.shutdown(timeout))
     })
     .await?;
+    // Dropping the recorder finishes its file (summary, index, final name).
     drop(sinks);
+    if let Some(stats) = recorder_stats {
+        let finished = stats.finished.lock().map(|f| f.clone()).unwrap_or_default();
+        tracing::info!(
+            messages = stats.messages.load(std::sync::atomic::Ordering::Relaxed),
+            files = finished.len(),
+            last = %finished.last().map(|p| p.display().to_string()).unwrap_or_default(),
+            "Recording finished."
+        );
+    }
     drop(presence);
     if let Err(e) = tokio::time::timeout(Duration::from_secs(2), session.close()).await {
         tracing::warn!(error = %e, "The Zenoh session did not close in time.");

@@ -22,11 +22,12 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use glrmon_monitor::Monitor;
 use glrmon_wire::{
-    DecodeLimits, ErrorCode, ErrorRecord, Record, Sample, Stage, decode_samples, encode_json,
+    DecodeLimits, ErrorCode, ErrorRecord, IntakeEvent, Record, Sample, Stage, decode_samples,
+    encode_intake, encode_json, encode_sample,
 };
 
 /// Index of a channel in the runtime (its position in the configuration).
@@ -51,6 +52,46 @@ pub struct Output {
     pub record: Record,
     /// Its JSON encoding (INTERFACE.md), without a trailing newline.
     pub json: Vec<u8>,
+    /// When the payload that produced it was received: nanoseconds since the Unix epoch.
+    pub log_time_ns: u64,
+    /// For a `stat` record, its position among the channel's `stat` records (0, 1, …),
+    /// by which each sink applies its own decimation ([`Interest::stat_every`]).
+    pub stat_index: Option<u64>,
+}
+
+/// What a channel's monitor was fed: a decoded sample or an [`IntakeEvent`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum InputItem {
+    /// A decoded sample, its `t` filled from the transport's timestamp where absent.
+    Sample(Sample),
+    /// Payloads dropped before the next one, or a refused payload.
+    Intake(IntakeEvent),
+}
+
+/// An input on its way to the sinks that asked for inputs (recorders), in the order
+/// the monitor saw it, before the records it produced.
+#[derive(Debug, Clone)]
+pub struct InputOutput {
+    /// The channel's index in the configuration.
+    pub channel: ChannelIndex,
+    /// The channel's name.
+    pub name: Arc<str>,
+    /// What the monitor was fed.
+    pub item: InputItem,
+    /// Its JSON: a sample in the sample format, or the intake event.
+    pub json: Vec<u8>,
+    /// When its payload was received: nanoseconds since the Unix epoch.
+    pub log_time_ns: u64,
+}
+
+/// What a sink wants besides the alarm, end, diagnosis and error records.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Interest {
+    /// Every input ([`Sink::write_input`]): what recorders need to replay a run.
+    pub inputs: bool,
+    /// One `stat` record in this many per channel (0: none); `None`: the runtime's
+    /// [`RuntimeSettings::stat_every`].
+    pub stat_every: Option<u64>,
 }
 
 /// Errors of a sink; the output stage logs them through [`RuntimeEvents`] and goes on.
@@ -67,6 +108,17 @@ pub struct SinkError {
 pub trait Sink: Send + 'static {
     /// A short name for messages.
     fn name(&self) -> &str;
+    /// What the sink wants beyond the default (asked once, at start).
+    fn interest(&self) -> Interest {
+        Interest::default()
+    }
+    /// Delivers one input (only to sinks whose [`Interest::inputs`] is set).
+    ///
+    /// # Errors
+    /// [`SinkError`] when the input could not be delivered.
+    fn write_input(&mut self, _input: &InputOutput) -> Result<(), SinkError> {
+        Ok(())
+    }
     /// Delivers one record.
     ///
     /// # Errors
@@ -138,14 +190,53 @@ enum Job {
     /// A payload and the number of payloads of its channel dropped just before it.
     Payload(ChannelIndex, Payload, u64),
     /// A payload refused at intake, reported as an `error` record by its worker.
-    Reject(ChannelIndex, ErrorCode, String),
+    Reject(ChannelIndex, ErrorCode, String, Instant),
     /// Queued behind every accepted payload at shutdown.
     Stop,
 }
 
 enum OutMsg {
     Record(Output),
+    Input(InputOutput),
     Flush,
+}
+
+/// Converts receive instants to wall-clock nanoseconds since the Unix epoch, from one
+/// reference pair taken at start (monotonic in between, unlike the wall clock).
+#[derive(Debug, Clone, Copy)]
+struct Clock {
+    instant: Instant,
+    unix_ns: u64,
+}
+
+impl Clock {
+    fn now() -> Self {
+        Self {
+            instant: Instant::now(),
+            unix_ns: SystemTime::now()
+                .duration_since(UNIX_EPOCH)
+                .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)),
+        }
+    }
+
+    fn unix_ns(&self, at: Instant) -> u64 {
+        let delta = |d: Duration| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX);
+        match at.checked_duration_since(self.instant) {
+            Some(after) => self.unix_ns.saturating_add(delta(after)),
+            None => self
+                .unix_ns
+                .saturating_sub(delta(self.instant.duration_since(at))),
+        }
+    }
+}
+
+/// What the workers send on, worked out once from the sinks' [`Interest`]s.
+#[derive(Debug, Clone, Copy)]
+struct Forwarding {
+    inputs: bool,
+    /// The smallest non-zero decimation over the sinks (0: no sink wants `stat`).
+    stat_every: u64,
+    clock: Clock,
 }
 
 /// The handle sources use to hand payloads in; cheap to clone, never blocks.
@@ -197,7 +288,7 @@ impl Intake {
                 payload.bytes.len(),
                 self.limits.max_payload_bytes
             );
-            let job = Job::Reject(channel, ErrorCode::TooLarge, msg);
+            let job = Job::Reject(channel, ErrorCode::TooLarge, msg, payload.received);
             let queued = self
                 .queues
                 .get(channel % self.queues.len().max(1))
@@ -250,7 +341,9 @@ impl std::fmt::Debug for Runtime {
 }
 
 struct WorkerChannel {
+    index: ChannelIndex,
     monitor: Monitor,
+    name: Arc<str>,
     stats: Arc<ChannelStats>,
     stat_count: u64,
 }
@@ -275,9 +368,21 @@ impl Runtime {
         );
         let (out_tx, out_rx) = mpsc::sync_channel::<OutMsg>(settings.output_queue.max(16));
         let stat_drops = Arc::new(AtomicU64::new(0));
+        let interests: Vec<Interest> = sinks.iter().map(|s| s.interest()).collect();
+        let forwarding = Forwarding {
+            inputs: interests.iter().any(|i| i.inputs),
+            stat_every: interests
+                .iter()
+                .map(|i| i.stat_every.unwrap_or(settings.stat_every))
+                .filter(|&e| e > 0)
+                .min()
+                .unwrap_or(0),
+            clock: Clock::now(),
+        };
+        let default_stat_every = settings.stat_every;
         let output = std::thread::Builder::new()
             .name("glrmon-output".into())
-            .spawn(move || output_stage(out_rx, sinks, events.as_ref()))
+            .spawn(move || output_stage(out_rx, sinks, default_stat_every, events.as_ref()))
             .ok();
         let mut shards: Vec<Vec<(ChannelIndex, WorkerChannel)>> =
             (0..workers_n).map(|_| Vec::new()).collect();
@@ -285,6 +390,8 @@ impl Runtime {
             shards[i % workers_n].push((
                 i,
                 WorkerChannel {
+                    index: i,
+                    name: Arc::from(m.channel()),
                     monitor: m,
                     stats: stats[i].clone(),
                     stat_count: 0,
@@ -298,11 +405,10 @@ impl Runtime {
             queues.push(tx);
             let out = out_tx.clone();
             let limits = settings.limits;
-            let stat_every = settings.stat_every;
             let drops = stat_drops.clone();
             if let Ok(h) = std::thread::Builder::new()
                 .name(format!("glrmon-worker-{w}"))
-                .spawn(move || worker(rx, shard, out, limits, stat_every, drops))
+                .spawn(move || worker(rx, shard, out, limits, forwarding, drops))
             {
                 workers.push(h);
             }
@@ -391,59 +497,101 @@ fn join_until<T>(h: JoinHandle<T>, until: Instant) -> Option<T> {
     h.join().ok()
 }
 
+/// The longest time records wait in a sink's buffers under continuous load.
+const FLUSH_INTERVAL: Duration = Duration::from_secs(1);
+
+/// Longest refused payload kept, as text, in its [`IntakeEvent::Rejected`].
+const MAX_KEPT_PAYLOAD: usize = 64 * 1024;
+
 fn worker(
     rx: Receiver<Job>,
     mut shard: Vec<(ChannelIndex, WorkerChannel)>,
     out: SyncSender<OutMsg>,
     limits: DecodeLimits,
-    stat_every: u64,
+    fwd: Forwarding,
     stat_drops: Arc<AtomicU64>,
 ) {
     let mut samples = Vec::new();
     let mut records = Vec::new();
+    let mut inputs: Vec<InputItem> = Vec::new();
     loop {
-        let (channel, payload, dropped_before) = match rx.recv() {
-            Ok(Job::Payload(c, p, d)) => (c, Some(p), d),
-            Ok(Job::Reject(c, code, message)) => {
-                if let Some((_, ch)) = shard.iter_mut().find(|(i, _)| *i == c) {
-                    records.push(Record::Error(ErrorRecord {
-                        channel: ch.monitor.channel().to_owned(),
-                        k: None,
-                        code,
-                        message: format!("channel \"{}\": {message}", ch.monitor.channel()),
-                        stage: Stage::Receiving,
-                    }));
-                }
-                (c, None, 0)
-            }
+        let job = match rx.recv() {
             // `Job::Stop`, or every sender gone: all accepted payloads are processed.
             Ok(Job::Stop) | Err(_) => return,
+            Ok(job) => job,
+        };
+        let (channel, received) = match &job {
+            Job::Payload(c, p, _) => (*c, p.received),
+            Job::Reject(c, _, _, at) => (*c, *at),
+            Job::Stop => return,
         };
         let Some((_, ch)) = shard.iter_mut().find(|(i, _)| *i == channel) else {
             continue;
         };
-        // Payloads dropped at intake just before this one: advance the arrival count so
-        // that this sample is seen after a gap.
-        if dropped_before > 0 {
-            ch.monitor.note_missing(dropped_before);
-        }
-        if let Some(payload) = payload {
-            match decode_samples(ch.monitor.channel(), &payload.bytes, &limits, &mut samples) {
-                Ok(()) => {
-                    for s in &mut samples {
-                        if s.t.is_none() {
-                            s.t = payload.source_time;
-                        }
-                        ch.monitor.on_sample(s, &mut records);
+        let log_time_ns = fwd.clock.unix_ns(received);
+        match job {
+            Job::Payload(_, payload, dropped_before) => {
+                // Payloads dropped at intake just before this one: advance the arrival
+                // count so that this sample is seen after a gap.
+                if dropped_before > 0 {
+                    ch.monitor.note_missing(dropped_before);
+                    if fwd.inputs {
+                        inputs.push(InputItem::Intake(IntakeEvent::Dropped {
+                            count: dropped_before,
+                        }));
                     }
                 }
-                Err(e) => records.push(Record::Error(ErrorRecord::from_decode_error(
-                    &e,
-                    None,
-                    Stage::Receiving,
-                ))),
+                match decode_samples(ch.monitor.channel(), &payload.bytes, &limits, &mut samples) {
+                    Ok(()) => {
+                        for s in &mut samples {
+                            if s.t.is_none() {
+                                s.t = payload.source_time;
+                            }
+                            if fwd.inputs {
+                                inputs.push(InputItem::Sample(s.clone()));
+                                // Inputs precede the records they produce.
+                                send_inputs(&out, ch, &mut inputs, log_time_ns);
+                            }
+                            ch.monitor.on_sample(s, &mut records);
+                            forward_records(&out, ch, &mut records, fwd, log_time_ns, &stat_drops);
+                        }
+                    }
+                    Err(e) => {
+                        let record = ErrorRecord::from_decode_error(&e, None, Stage::Receiving);
+                        if fwd.inputs {
+                            let kept = (payload.bytes.len() <= MAX_KEPT_PAYLOAD)
+                                .then(|| String::from_utf8_lossy(&payload.bytes).into_owned());
+                            inputs.push(InputItem::Intake(IntakeEvent::Rejected {
+                                code: record.code,
+                                message: record.message.clone(),
+                                payload: kept,
+                            }));
+                        }
+                        records.push(Record::Error(record));
+                    }
+                }
             }
+            Job::Reject(_, code, message, _) => {
+                let message = format!("channel \"{}\": {message}", ch.monitor.channel());
+                if fwd.inputs {
+                    inputs.push(InputItem::Intake(IntakeEvent::Rejected {
+                        code,
+                        message: message.clone(),
+                        payload: None,
+                    }));
+                }
+                records.push(Record::Error(ErrorRecord {
+                    channel: ch.monitor.channel().to_owned(),
+                    k: None,
+                    code,
+                    message,
+                    stage: Stage::Receiving,
+                }));
+            }
+            Job::Stop => return,
         }
+        send_inputs(&out, ch, &mut inputs, log_time_ns);
+        forward_records(&out, ch, &mut records, fwd, log_time_ns, &stat_drops);
         let c = ch.monitor.counters();
         ch.stats.samples.store(c.samples, Ordering::Relaxed);
         ch.stats.alarms.store(c.alarms, Ordering::Relaxed);
@@ -454,34 +602,81 @@ fn worker(
             ch.monitor.detector().next_index().unwrap_or(0),
             Ordering::Relaxed,
         );
-        for r in records.drain(..) {
-            if let Record::Error(e) = &r {
-                let mut errs = ch
-                    .stats
-                    .errors
-                    .lock()
-                    .unwrap_or_else(std::sync::PoisonError::into_inner);
-                *errs.entry(e.code.as_str()).or_insert(0) += 1;
-            }
-            let is_stat = matches!(r, Record::Stat(_));
-            if is_stat {
-                ch.stat_count += 1;
-                if stat_every == 0 || (ch.stat_count - 1) % stat_every != 0 {
-                    continue;
-                }
-            }
-            let mut json = Vec::with_capacity(256);
-            if encode_json(&r, &mut json).is_err() {
+    }
+}
+
+/// Sends the pending inputs of a channel; they wait for room (a recording must hold
+/// every input for the replay to be exact).
+fn send_inputs(
+    out: &SyncSender<OutMsg>,
+    ch: &WorkerChannel,
+    inputs: &mut Vec<InputItem>,
+    log_time_ns: u64,
+) {
+    for item in inputs.drain(..) {
+        let mut json = Vec::with_capacity(128);
+        let encoded = match &item {
+            InputItem::Sample(s) => encode_sample(&ch.name, s, &mut json),
+            InputItem::Intake(e) => encode_intake(&ch.name, e, &mut json),
+        };
+        if encoded.is_err() {
+            continue;
+        }
+        let _ = out.send(OutMsg::Input(InputOutput {
+            channel: ch.index,
+            name: ch.name.clone(),
+            item,
+            json,
+            log_time_ns,
+        }));
+    }
+}
+
+/// Counts errors, decimates `stat` records and sends the records of a channel.
+fn forward_records(
+    out: &SyncSender<OutMsg>,
+    ch: &mut WorkerChannel,
+    records: &mut Vec<Record>,
+    fwd: Forwarding,
+    log_time_ns: u64,
+    stat_drops: &AtomicU64,
+) {
+    for r in records.drain(..) {
+        if let Record::Error(e) = &r {
+            let mut errs = ch
+                .stats
+                .errors
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            *errs.entry(e.code.as_str()).or_insert(0) += 1;
+        }
+        let stat_index = if matches!(r, Record::Stat(_)) {
+            let index = ch.stat_count;
+            ch.stat_count += 1;
+            if fwd.stat_every == 0 || index % fwd.stat_every != 0 {
                 continue;
             }
-            let msg = OutMsg::Record(Output { record: r, json });
-            if is_stat {
-                if out.try_send(msg).is_err() {
-                    stat_drops.fetch_add(1, Ordering::Relaxed);
-                }
-            } else if out.send(msg).is_err() {
-                return;
+            Some(index)
+        } else {
+            None
+        };
+        let mut json = Vec::with_capacity(256);
+        if encode_json(&r, &mut json).is_err() {
+            continue;
+        }
+        let msg = OutMsg::Record(Output {
+            record: r,
+            json,
+            log_time_ns,
+            stat_index,
+        });
+        if stat_index.is_some() && !fwd.inputs {
+            // Without a recorder, decimated statistics may be shed under load.
+            if out.try_send(msg).is_err() {
+                stat_drops.fetch_add(1, Ordering::Relaxed);
             }
+        } else {
+            let _ = out.send(msg);
         }
     }
 }
@@ -489,8 +684,10 @@ fn worker(
 fn output_stage(
     rx: Receiver<OutMsg>,
     mut sinks: Vec<Box<dyn Sink>>,
+    default_stat_every: u64,
     events: &dyn RuntimeEvents,
 ) -> Vec<Box<dyn Sink>> {
+    let interests: Vec<Interest> = sinks.iter().map(|s| s.interest()).collect();
     let flush_all = |sinks: &mut Vec<Box<dyn Sink>>| {
         for s in sinks.iter_mut() {
             if let Err(e) = s.flush() {
@@ -498,16 +695,40 @@ fn output_stage(
             }
         }
     };
+    let mut last_flush = Instant::now();
     loop {
+        // Sinks are flushed when the queue is idle and at least every second under load.
+        if last_flush.elapsed() >= FLUSH_INTERVAL {
+            flush_all(&mut sinks);
+            last_flush = Instant::now();
+        }
         match rx.recv_timeout(Duration::from_millis(200)) {
             Ok(OutMsg::Record(o)) => {
-                for s in &mut sinks {
+                for (s, interest) in sinks.iter_mut().zip(&interests) {
+                    if let Some(index) = o.stat_index {
+                        let every = interest.stat_every.unwrap_or(default_stat_every);
+                        if every == 0 || index % every != 0 {
+                            continue;
+                        }
+                    }
                     if let Err(e) = s.write(&o) {
                         events.sink_error(&e);
                     }
                 }
             }
-            Ok(OutMsg::Flush) | Err(mpsc::RecvTimeoutError::Timeout) => flush_all(&mut sinks),
+            Ok(OutMsg::Input(i)) => {
+                for (s, interest) in sinks.iter_mut().zip(&interests) {
+                    if interest.inputs {
+                        if let Err(e) = s.write_input(&i) {
+                            events.sink_error(&e);
+                        }
+                    }
+                }
+            }
+            Ok(OutMsg::Flush) | Err(mpsc::RecvTimeoutError::Timeout) => {
+                flush_all(&mut sinks);
+                last_flush = Instant::now();
+            }
             Err(mpsc::RecvTimeoutError::Disconnected) => break,
         }
     }

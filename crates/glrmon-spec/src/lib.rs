@@ -308,6 +308,82 @@ impl Channel {
     }
 }
 
+fn validate_recording(v: &mut Validator, r: &schema::RecordingSpec) {
+    let positive = |x: f64| x.is_finite() && x > 0.0;
+    for (field, value) in [
+        ("max_file_mb", r.max_file_mb),
+        ("max_file_seconds", r.max_file_seconds),
+        ("flush_seconds", r.flush_seconds),
+    ] {
+        if !positive(value) {
+            v.error(
+                format!("recording.{field}"),
+                format!("{value} must be finite and positive"),
+            );
+        }
+    }
+    if let Some(cap) = r.max_total_mb {
+        if !positive(cap) {
+            v.error(
+                "recording.max_total_mb".into(),
+                format!("{cap} must be finite and positive"),
+            );
+        } else if cap < r.max_file_mb {
+            v.error(
+                "recording.max_total_mb".into(),
+                format!(
+                    "{cap} MB is less than one file (max_file_mb = {} MB): the cap would \
+                     delete every finished recording",
+                    r.max_file_mb
+                ),
+            );
+        }
+    }
+    if r.flush_seconds > 60.0 {
+        v.error(
+            "recording.flush_seconds".into(),
+            format!(
+                "{} s: at most 60, so that a crash loses little",
+                r.flush_seconds
+            ),
+        );
+    }
+    if !(1..=1 << 20).contains(&r.chunk_kb) {
+        v.error(
+            "recording.chunk_kb".into(),
+            format!("{} is not in 1..=1048576", r.chunk_kb),
+        );
+    }
+    if !matches!(r.compression.as_str(), "zstd" | "none") {
+        v.error(
+            "recording.compression".into(),
+            format!("\"{}\" is not one of zstd, none", r.compression),
+        );
+    }
+    if r.queue == 0 {
+        v.error("recording.queue".into(), "must be positive".into());
+    }
+    if r.prefix.is_empty() || r.prefix.contains(['/', '\\']) {
+        v.error(
+            "recording.prefix".into(),
+            format!("\"{}\" must be a non-empty file name part", r.prefix),
+        );
+    }
+    if let Some(c) = r.capture {
+        for (field, value) in [
+            ("before_seconds", c.before_seconds),
+            ("after_seconds", c.after_seconds),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                v.error(
+                    format!("recording.capture.{field}"),
+                    format!("{value} must be finite and non-negative"),
+                );
+            }
+        }
+    }
+}
+
 /// Reads and validates a configuration file.
 ///
 /// # Errors
@@ -365,6 +441,7 @@ pub fn parse(text: &str) -> Result<Config, SpecErrors> {
             format!("{} must be finite and positive", d.shutdown_timeout),
         );
     }
+    validate_recording(&mut v, &file.recording);
     let mut channels = Vec::new();
     for (i, spec) in file.channels.iter().enumerate() {
         let prefix = format!("channels[{i}] \"{}\"", spec.name);

@@ -100,15 +100,105 @@ fn default_shutdown() -> f64 {
     5.0
 }
 
-/// Recording settings.
-#[derive(Debug, Clone, Default, Deserialize)]
+/// Recording settings (`[recording]`): MCAP files of inputs and results.
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RecordingSpec {
     /// Whether `glrmon run` records inputs and results.
     #[serde(default)]
     pub enabled: bool,
-    /// Directory of the recordings.
+    /// Directory of the recordings (default `recordings`).
     pub directory: Option<PathBuf>,
+    /// File name prefix (default `glrmon`): `<prefix>-<UTC time>-<n>.mcap`.
+    #[serde(default = "default_prefix")]
+    pub prefix: String,
+    /// Record every input sample (default true; needed by `glrmon replay`).
+    #[serde(default = "default_true")]
+    pub inputs: bool,
+    /// Record one `stat` record in this many per channel (default 1; 0: none).
+    #[serde(default = "default_one")]
+    pub stat_every: u64,
+    /// Start a new file at this size in MB (default 1024).
+    #[serde(default = "default_max_file_mb")]
+    pub max_file_mb: f64,
+    /// Start a new file after this many seconds (default 3600).
+    #[serde(default = "default_max_file_seconds")]
+    pub max_file_seconds: f64,
+    /// Delete the oldest recordings while the total exceeds this many MB (default: no cap).
+    pub max_total_mb: Option<f64>,
+    /// Close a chunk and flush at least this often, in seconds (default 1).
+    #[serde(default = "default_flush_seconds")]
+    pub flush_seconds: f64,
+    /// Chunk size in KiB before compression (default 1024).
+    #[serde(default = "default_chunk_kb")]
+    pub chunk_kb: u64,
+    /// `zstd` (default) or `none`.
+    #[serde(default = "default_compression")]
+    pub compression: String,
+    /// Messages queued for the file thread (default 65536).
+    #[serde(default = "default_recording_queue")]
+    pub queue: usize,
+    /// Pre/post-fault capture: inputs kept only around alarms.
+    pub capture: Option<CaptureSpec>,
+}
+
+impl Default for RecordingSpec {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            directory: None,
+            prefix: default_prefix(),
+            inputs: true,
+            stat_every: 1,
+            max_file_mb: default_max_file_mb(),
+            max_file_seconds: default_max_file_seconds(),
+            max_total_mb: None,
+            flush_seconds: default_flush_seconds(),
+            chunk_kb: default_chunk_kb(),
+            compression: default_compression(),
+            queue: default_recording_queue(),
+            capture: None,
+        }
+    }
+}
+
+/// `[recording.capture]`: keep the last `before_seconds` of inputs in memory and write
+/// them, and `after_seconds` more, when an alarm fires.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CaptureSpec {
+    /// Seconds of inputs kept before an alarm.
+    pub before_seconds: f64,
+    /// Seconds of inputs written after an alarm.
+    pub after_seconds: f64,
+}
+
+fn default_prefix() -> String {
+    "glrmon".into()
+}
+fn default_true() -> bool {
+    true
+}
+fn default_one() -> u64 {
+    1
+}
+fn default_max_file_mb() -> f64 {
+    1024.0
+}
+fn default_max_file_seconds() -> f64 {
+    3600.0
+}
+fn default_flush_seconds() -> f64 {
+    1.0
+}
+fn default_chunk_kb() -> u64 {
+    1024
+}
+fn default_compression() -> String {
+    "zstd".into()
+}
+fn default_recording_queue() -> usize {
+    65536
 }
 
 /// One channel of the plant.

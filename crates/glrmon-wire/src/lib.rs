@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 
 mod error;
+mod intake;
 mod key;
 mod record;
 mod sample;
@@ -9,6 +10,7 @@ pub use error::{
     ChannelNameError, ChannelNameErrorKind, DecodeError, DecodeErrorKind, EncodeError,
     EncodeErrorKind, ErrorCode, SizeLimit, Stage,
 };
+pub use intake::{IntakeEvent, decode_intake, encode_intake};
 pub use key::{
     DEFAULT_INPUT_PREFIX, RESULT_PREFIX, default_input_key, parse_result_key, result_key,
     validate_channel_name,

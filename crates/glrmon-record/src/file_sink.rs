@@ -1,0 +1,115 @@
+//! A synchronous sink writing one MCAP file: for offline tools (replay), where the
+//! caller's thread may block on the disk.
+
+use std::path::{Path, PathBuf};
+
+use glrmon_runtime::{InputItem, InputOutput, Interest, Output, Sink, SinkError};
+use glrmon_wire::Record;
+
+use crate::schema::TopicKind;
+use crate::writer::{FileHeader, FileOptions, McapFile, RecordError, publish_time};
+
+/// Writes every input and every result into one MCAP file, on the caller's thread.
+#[derive(Debug)]
+pub struct McapFileSink {
+    file: Option<McapFile>,
+}
+
+impl McapFileSink {
+    /// Creates the file.
+    ///
+    /// # Errors
+    /// [`RecordError`] when it cannot be created.
+    pub fn create(path: &Path, header: &FileHeader) -> Result<Self, RecordError> {
+        Ok(Self {
+            file: Some(McapFile::create(path, FileOptions::default(), header)?),
+        })
+    }
+
+    /// Writes the summary and footer.
+    ///
+    /// # Errors
+    /// [`RecordError`] when writing fails.
+    pub fn finish(mut self) -> Result<Option<PathBuf>, RecordError> {
+        self.file.take().map(McapFile::finish).transpose()
+    }
+
+    fn put(
+        &mut self,
+        channel: &str,
+        kind: TopicKind,
+        log_time: u64,
+        publish: u64,
+        json: &[u8],
+    ) -> Result<(), SinkError> {
+        let Some(f) = &mut self.file else {
+            return Ok(());
+        };
+        f.write(channel, kind, log_time, publish, json)
+            .map_err(|e| SinkError {
+                sink: "mcap".into(),
+                message: e.to_string(),
+            })
+    }
+}
+
+impl Sink for McapFileSink {
+    fn name(&self) -> &str {
+        "mcap"
+    }
+
+    fn interest(&self) -> Interest {
+        Interest {
+            inputs: true,
+            stat_every: Some(1),
+        }
+    }
+
+    fn write(&mut self, output: &Output) -> Result<(), SinkError> {
+        let Some(kind) = TopicKind::of_record(&output.record) else {
+            return Ok(());
+        };
+        let t = match &output.record {
+            Record::Stat(r) => r.t,
+            Record::Alarm(r) => r.t,
+            Record::AlarmEnd(r) => r.t,
+            _ => None,
+        };
+        let publish = publish_time(t, output.log_time_ns);
+        self.put(
+            output.record.channel(),
+            kind,
+            output.log_time_ns,
+            publish,
+            &output.json,
+        )
+    }
+
+    fn write_input(&mut self, input: &InputOutput) -> Result<(), SinkError> {
+        let (kind, t) = match &input.item {
+            InputItem::Sample(s) => (TopicKind::Inputs, s.t),
+            InputItem::Intake(_) => (TopicKind::Intake, None),
+        };
+        let publish = publish_time(t, input.log_time_ns);
+        let name = input.name.clone();
+        self.put(&name, kind, input.log_time_ns, publish, &input.json)
+    }
+
+    fn flush(&mut self) -> Result<(), SinkError> {
+        match &mut self.file {
+            Some(f) => f.flush().map_err(|e| SinkError {
+                sink: "mcap".into(),
+                message: e.to_string(),
+            }),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for McapFileSink {
+    fn drop(&mut self) {
+        if let Some(f) = self.file.take() {
+            let _ = f.finish();
+        }
+    }
+}

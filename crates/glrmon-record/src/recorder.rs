@@ -1,0 +1,525 @@
+//! The recording sink: blocking file I/O on its own thread behind a bounded queue,
+//! rotation by size and duration, files finished under their final name only, an
+//! optional cap on disk use and an optional pre/post-fault capture.
+
+use std::collections::{HashMap, VecDeque};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use glrmon_runtime::{InputItem, InputOutput, Interest, Output, Sink, SinkError};
+use glrmon_wire::Record;
+
+use crate::schema::TopicKind;
+use crate::writer::{FileHeader, FileOptions, McapFile, RecordError, publish_time};
+
+/// Suffix of a file being written; renamed to `.mcap` when finished.
+pub const PARTIAL_SUFFIX: &str = ".mcap.tmp";
+
+/// Recording settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecorderSettings {
+    /// Directory of the files (created if missing).
+    pub directory: PathBuf,
+    /// File name prefix: `<prefix>-<UTC time>-<sequence>.mcap`.
+    pub prefix: String,
+    /// Record every input (needed for replay).
+    pub inputs: bool,
+    /// Record one `stat` record in this many per channel (0: none).
+    pub stat_every: u64,
+    /// Start a new file when the current one reaches this size.
+    pub max_file_bytes: Option<u64>,
+    /// Start a new file when the current one is this old.
+    pub max_file_duration: Option<Duration>,
+    /// Delete the oldest finished files while the recordings exceed this size.
+    pub max_total_bytes: Option<u64>,
+    /// Close the current chunk and flush at least this often.
+    pub flush_interval: Duration,
+    /// Chunking and compression.
+    pub file: FileOptions,
+    /// Capacity of the queue to the file thread, in messages; when full, the output
+    /// stage waits (and intake drops, counted, upstream) rather than losing recorded
+    /// data silently.
+    pub queue: usize,
+    /// Keep inputs only around alarms.
+    pub capture: Option<Capture>,
+}
+
+impl Default for RecorderSettings {
+    fn default() -> Self {
+        Self {
+            directory: PathBuf::from("recordings"),
+            prefix: "glrmon".into(),
+            inputs: true,
+            stat_every: 1,
+            max_file_bytes: Some(1 << 30),
+            max_file_duration: Some(Duration::from_secs(3600)),
+            max_total_bytes: None,
+            flush_interval: Duration::from_secs(1),
+            file: FileOptions::default(),
+            queue: 65536,
+            capture: None,
+        }
+    }
+}
+
+/// Pre/post-fault capture: the last `before` of each channel's inputs are kept in
+/// memory and written when the channel raises an alarm, then its inputs are written for
+/// `after` (extended by every further alarm). Results are always recorded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Capture {
+    /// Inputs kept before an alarm.
+    pub before: Duration,
+    /// Inputs written after an alarm.
+    pub after: Duration,
+}
+
+/// Counters of a recorder, shared with status queries.
+#[derive(Debug, Default)]
+pub struct RecorderStats {
+    /// Messages written.
+    pub messages: AtomicU64,
+    /// Files finished (renamed to `.mcap`).
+    pub files: AtomicU64,
+    /// Files deleted by the disk cap.
+    pub deleted: AtomicU64,
+    /// Write failures (each also logged by the runtime).
+    pub errors: AtomicU64,
+    /// The file being written.
+    pub current: Mutex<Option<PathBuf>>,
+    /// The files finished so far, oldest first (less those deleted by the cap).
+    pub finished: Mutex<Vec<PathBuf>>,
+}
+
+enum Msg {
+    Write {
+        channel: Arc<str>,
+        kind: TopicKind,
+        log_time: u64,
+        publish_time: u64,
+        json: Vec<u8>,
+        alarm: bool,
+    },
+    Stop,
+}
+
+/// The MCAP recording [`Sink`].
+pub struct Recorder {
+    tx: Option<SyncSender<Msg>>,
+    thread: Option<JoinHandle<Vec<PathBuf>>>,
+    stats: Arc<RecorderStats>,
+    errors: Arc<Mutex<Vec<RecordError>>>,
+    interest: Interest,
+}
+
+impl std::fmt::Debug for Recorder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Recorder").finish_non_exhaustive()
+    }
+}
+
+impl Recorder {
+    /// Creates the directory and the first file, and starts the file thread.
+    ///
+    /// # Errors
+    /// [`RecordError`] when the directory or the first file cannot be created.
+    pub fn start(settings: RecorderSettings, header: FileHeader) -> Result<Self, RecordError> {
+        std::fs::create_dir_all(&settings.directory).map_err(|source| RecordError::Io {
+            path: settings.directory.clone(),
+            source,
+        })?;
+        let stats = Arc::new(RecorderStats::default());
+        let mut files = Files {
+            settings: settings.clone(),
+            header,
+            sequence: 0,
+            current: None,
+            opened: Instant::now(),
+            finished: Vec::new(),
+            stats: stats.clone(),
+        };
+        files.open()?;
+        let (tx, rx) = mpsc::sync_channel(settings.queue.max(1));
+        let errors = Arc::new(Mutex::new(Vec::new()));
+        let thread_errors = errors.clone();
+        let thread = std::thread::Builder::new()
+            .name("glrmon-recorder".into())
+            .spawn(move || file_thread(&rx, files, &thread_errors))
+            .map_err(|source| RecordError::Io {
+                path: settings.directory.clone(),
+                source,
+            })?;
+        Ok(Self {
+            tx: Some(tx),
+            thread: Some(thread),
+            stats,
+            errors,
+            interest: Interest {
+                inputs: settings.inputs || settings.capture.is_some(),
+                stat_every: Some(settings.stat_every),
+            },
+        })
+    }
+
+    /// The counters.
+    #[must_use]
+    pub fn stats(&self) -> Arc<RecorderStats> {
+        self.stats.clone()
+    }
+
+    /// Finishes the current file (summary, index, rename) and returns every file
+    /// finished by this recorder, oldest first.
+    pub fn finish(mut self) -> Vec<PathBuf> {
+        self.stop()
+    }
+
+    fn stop(&mut self) -> Vec<PathBuf> {
+        if let Some(tx) = self.tx.take() {
+            let _ = tx.send(Msg::Stop);
+        }
+        self.thread
+            .take()
+            .and_then(|h| h.join().ok())
+            .unwrap_or_default()
+    }
+
+    fn send(&self, msg: Msg) -> Result<(), SinkError> {
+        let failed = self.tx.as_ref().is_none_or(|tx| tx.send(msg).is_err());
+        let pending = std::mem::take(
+            &mut *self
+                .errors
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner),
+        );
+        if let Some(e) = pending.into_iter().next() {
+            return Err(SinkError {
+                sink: "mcap".into(),
+                message: e.to_string(),
+            });
+        }
+        if failed {
+            return Err(SinkError {
+                sink: "mcap".into(),
+                message: "the recorder thread has stopped".into(),
+            });
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+impl Sink for Recorder {
+    fn name(&self) -> &str {
+        "mcap"
+    }
+
+    fn interest(&self) -> Interest {
+        self.interest
+    }
+
+    fn write(&mut self, output: &Output) -> Result<(), SinkError> {
+        let Some(kind) = TopicKind::of_record(&output.record) else {
+            return Ok(());
+        };
+        let t = match &output.record {
+            Record::Stat(r) => r.t,
+            Record::Alarm(r) => r.t,
+            Record::AlarmEnd(r) => r.t,
+            _ => None,
+        };
+        self.send(Msg::Write {
+            channel: Arc::from(output.record.channel()),
+            kind,
+            log_time: output.log_time_ns,
+            publish_time: publish_time(t, output.log_time_ns),
+            json: output.json.clone(),
+            alarm: kind == TopicKind::Alarm,
+        })
+    }
+
+    fn write_input(&mut self, input: &InputOutput) -> Result<(), SinkError> {
+        let (kind, t) = match &input.item {
+            InputItem::Sample(s) => (TopicKind::Inputs, s.t),
+            InputItem::Intake(_) => (TopicKind::Intake, None),
+        };
+        self.send(Msg::Write {
+            channel: input.name.clone(),
+            kind,
+            log_time: input.log_time_ns,
+            publish_time: publish_time(t, input.log_time_ns),
+            json: input.json.clone(),
+            alarm: false,
+        })
+    }
+}
+
+/// The sequence of files of one recorder.
+struct Files {
+    settings: RecorderSettings,
+    header: FileHeader,
+    sequence: u64,
+    current: Option<McapFile>,
+    opened: Instant,
+    finished: Vec<PathBuf>,
+    stats: Arc<RecorderStats>,
+}
+
+impl Files {
+    fn open(&mut self) -> Result<(), RecordError> {
+        let stem = format!(
+            "{}-{}-{:04}",
+            self.settings.prefix,
+            utc_stamp(SystemTime::now()),
+            self.sequence
+        );
+        self.sequence += 1;
+        let path = self
+            .settings
+            .directory
+            .join(format!("{stem}{PARTIAL_SUFFIX}"));
+        let file = McapFile::create(&path, self.settings.file, &self.header)?;
+        *self
+            .stats
+            .current
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(path);
+        self.current = Some(file);
+        self.opened = Instant::now();
+        Ok(())
+    }
+
+    fn close(&mut self) -> Result<(), RecordError> {
+        let Some(file) = self.current.take() else {
+            return Ok(());
+        };
+        let partial = file.finish()?;
+        let done = finished_name(&partial);
+        std::fs::rename(&partial, &done).map_err(|source| RecordError::Io {
+            path: partial.clone(),
+            source,
+        })?;
+        self.stats.files.fetch_add(1, Ordering::Relaxed);
+        self.finished.push(done);
+        self.enforce_cap();
+        self.stats
+            .finished
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone_from(&self.finished);
+        Ok(())
+    }
+
+    fn write(
+        &mut self,
+        channel: &str,
+        kind: TopicKind,
+        log_time: u64,
+        publish: u64,
+        json: &[u8],
+    ) -> Result<(), RecordError> {
+        if let Some(f) = &mut self.current {
+            f.write(channel, kind, log_time, publish, json)?;
+            self.stats.messages.fetch_add(1, Ordering::Relaxed);
+        }
+        Ok(())
+    }
+
+    /// Flushes; rotates when the file is too big or too old.
+    fn tick(&mut self) -> Result<(), RecordError> {
+        let Some(f) = &mut self.current else {
+            return Ok(());
+        };
+        f.flush()?;
+        let size = std::fs::metadata(f.path()).map_or(0, |m| m.len());
+        let too_big = self.settings.max_file_bytes.is_some_and(|max| size >= max);
+        let too_old = self
+            .settings
+            .max_file_duration
+            .is_some_and(|max| self.opened.elapsed() >= max);
+        if too_big || too_old {
+            self.close()?;
+            self.open()?;
+        }
+        Ok(())
+    }
+
+    /// Deletes the oldest finished recordings of this prefix while the directory's
+    /// recordings exceed the cap; never the file being written.
+    fn enforce_cap(&mut self) {
+        let Some(cap) = self.settings.max_total_bytes else {
+            return;
+        };
+        let Ok(dir) = std::fs::read_dir(&self.settings.directory) else {
+            return;
+        };
+        let prefix = format!("{}-", self.settings.prefix);
+        let mut files: Vec<(PathBuf, u64)> = Vec::new();
+        let mut total = 0;
+        for entry in dir.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if !name.starts_with(&prefix) {
+                continue;
+            }
+            let size = entry.metadata().map_or(0, |m| m.len());
+            total += size;
+            if name.ends_with(".mcap") {
+                files.push((entry.path(), size));
+            }
+        }
+        // Names carry the UTC time and a sequence number: name order is age order.
+        files.sort();
+        for (path, size) in files {
+            if total <= cap {
+                break;
+            }
+            if std::fs::remove_file(&path).is_ok() {
+                total = total.saturating_sub(size);
+                self.stats.deleted.fetch_add(1, Ordering::Relaxed);
+                self.finished.retain(|p| p != &path);
+            }
+        }
+    }
+}
+
+/// The final name of a partial file (`x.mcap.tmp` → `x.mcap`).
+#[must_use]
+pub fn finished_name(partial: &Path) -> PathBuf {
+    let s = partial.to_string_lossy();
+    PathBuf::from(s.strip_suffix(".tmp").unwrap_or(&s).to_owned())
+}
+
+/// Per-channel inputs held back in capture mode.
+#[derive(Default)]
+struct Held {
+    inputs: VecDeque<(TopicKind, u64, u64, Vec<u8>)>,
+    /// Inputs are written directly until this log time (after an alarm).
+    open_until: u64,
+}
+
+fn file_thread(
+    rx: &Receiver<Msg>,
+    mut files: Files,
+    errors: &Mutex<Vec<RecordError>>,
+) -> Vec<PathBuf> {
+    let interval = files.settings.flush_interval.max(Duration::from_millis(10));
+    let capture = files.settings.capture;
+    let record_inputs = files.settings.inputs;
+    let mut held: HashMap<Arc<str>, Held> = HashMap::new();
+    let mut last_tick = Instant::now();
+    let report = |files: &Files, e: RecordError| {
+        files.stats.errors.fetch_add(1, Ordering::Relaxed);
+        let mut errs = errors
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if errs.len() < 16 {
+            errs.push(e);
+        }
+    };
+    loop {
+        let wait = interval.saturating_sub(last_tick.elapsed());
+        match rx.recv_timeout(wait) {
+            Ok(Msg::Write {
+                channel,
+                kind,
+                log_time,
+                publish_time,
+                json,
+                alarm,
+            }) => {
+                let is_input = matches!(kind, TopicKind::Inputs | TopicKind::Intake);
+                let result = match capture {
+                    Some(c) if is_input => {
+                        let h = held.entry(channel.clone()).or_default();
+                        if log_time <= h.open_until {
+                            files.write(&channel, kind, log_time, publish_time, &json)
+                        } else {
+                            h.inputs.push_back((kind, log_time, publish_time, json));
+                            let horizon = log_time.saturating_sub(nanos(c.before));
+                            while h.inputs.front().is_some_and(|i| i.1 < horizon) {
+                                h.inputs.pop_front();
+                            }
+                            Ok(())
+                        }
+                    }
+                    _ if is_input && !record_inputs => Ok(()),
+                    _ => {
+                        let mut r = Ok(());
+                        if let (Some(c), true) = (capture, alarm) {
+                            // The alarm: the inputs before it, then keep writing.
+                            let h = held.entry(channel.clone()).or_default();
+                            for (k, l, p, j) in h.inputs.drain(..) {
+                                r = r.and(files.write(&channel, k, l, p, &j));
+                            }
+                            h.open_until = log_time.saturating_add(nanos(c.after));
+                        }
+                        r.and(files.write(&channel, kind, log_time, publish_time, &json))
+                    }
+                };
+                if let Err(e) = result {
+                    report(&files, e);
+                }
+            }
+            Err(RecvTimeoutError::Timeout) => {}
+            Ok(Msg::Stop) | Err(RecvTimeoutError::Disconnected) => break,
+        }
+        if last_tick.elapsed() >= interval {
+            if let Err(e) = files.tick() {
+                report(&files, e);
+            }
+            last_tick = Instant::now();
+        }
+    }
+    if let Err(e) = files.close() {
+        report(&files, e);
+    }
+    files.finished
+}
+
+fn nanos(d: Duration) -> u64 {
+    u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)
+}
+
+/// `YYYYMMDDTHHMMSSZ` for a time (UTC).
+fn utc_stamp(t: SystemTime) -> String {
+    let secs = t.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
+    let days = i64::try_from(secs / 86_400).unwrap_or(0);
+    let rem = secs % 86_400;
+    // Howard Hinnant's civil_from_days.
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}{m:02}{d:02}T{:02}{:02}{:02}Z",
+        rem / 3600,
+        (rem % 3600) / 60,
+        rem % 60
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn utc_stamp_matches_known_dates() {
+        assert_eq!(utc_stamp(UNIX_EPOCH), "19700101T000000Z");
+        let t = UNIX_EPOCH + Duration::from_secs(1_732_200_000);
+        assert_eq!(utc_stamp(t), "20241121T144000Z");
+        let leap = UNIX_EPOCH + Duration::from_secs(951_825_600); // 2000-02-29 12:00
+        assert_eq!(utc_stamp(leap), "20000229T120000Z");
+    }
+}

@@ -1,0 +1,245 @@
+//! Topics and JSON Schemas of a recording.
+//!
+//! Every message is JSON (`message_encoding = "json"`) with a `jsonschema` schema, so
+//! Foxglove and the `mcap` CLI open a recording without plugins. Topics mirror the Zenoh
+//! result keys: `glrmon/<channel>/<kind>`. Each MCAP channel carries the metadata
+//! `channel` (the glrmon channel name) and `kind`, by which a reader maps it back.
+//!
+//! The schemas use only `type`, `properties`, `required`, `additionalProperties`,
+//! `items`, `enum` and `description` (checked by the tests, which validate every
+//! recorded message against its schema).
+
+/// What a topic holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum TopicKind {
+    /// Decoded input samples, in the order the monitor saw them.
+    Inputs,
+    /// Intake events between samples (drops, rejected payloads).
+    Intake,
+    /// `stat` records.
+    Stat,
+    /// `alarm` records.
+    Alarm,
+    /// `alarm_end` records.
+    AlarmEnd,
+    /// `diagnosis` records.
+    Diagnosis,
+    /// `error` records.
+    Error,
+}
+
+impl TopicKind {
+    /// Every kind, in topic order.
+    pub const ALL: [TopicKind; 7] = [
+        TopicKind::Inputs,
+        TopicKind::Intake,
+        TopicKind::Stat,
+        TopicKind::Alarm,
+        TopicKind::AlarmEnd,
+        TopicKind::Diagnosis,
+        TopicKind::Error,
+    ];
+
+    /// The last part of the topic and the `kind` metadata value.
+    #[must_use]
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            TopicKind::Inputs => "inputs",
+            TopicKind::Intake => "intake",
+            TopicKind::Stat => "stat",
+            TopicKind::Alarm => "alarm",
+            TopicKind::AlarmEnd => "alarm_end",
+            TopicKind::Diagnosis => "diagnosis",
+            TopicKind::Error => "error",
+        }
+    }
+
+    /// The kind named `s`.
+    #[must_use]
+    pub fn parse(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.as_str() == s)
+    }
+
+    /// The kind of a result record's topic.
+    #[must_use]
+    pub fn of_record(record: &glrmon_wire::Record) -> Option<Self> {
+        use glrmon_wire::Record;
+        Some(match record {
+            Record::Stat(_) => TopicKind::Stat,
+            Record::Alarm(_) => TopicKind::Alarm,
+            Record::AlarmEnd(_) => TopicKind::AlarmEnd,
+            Record::Diagnosis(_) => TopicKind::Diagnosis,
+            Record::Error(_) => TopicKind::Error,
+            _ => return None,
+        })
+    }
+
+    /// The schema's name.
+    #[must_use]
+    pub const fn schema_name(self) -> &'static str {
+        match self {
+            TopicKind::Inputs => "glrmon.Sample",
+            TopicKind::Intake => "glrmon.Intake",
+            TopicKind::Stat => "glrmon.Stat",
+            TopicKind::Alarm => "glrmon.Alarm",
+            TopicKind::AlarmEnd => "glrmon.AlarmEnd",
+            TopicKind::Diagnosis => "glrmon.Diagnosis",
+            TopicKind::Error => "glrmon.Error",
+        }
+    }
+
+    /// The JSON Schema of the messages.
+    #[must_use]
+    pub const fn schema(self) -> &'static str {
+        match self {
+            TopicKind::Inputs => SAMPLE,
+            TopicKind::Intake => INTAKE,
+            TopicKind::Stat => STAT,
+            TopicKind::Alarm => ALARM,
+            TopicKind::AlarmEnd => ALARM_END,
+            TopicKind::Diagnosis => DIAGNOSIS,
+            TopicKind::Error => ERROR,
+        }
+    }
+}
+
+/// The topic of `kind` for `channel`.
+#[must_use]
+pub fn topic(channel: &str, kind: TopicKind) -> String {
+    format!("glrmon/{channel}/{}", kind.as_str())
+}
+
+const SAMPLE: &str = r#"{
+  "title": "glrmon sample",
+  "description": "A decoded input sample as the monitor saw it (INTERFACE.md).",
+  "type": "object",
+  "properties": {
+    "k": {"type": "integer", "description": "sample index (absent: arrival order)"},
+    "t": {"type": "number", "description": "time in seconds"},
+    "u": {"type": "array", "items": {"type": "number"}, "description": "known inputs"},
+    "y": {"type": "array", "items": {"type": "number"}, "description": "measured outputs"},
+    "p": {"type": "array", "items": {"type": "number"}, "description": "scheduling signals"}
+  },
+  "required": ["y"],
+  "additionalProperties": false
+}"#;
+
+const INTAKE: &str = r#"{
+  "title": "glrmon intake event",
+  "description": "Payloads dropped before the next sample, or a refused payload.",
+  "type": "object",
+  "properties": {
+    "type": {"type": "string", "enum": ["dropped", "rejected"]},
+    "count": {"type": "integer", "description": "payloads dropped"},
+    "code": {"type": "string"},
+    "message": {"type": "string"},
+    "payload": {"type": ["string", "null"], "description": "the refused payload"}
+  },
+  "required": ["type"],
+  "additionalProperties": false
+}"#;
+
+const STAT: &str = r#"{
+  "title": "glrmon stat",
+  "description": "Per-sample statistics: the windowed GLR l_k, onset r, magnitude, innovation.",
+  "type": "object",
+  "properties": {
+    "type": {"type": "string", "enum": ["stat"]},
+    "channel": {"type": "string"},
+    "k": {"type": "integer"},
+    "t": {"type": ["number", "null"]},
+    "glr": {"type": ["number", "null"], "description": "l_k, Zhang & Basseville 2014 eq. (30)"},
+    "onset": {"type": ["integer", "null"], "description": "onset estimate r"},
+    "magnitude": {"type": "array", "items": {"type": "number"}, "description": "theta estimate"},
+    "rank": {"type": "integer"},
+    "innovation": {"type": "array", "items": {"type": "number"}, "description": "innovation epsilon_k"},
+    "threshold": {"type": ["number", "null"]}
+  },
+  "required": ["type", "channel", "k", "magnitude", "rank", "innovation"],
+  "additionalProperties": false
+}"#;
+
+const ALARM: &str = r#"{
+  "title": "glrmon alarm",
+  "type": "object",
+  "properties": {
+    "type": {"type": "string", "enum": ["alarm"]},
+    "channel": {"type": "string"},
+    "k": {"type": "integer"},
+    "t": {"type": ["number", "null"]},
+    "glr": {"type": "number"},
+    "threshold": {"type": "number"},
+    "onset": {"type": "integer"},
+    "magnitude": {"type": "array", "items": {"type": "number"}},
+    "isolation": {"type": "array", "items": {
+      "type": "object",
+      "properties": {
+        "fault": {"type": "string"},
+        "minmax": {"type": "number"},
+        "sensitivity": {"type": "number"},
+        "threshold": {"type": "number"},
+        "isolated": {"type": "boolean"}
+      },
+      "required": ["fault", "minmax", "sensitivity", "threshold", "isolated"],
+      "additionalProperties": false
+    }},
+    "faults": {"type": "array", "items": {"type": "string"}}
+  },
+  "required": ["type", "channel", "k", "glr", "threshold", "onset", "magnitude", "isolation", "faults"],
+  "additionalProperties": false
+}"#;
+
+const ALARM_END: &str = r#"{
+  "title": "glrmon alarm end",
+  "type": "object",
+  "properties": {
+    "type": {"type": "string", "enum": ["alarm_end"]},
+    "channel": {"type": "string"},
+    "k": {"type": "integer"},
+    "t": {"type": ["number", "null"]},
+    "onset": {"type": "integer"},
+    "duration": {"type": "integer"},
+    "peak_glr": {"type": "number"}
+  },
+  "required": ["type", "channel", "k", "onset", "duration", "peak_glr"],
+  "additionalProperties": false
+}"#;
+
+const DIAGNOSIS: &str = r#"{
+  "title": "glrmon diagnosis",
+  "description": "Sparse diagnosis (Zhang 2021): Lasso support, refitted estimates and the path.",
+  "type": "object",
+  "properties": {
+    "type": {"type": "string", "enum": ["diagnosis"]},
+    "channel": {"type": "string"},
+    "k": {"type": "integer"},
+    "from": {"type": "integer"},
+    "to": {"type": "integer"},
+    "support": {"type": "array", "items": {"type": "string"}},
+    "estimate": {"type": "object", "additionalProperties": {"type": "number"}},
+    "lambda": {"type": "number"},
+    "plateau": {"type": "array", "items": {"type": "number"}},
+    "residual": {"type": "string", "enum": ["kalman", "kitanidis"]},
+    "path_support_sizes": {"type": "array", "items": {"type": "integer"}},
+    "faults": {"type": "array", "items": {"type": "string"}},
+    "path_lambda": {"type": "array", "items": {"type": "number"}},
+    "path_coefficients": {"type": "array", "items": {"type": "array", "items": {"type": "number"}}}
+  },
+  "required": ["type", "channel", "k", "from", "to", "support", "estimate", "lambda", "plateau", "residual", "path_support_sizes", "faults", "path_lambda", "path_coefficients"],
+  "additionalProperties": false
+}"#;
+
+const ERROR: &str = r#"{
+  "title": "glrmon error",
+  "type": "object",
+  "properties": {
+    "type": {"type": "string", "enum": ["error"]},
+    "channel": {"type": "string"},
+    "k": {"type": ["integer", "null"]},
+    "code": {"type": "string"},
+    "message": {"type": "string"},
+    "stage": {"type": "string", "enum": ["receiving", "processing", "sending"]}
+  },
+  "required": ["type", "channel", "code", "message", "stage"],
+  "additionalProperties": false
+}"#;

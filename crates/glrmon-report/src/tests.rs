@@ -1,0 +1,439 @@
+//! Reports built from synthetic records: figures present, names escaped, numbers shown,
+//! memory bounded.
+
+use std::collections::BTreeMap;
+
+use glrmon_wire::{
+    Alarm, AlarmEnd, Diagnosis, ErrorCode, ErrorRecord, IsolationResult, Record, Stage, Stat,
+};
+
+use super::*;
+use crate::html::escape;
+
+const CHANNEL: &str = "pump<3>&co";
+const THRESHOLD: f64 = 23.5;
+
+fn stat(channel: &str, k: u64, glr: Option<f64>) -> Record {
+    Record::from(Stat {
+        channel: channel.into(),
+        k,
+        t: Some(k as f64 * 0.5),
+        glr,
+        onset: glr.map(|_| k.saturating_sub(20)),
+        magnitude: if glr.is_some() {
+            vec![0.1 * k as f64, -0.2]
+        } else {
+            Vec::new()
+        },
+        rank: 2,
+        innovation: vec![(k as f64).sin(), (k as f64).cos()],
+        threshold: Some(THRESHOLD),
+    })
+}
+
+/// l_k of a fault that starts at k = 200: None while the window fills (k < 50), noise
+/// level before the fault, then a ramp that crosses the threshold at k = 215.
+fn glr_at(k: u64) -> Option<f64> {
+    match k {
+        0..50 => None,
+        50..200 => Some(2.0 + (k % 7) as f64),
+        _ => Some(2.0 + 1.5 * (k - 199) as f64),
+    }
+}
+
+fn alarm() -> Record {
+    Record::from(Alarm {
+        channel: CHANNEL.into(),
+        k: 215,
+        t: Some(107.5),
+        glr: 26.0,
+        threshold: THRESHOLD,
+        onset: 201,
+        magnitude: vec![4.1, 0.05],
+        isolation: vec![
+            IsolationResult {
+                fault: "x0_jump".into(),
+                minmax: 31.25,
+                sensitivity: 35.0,
+                threshold: 6.63,
+                isolated: true,
+            },
+            IsolationResult {
+                fault: "<b>x1</b>".into(),
+                minmax: 0.75,
+                sensitivity: 4.5,
+                threshold: 6.63,
+                isolated: false,
+            },
+        ],
+        faults: vec!["x0_jump".into(), "<b>x1</b>".into()],
+    })
+}
+
+fn alarm_end() -> Record {
+    Record::from(AlarmEnd {
+        channel: CHANNEL.into(),
+        k: 320,
+        t: Some(160.0),
+        onset: 201,
+        duration: 105,
+        peak_glr: 180.0,
+    })
+}
+
+fn diagnosis() -> Record {
+    let faults: Vec<String> = ["f00", "f01", "f02", "f03"].map(String::from).to_vec();
+    let path_lambda: Vec<f64> = (0..20).map(|i| 10f64.powf(1.0 - 0.2 * i as f64)).collect();
+    let path_coefficients: Vec<Vec<f64>> = path_lambda
+        .iter()
+        .map(|l| {
+            let shrink = |v: f64| (v - l).max(0.0);
+            vec![shrink(2.0), 0.0, shrink(1.0), shrink(0.05)]
+        })
+        .collect();
+    let path_support_sizes = path_coefficients
+        .iter()
+        .map(|row| row.iter().filter(|v| **v != 0.0).count())
+        .collect();
+    Record::from(Diagnosis {
+        channel: CHANNEL.into(),
+        k: 320,
+        from: 201,
+        to: 320,
+        support: vec!["f00".into(), "f02".into()],
+        estimate: BTreeMap::from([("f00".into(), 2.0), ("f02".into(), 1.0)]),
+        lambda: 0.25,
+        plateau: [0.06, 0.9],
+        residual: Diagnosis::RESIDUAL_KALMAN.into(),
+        path_support_sizes,
+        faults,
+        path_lambda,
+        path_coefficients,
+    })
+}
+
+fn error(channel: &str, k: Option<u64>, code: ErrorCode) -> Record {
+    Record::from(ErrorRecord {
+        channel: channel.into(),
+        k,
+        code,
+        message: format!("channel \"{channel}\": <bad> sample"),
+        stage: Stage::Processing,
+    })
+}
+
+fn render(report: &Report) -> String {
+    let mut out = Vec::new();
+    report.write_html(&mut out).unwrap();
+    String::from_utf8(out).unwrap()
+}
+
+/// The full scenario: 400 samples of one channel with an alarm, its end and a
+/// diagnosis, two errors; and a channel with only errors, named like a script.
+fn scenario() -> Report {
+    let mut report = Report::new(ReportOptions {
+        title: "Replay <test>".into(),
+        ..ReportOptions::default()
+    });
+    for k in 0..400 {
+        report.add(&stat(CHANNEL, k, glr_at(k)));
+        match k {
+            215 => report.add(&alarm()),
+            320 => {
+                report.add(&alarm_end());
+                report.add(&diagnosis());
+            }
+            _ => {}
+        }
+    }
+    report.add(&error(CHANNEL, Some(399), ErrorCode::Gap));
+    report.add(&error(CHANNEL, None, ErrorCode::InvalidJson));
+    report.add(&error("<script>", Some(3), ErrorCode::WrongDimension));
+    report
+}
+
+/// The `<svg …>` elements with `class` among their classes.
+fn figures_of_class<'a>(html: &'a str, class: &str) -> Vec<&'a str> {
+    html.split("<svg ")
+        .skip(1)
+        .filter(|s| {
+            s.split_once("class=\"")
+                .and_then(|(_, rest)| rest.split_once('"'))
+                .is_some_and(|(classes, _)| classes.split(' ').any(|c| c == class))
+        })
+        .collect()
+}
+
+#[test]
+fn report_has_one_svg_per_expected_figure() {
+    let html = render(&scenario());
+    // ε_k, l_k, r̂, θ̂, one isolation figure, Lasso path and support size.
+    assert_eq!(html.matches("<svg").count(), 7);
+    assert_eq!(html.matches("</svg>").count(), 7);
+    for class in [
+        "innovation",
+        "glr",
+        "onset",
+        "magnitude",
+        "isolation",
+        "lasso-path",
+        "support-size",
+    ] {
+        assert_eq!(figures_of_class(&html, class).len(), 1, "{class}");
+    }
+    // Clip-path ids are document-global: they must be unique.
+    for id in 1..=7 {
+        assert_eq!(html.matches(&format!("id=\"clip{id}\"")).count(), 1);
+    }
+    assert!(html.starts_with("<!DOCTYPE html>"));
+    assert!(
+        !html.contains("<script"),
+        "no JavaScript, and names are escaped"
+    );
+    let without_namespace = html.replace("xmlns=\"http://www.w3.org/2000/svg\"", "");
+    assert!(!without_namespace.contains("http"), "no network resources");
+}
+
+#[test]
+fn glr_figure_has_threshold_alarm_episode_and_onset() {
+    let html = render(&scenario());
+    let glr = figures_of_class(&html, "glr");
+    let glr = glr.first().expect("an l_k figure");
+    assert!(glr.contains("class=\"threshold\""), "threshold line");
+    assert!(glr.contains("stroke-dasharray"), "dashed threshold");
+    assert!(
+        glr.contains("threshold h = 23.5"),
+        "threshold in the legend"
+    );
+    assert!(glr.contains("class=\"alarm-marker\""), "alarm marker");
+    assert!(glr.contains("alarm k=215"), "alarm label");
+    assert!(glr.contains("class=\"alarm-episode\""), "shaded episode");
+    assert!(glr.contains("class=\"onset-marker\""), "onset marker");
+    assert!(glr.contains("r̂=201"), "onset label");
+    // glr is None for k < 50: the line starts later, so there is exactly one polyline
+    // for l_k (the threshold is a <line>).
+    assert_eq!(glr.matches("<polyline").count(), 1);
+    // Time is shown under the k axis (t = k / 2).
+    assert!(glr.contains(">100 s<"), "t labels: {glr}");
+}
+
+#[test]
+fn summary_shows_the_numbers() {
+    let html = render(&scenario());
+    let summary = html
+        .split("<table class=\"summary\">")
+        .nth(1)
+        .and_then(|s| s.split("</table>").next())
+        .expect("summary table");
+    let row = summary
+        .split("<tr>")
+        .find(|r| r.contains("pump&lt;3&gt;&amp;co"))
+        .expect("row of the channel");
+    for want in [
+        ">400<",     // samples
+        ">0 … 399<", // k range
+        ">1<",       // alarms, episodes ended
+        ">201<",     // onset r̂
+        "x0_jump",   // isolated fault
+        "f00=2",     // diagnosis support and estimate
+        "f02=1",
+        "gap: 1",
+        "invalid_json: 1",
+    ] {
+        assert!(row.contains(want), "{want} missing in {row}");
+    }
+    assert!(!row.contains("x1"), "x1 is not isolated: {row}");
+    let script_row = summary
+        .split("<tr>")
+        .find(|r| r.contains("&lt;script&gt;"))
+        .expect("row of the error-only channel");
+    assert!(script_row.contains("wrong_dimension: 1"));
+}
+
+#[test]
+fn names_are_escaped() {
+    let html = render(&scenario());
+    assert!(html.contains("<title>Replay &lt;test&gt;</title>"));
+    assert!(html.contains("pump&lt;3&gt;&amp;co"));
+    assert!(!html.contains("pump<3>"));
+    assert!(html.contains("&lt;script&gt;"));
+    assert!(!html.contains("<script>"));
+    assert!(
+        html.contains("&lt;b&gt;x1&lt;/b&gt;"),
+        "fault names escaped"
+    );
+    assert!(!html.contains("<b>x1"));
+    assert!(
+        html.contains("&lt;bad&gt; sample"),
+        "error messages escaped"
+    );
+    assert_eq!(escape("a<b>&\"'"), "a&lt;b&gt;&amp;&quot;&#39;");
+}
+
+#[test]
+fn error_only_channel_and_empty_report() {
+    let mut report = Report::new(ReportOptions::default());
+    let html = render(&report);
+    assert!(html.contains("No records."));
+    assert_eq!(html.matches("<svg").count(), 0);
+
+    report.add(&error("<script>", None, ErrorCode::NonFinite));
+    let html = render(&report);
+    assert_eq!(html.matches("<svg").count(), 0);
+    assert!(html.contains("No stat records for this channel"));
+    assert!(html.contains("non_finite"));
+}
+
+#[test]
+fn isolation_figure_highlights_isolated_faults() {
+    let html = render(&scenario());
+    let iso = figures_of_class(&html, "isolation");
+    let iso = iso.first().expect("an isolation figure");
+    assert_eq!(iso.matches("class=\"isolated-row\"").count(), 1);
+    assert!(iso.contains(r#"font-weight="bold">x0_jump<"#));
+    assert!(
+        iso.contains(">31.25<") && iso.contains(">4.5<"),
+        "bar values"
+    );
+    assert_eq!(
+        iso.matches("class=\"threshold\"").count(),
+        2,
+        "one per fault"
+    );
+}
+
+#[test]
+fn lasso_figures_mark_lambda_and_plateau() {
+    let html = render(&scenario());
+    for class in ["lasso-path", "support-size"] {
+        let fig = figures_of_class(&html, class);
+        let fig = fig.first().expect("figure");
+        assert!(fig.contains("class=\"chosen-lambda\""), "{class}");
+        assert!(fig.contains("class=\"plateau\""), "{class}");
+        assert!(fig.contains("chosen λ = 0.25"), "{class}");
+    }
+    let path = figures_of_class(&html, "lasso-path");
+    let path = path.first().expect("figure");
+    assert!(
+        path.contains(">f00<") && path.contains(">f02<"),
+        "support in the legend"
+    );
+    assert!(path.contains("other faults (2)"));
+    assert_eq!(path.matches("class=\"refit\"").count(), 2);
+}
+
+#[test]
+fn decimation_keeps_the_point_budget_and_the_spike() {
+    let width_points = 2000;
+    let mut report = Report::new(ReportOptions {
+        width_points,
+        ..ReportOptions::default()
+    });
+    let spike_k = 654_321;
+    for k in 0..1_000_000u64 {
+        let glr = if k == spike_k {
+            1e4
+        } else {
+            1.0 + (k % 13) as f64 * 0.1
+        };
+        report.add(&Record::from(Stat {
+            channel: "c".into(),
+            k,
+            t: None,
+            glr: Some(glr),
+            onset: Some(k / 2),
+            magnitude: vec![0.0; 3],
+            rank: 3,
+            innovation: vec![0.0; 2],
+            threshold: Some(20.0),
+        }));
+    }
+    let ch = report.channels.get("c").expect("channel");
+    assert_eq!(ch.stats, 1_000_000);
+    assert!(ch.grid.cells_used() <= width_points / 2);
+    let glr: Vec<(u64, f64)> = ch.grid.segments(ch.glr).concat();
+    assert!(glr.len() <= width_points, "{} points", glr.len());
+    assert!(glr.len() >= width_points / 2, "{} points", glr.len());
+    assert!(glr.contains(&(spike_k, 1e4)), "the spike survives");
+    let max = glr.iter().map(|p| p.1).fold(f64::MIN, f64::max);
+    assert_eq!(max, 1e4);
+
+    let html = render(&report);
+    let fig = figures_of_class(&html, "glr");
+    let fig = fig.first().expect("l_k figure");
+    let points = fig
+        .split("<polyline")
+        .nth(1)
+        .and_then(|s| s.split("points=\"").nth(1))
+        .and_then(|s| s.split('"').next())
+        .expect("l_k polyline");
+    assert!(points.split(' ').count() <= width_points);
+    // 1e4 is the top of the axis (× 1.05): the spike reaches near the top.
+    let min_y = points
+        .split(' ')
+        .filter_map(|p| p.split(',').nth(1)?.parse::<f64>().ok())
+        .fold(f64::MAX, f64::min);
+    assert!(min_y < 20.0, "spike drawn near the top, y = {min_y}");
+}
+
+#[test]
+fn caps_bound_rare_records_and_channels() {
+    let mut report = Report::new(ReportOptions::default());
+    for i in 0..1000u64 {
+        report.add(&error(
+            &format!("ch{}", i % 100),
+            Some(i),
+            ErrorCode::UnknownChannel,
+        ));
+    }
+    assert_eq!(report.channels.len(), MAX_CHANNELS);
+    assert!(report.dropped_records > 0);
+    let mut report = Report::new(ReportOptions::default());
+    for i in 0..500 {
+        report.add(&error("c", Some(i), ErrorCode::Gap));
+        report.add(&alarm());
+    }
+    let ch = report.channels.values().next().expect("channel");
+    assert_eq!(ch.errors.len(), channel::MAX_ERRORS);
+    assert_eq!(ch.error_counts.get("gap"), Some(&500));
+    let ch = report.channels.get(CHANNEL).expect("channel");
+    assert_eq!(ch.alarms.len(), channel::MAX_ALARMS);
+    assert_eq!(ch.alarms_total, 500);
+    let html = render(&report);
+    assert!(html.contains("… 492 more"));
+}
+
+#[test]
+fn odd_records_do_not_panic() {
+    let mut report = Report::new(ReportOptions {
+        title: String::new(),
+        width_points: 0,
+    });
+    // An alarm_end without its alarm, out-of-order and extreme k, a diagnosis without a
+    // path, rows of the wrong length, non-finite values.
+    report.add(&alarm_end());
+    report.add(&stat("c", u64::MAX, Some(f64::INFINITY)));
+    report.add(&stat("c", 5, Some(1.0)));
+    report.add(&stat("c", 0, None));
+    let Record::Diagnosis(mut d) = diagnosis() else {
+        unreachable!()
+    };
+    d.path_coefficients.truncate(3);
+    d.path_coefficients.push(vec![f64::NAN]);
+    d.path_support_sizes.clear();
+    d.plateau = [-1.0, f64::NAN];
+    report.add(&Record::from(d.clone()));
+    d.path_lambda = vec![0.0, -1.0];
+    d.lambda = 0.0;
+    report.add(&Record::from(d));
+    let Record::Alarm(mut a) = alarm() else {
+        unreachable!()
+    };
+    a.isolation[0].minmax = f64::NAN;
+    a.isolation[1].threshold = 0.0;
+    a.faults.clear();
+    report.add(&Record::from(a));
+    let html = render(&report);
+    assert!(html.ends_with("</body></html>\n"));
+    assert!(html.contains("No regularisation path with positive λ"));
+}
