@@ -274,17 +274,19 @@ struct Files {
 
 impl Files {
     fn open(&mut self) -> Result<(), RecordError> {
-        let stem = format!(
-            "{}-{}-{:04}",
-            self.settings.prefix,
-            utc_stamp(SystemTime::now()),
-            self.sequence
-        );
-        self.sequence += 1;
-        let path = self
-            .settings
-            .directory
-            .join(format!("{stem}{PARTIAL_SUFFIX}"));
+        // Never over an existing recording (e.g. of an earlier run in the same second).
+        let stamp = utc_stamp(SystemTime::now());
+        let path = loop {
+            let stem = format!("{}-{stamp}-{:04}", self.settings.prefix, self.sequence);
+            self.sequence += 1;
+            let partial = self
+                .settings
+                .directory
+                .join(format!("{stem}{PARTIAL_SUFFIX}"));
+            if !partial.exists() && !finished_name(&partial).exists() {
+                break partial;
+            }
+        };
         let file = McapFile::create(&path, self.settings.file, &self.header)?;
         *self
             .stats
@@ -361,22 +363,23 @@ impl Files {
             return;
         };
         let prefix = format!("{}-", self.settings.prefix);
-        let mut files: Vec<(PathBuf, u64)> = Vec::new();
+        let mut files: Vec<(SystemTime, PathBuf, u64)> = Vec::new();
         let mut total = 0;
         for entry in dir.flatten() {
             let name = entry.file_name().to_string_lossy().into_owned();
             if !name.starts_with(&prefix) {
                 continue;
             }
-            let size = entry.metadata().map_or(0, |m| m.len());
-            total += size;
+            let Ok(meta) = entry.metadata() else { continue };
+            total += meta.len();
             if name.ends_with(".mcap") {
-                files.push((entry.path(), size));
+                let modified = meta.modified().unwrap_or(UNIX_EPOCH);
+                files.push((modified, entry.path(), meta.len()));
             }
         }
-        // Names carry the UTC time and a sequence number: name order is age order.
+        // Oldest last write first (names sort by start time only within one run).
         files.sort();
-        for (path, size) in files {
+        for (_, path, size) in files {
             if total <= cap {
                 break;
             }
@@ -401,7 +404,7 @@ pub fn finished_name(partial: &Path) -> PathBuf {
 struct Held {
     inputs: VecDeque<(TopicKind, u64, u64, Vec<u8>)>,
     /// Inputs are written directly until this log time (after an alarm).
-    open_until: u64,
+    open_until: Option<u64>,
 }
 
 fn file_thread(
@@ -438,7 +441,7 @@ fn file_thread(
                 let result = match capture {
                     Some(c) if is_input => {
                         let h = held.entry(channel.clone()).or_default();
-                        if log_time <= h.open_until {
+                        if h.open_until.is_some_and(|until| log_time <= until) {
                             files.write(&channel, kind, log_time, publish_time, &json)
                         } else {
                             h.inputs.push_back((kind, log_time, publish_time, json));
@@ -458,7 +461,7 @@ fn file_thread(
                             for (k, l, p, j) in h.inputs.drain(..) {
                                 r = r.and(files.write(&channel, k, l, p, &j));
                             }
-                            h.open_until = log_time.saturating_add(nanos(c.after));
+                            h.open_until = Some(log_time.saturating_add(nanos(c.after)));
                         }
                         r.and(files.write(&channel, kind, log_time, publish_time, &json))
                     }
@@ -513,6 +516,200 @@ fn utc_stamp(t: SystemTime) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::{Event, McapReader, ReadEnd};
+    use glrmon_wire::{IntakeEvent, Sample};
+
+    fn scratch(tag: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("glrmon-recorder-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    fn input(k: u64, log_ms: u64) -> InputOutput {
+        let s = Sample {
+            k: Some(k),
+            t: None,
+            u: vec![],
+            y: vec![k as f64 * 0.1, -1.0 / (k as f64 + 3.0)],
+            p: vec![],
+        };
+        let mut json = Vec::new();
+        glrmon_wire::encode_sample("a", &s, &mut json).unwrap();
+        InputOutput {
+            channel: 0,
+            name: Arc::from("a"),
+            item: InputItem::Sample(s),
+            json,
+            log_time_ns: log_ms * 1_000_000,
+        }
+    }
+
+    /// (k of every input, how the file ended) of each file, in name order.
+    fn read_dir(dir: &Path) -> Vec<(PathBuf, Vec<u64>, ReadEnd)> {
+        let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
+            .unwrap()
+            .flatten()
+            .map(|e| e.path())
+            .collect();
+        paths.sort();
+        paths
+            .into_iter()
+            .map(|p| {
+                let mut r = McapReader::new(std::fs::File::open(&p).unwrap()).unwrap();
+                let mut ks = Vec::new();
+                let mut config = false;
+                while let Some(e) = r.next_event().unwrap() {
+                    match e {
+                        Event::Metadata { entries, .. } => {
+                            config = entries.get("config").is_some_and(|c| c == "cfg");
+                        }
+                        Event::Message(m) if m.topic.kind == Some(TopicKind::Inputs) => {
+                            let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+                            ks.push(v["k"].as_u64().unwrap());
+                        }
+                        Event::Message(_) => {}
+                    }
+                }
+                assert!(
+                    config,
+                    "{}: the configuration is repeated in every file",
+                    p.display()
+                );
+                (p, ks, r.end().clone())
+            })
+            .collect()
+    }
+
+    fn header() -> FileHeader {
+        FileHeader {
+            config: "cfg".into(),
+            channels: vec!["a".into()],
+            extra: std::collections::BTreeMap::new(),
+        }
+    }
+
+    /// Rotation by size: every file finished under its final name, with the schemas and
+    /// the configuration; together they hold every input once, in order. Then a disk
+    /// cap deletes the oldest files only.
+    #[test]
+    fn rotation_by_size_keeps_every_input_once_and_the_cap_deletes_the_oldest() {
+        let dir = scratch("rotate");
+        let settings = RecorderSettings {
+            directory: dir.clone(),
+            max_file_bytes: Some(20_000),
+            flush_interval: Duration::from_millis(10),
+            file: FileOptions {
+                chunk_bytes: 4096,
+                zstd: true,
+            },
+            ..RecorderSettings::default()
+        };
+        let mut rec = Recorder::start(settings.clone(), header()).unwrap();
+        let n = 20_000;
+        for k in 0..n {
+            rec.write_input(&input(k, k)).unwrap();
+            if k % 2000 == 1999 {
+                // Rotation is checked at each flush (at least every flush interval).
+                let t = Instant::now();
+                let before = rec.stats().files.load(Ordering::Relaxed);
+                while rec.stats().files.load(Ordering::Relaxed) == before
+                    && t.elapsed() < Duration::from_secs(10)
+                {
+                    std::thread::sleep(Duration::from_millis(5));
+                }
+            }
+        }
+        let files = rec.finish();
+        assert!(files.len() >= 5, "{} files", files.len());
+        let read = read_dir(&dir);
+        assert_eq!(read.len(), files.len(), "no .tmp file is left");
+        let all: Vec<u64> = read.iter().flat_map(|(_, ks, _)| ks.clone()).collect();
+        assert_eq!(all, (0..n).collect::<Vec<_>>());
+        assert!(read.iter().all(|(_, _, end)| *end == ReadEnd::Finished));
+
+        // The cap: a recorder over the same directory with room for about two files.
+        let capped = RecorderSettings {
+            max_total_bytes: Some(45_000),
+            max_file_bytes: Some(1_000_000),
+            ..settings
+        };
+        let rec = Recorder::start(capped, header()).unwrap();
+        let stats = rec.stats();
+        let _ = rec.finish();
+        let left = read_dir(&dir);
+        let total: u64 = left
+            .iter()
+            .map(|(p, _, _)| std::fs::metadata(p).unwrap().len())
+            .sum();
+        assert!(total <= 45_000, "{total} bytes left");
+        assert!(stats.deleted.load(Ordering::Relaxed) >= 3);
+        // The newest files survive: the last input recorded is still there.
+        assert!(left.iter().any(|(_, ks, _)| ks.last() == Some(&(n - 1))));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Capture mode: without an alarm no input is written; at an alarm the last
+    /// `before` of inputs are, then `after` more.
+    #[test]
+    fn capture_writes_inputs_only_around_an_alarm() {
+        let dir = scratch("capture");
+        let settings = RecorderSettings {
+            directory: dir.clone(),
+            capture: Some(Capture {
+                before: Duration::from_millis(100),
+                after: Duration::from_millis(50),
+            }),
+            ..RecorderSettings::default()
+        };
+        let mut rec = Recorder::start(settings, header()).unwrap();
+        for k in 0..1000 {
+            rec.write_input(&input(k, k)).unwrap();
+            if k == 500 {
+                let alarm = glrmon_wire::Record::AlarmEnd(glrmon_wire::AlarmEnd {
+                    channel: "a".into(),
+                    k,
+                    t: None,
+                    onset: k,
+                    duration: 0,
+                    peak_glr: 0.0,
+                });
+                // An alarm_end does not open the capture; the alarm below does.
+                rec.write(&Output {
+                    record: alarm,
+                    json: b"{}".to_vec(),
+                    log_time_ns: k * 1_000_000,
+                    stat_index: None,
+                })
+                .unwrap();
+                rec.write(&Output {
+                    record: glrmon_wire::Record::Alarm(glrmon_wire::Alarm {
+                        channel: "a".into(),
+                        k,
+                        t: None,
+                        glr: 1.0,
+                        threshold: 0.5,
+                        onset: k,
+                        magnitude: vec![],
+                        isolation: vec![],
+                        faults: vec![],
+                    }),
+                    json: b"{}".to_vec(),
+                    log_time_ns: k * 1_000_000,
+                    stat_index: None,
+                })
+                .unwrap();
+            }
+        }
+        let _ = rec.write_input(&InputOutput {
+            item: InputItem::Intake(IntakeEvent::Dropped { count: 1 }),
+            ..input(1000, 1000)
+        });
+        rec.finish();
+        let read = read_dir(&dir);
+        assert_eq!(read.len(), 1);
+        assert_eq!(read[0].1, (400..=550).collect::<Vec<_>>());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn utc_stamp_matches_known_dates() {
