@@ -441,6 +441,20 @@ fn live_run_recorded_then_replayed_gives_identical_records() {
             *compared.entry(kind).or_insert(0) += a.len();
         }
     }
+    // `glrmon diagnose` reads a recording too (its configuration included).
+    let out =
+        run_ok(
+            glrmon()
+                .arg("diagnose")
+                .arg(&finished[0])
+                .args(["--channel", "ltv3", "--json"]),
+        );
+    let d: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        d["support"],
+        serde_json::json!(["f05", "f16", "f28", "f39", "f42"]),
+        "{d}"
+    );
     // The inputs of the MCAP output are the recorded ones.
     assert_eq!(
         live.get(&("unstable".into(), "inputs")),

@@ -1,5 +1,5 @@
 //! `glrmon diagnose`: batch sparse fault diagnosis (Zhang 2021) over a recorded span of
-//! a CSV file. The channel's residual filter (Kitanidis when the model has E, else
+//! a CSV file or of one channel of an MCAP recording. The channel's residual filter (Kitanidis when the model has E, else
 //! Kalman, or as `[channels.diagnosis]` says) runs from the first row; the regression
 //! of Zhang 2021, eq. (36), is stacked over `--from`…`--to` (default: the whole file);
 //! the Lasso path (eq. (39)), the plateau λ (§IV) and the least-squares refit (§V) give
@@ -8,7 +8,7 @@
 //! The same engine runs in the monitor at every alarm ([`glrmon_monitor::diagnosis`]).
 
 use std::fmt::Write as _;
-use std::io::{BufRead, Write as _};
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
@@ -18,18 +18,21 @@ use glrmon_spec::ResidualKind;
 use glrmon_wire::{Record, Sample, encode_json};
 
 use crate::csv::CsvReader;
+use crate::mcapin::{McapInput, is_mcap};
 use crate::simulate::pick;
 use crate::{InvalidInput, load_config};
+use glrmon_runtime::InputItem;
+use glrmon_wire::IntakeEvent;
 
 #[derive(Debug, Args)]
 pub(crate) struct DiagnoseArgs {
-    /// Configuration file.
+    /// Configuration file (optional for MCAP input: the recorded one is used).
     #[arg(long)]
-    config: PathBuf,
-    /// Channel the samples belong to (optional when the file has one channel).
+    config: Option<PathBuf>,
+    /// Channel the samples belong to (optional when the configuration has one channel).
     #[arg(long)]
     channel: Option<String>,
-    /// Recorded samples (CSV: k, t, u0…, y0…, p0…).
+    /// Recorded samples: CSV (k, t, u0…, y0…, p0…) or an MCAP recording.
     input: PathBuf,
     /// First sample index of the regression (default: the first row).
     #[arg(long)]
@@ -63,33 +66,97 @@ struct Extent {
     last: u64,
 }
 
-fn open(path: &Path, dims: glrmon_core::Dims) -> anyhow::Result<CsvReader<impl BufRead>> {
-    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let reader = std::io::BufReader::with_capacity(1 << 16, file);
-    Ok(CsvReader::new(reader, dims)
-        .map_err(|e| InvalidInput(format!("{}: {e}", path.display())))?)
+/// The samples of one channel from a CSV file or an MCAP recording.
+enum Samples {
+    Csv(CsvReader<std::io::BufReader<std::fs::File>>),
+    Mcap(Box<McapInput>, String),
+}
+
+impl Samples {
+    fn open(path: &Path, channel: &str, dims: glrmon_core::Dims) -> anyhow::Result<Self> {
+        if is_mcap(path) {
+            return Ok(Self::Mcap(
+                Box::new(McapInput::open(path)?),
+                channel.to_owned(),
+            ));
+        }
+        let file =
+            std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+        let reader = std::io::BufReader::with_capacity(1 << 16, file);
+        Ok(Self::Csv(CsvReader::new(reader, dims).map_err(|e| {
+            InvalidInput(format!("{}: {e}", path.display()))
+        })?))
+    }
+
+    /// The next sample; `Some(Err)` for a sample that cannot be used (a bad row, a
+    /// refused or dropped payload in the recording).
+    fn next_into(&mut self, sample: &mut Sample) -> anyhow::Result<Option<Result<(), String>>> {
+        match self {
+            Self::Csv(csv) => Ok(csv
+                .next_into(sample)
+                .map(|r| r.map_err(|e| format!("{} ({})", e.message, e.code.as_str())))),
+            Self::Mcap(input, channel) => loop {
+                let Some(recorded) = input.next_input()? else {
+                    let (lines, damaged) = input.damage_report();
+                    if damaged {
+                        return Err(InvalidInput(lines.join("; ")).into());
+                    }
+                    return Ok(None);
+                };
+                if *recorded.channel != **channel {
+                    continue;
+                }
+                return Ok(Some(match recorded.item {
+                    InputItem::Sample(s) => {
+                        *sample = s;
+                        Ok(())
+                    }
+                    InputItem::Intake(IntakeEvent::Dropped { count }) => Err(format!(
+                        "{count} payload(s) of channel \"{channel}\" were dropped at intake here"
+                    )),
+                    InputItem::Intake(IntakeEvent::Rejected { message, .. }) => {
+                        Err(format!("a refused payload: {message}"))
+                    }
+                }));
+            },
+        }
+    }
+}
+
+/// The configuration recorded in an MCAP file.
+fn recorded_config(path: &Path) -> anyhow::Result<glrmon_spec::Config> {
+    let input = McapInput::open(path)?;
+    match input.header {
+        Some(h) if !h.config.is_empty() => glrmon_spec::parse(&h.config).map_err(|e| {
+            InvalidInput(format!(
+                "{}: the recorded configuration is invalid:\n{e}",
+                path.display()
+            ))
+            .into()
+        }),
+        _ => Err(InvalidInput(format!(
+            "{}: no glrmon configuration is recorded in this file: give --config",
+            path.display()
+        ))
+        .into()),
+    }
 }
 
 /// Calls `visit` with every sample of the file and its index k (the row's `k`, or its
 /// position). Bad rows and gaps are errors: the regression needs consecutive samples.
 fn for_each_sample(
     path: &Path,
+    channel: &str,
     dims: glrmon_core::Dims,
     mut visit: impl FnMut(u64, &Sample) -> anyhow::Result<bool>,
 ) -> anyhow::Result<Option<Extent>> {
-    let mut csv = open(path, dims)?;
+    let mut samples = Samples::open(path, channel, dims)?;
     let mut sample = Sample::default();
     let mut extent: Option<Extent> = None;
     let mut position = 0u64;
-    while let Some(row) = csv.next_into(&mut sample) {
+    while let Some(row) = samples.next_into(&mut sample)? {
         if let Err(e) = row {
-            return Err(InvalidInput(format!(
-                "{}: {} ({})",
-                path.display(),
-                e.message,
-                e.code.as_str()
-            ))
-            .into());
+            return Err(InvalidInput(format!("{}: {e}", path.display())).into());
         }
         let k = sample.k.unwrap_or(position);
         position = k + 1;
@@ -114,7 +181,17 @@ fn for_each_sample(
 }
 
 pub(crate) fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
-    let cfg = load_config(&args.config)?;
+    let cfg = match &args.config {
+        Some(path) => load_config(path)?,
+        None if is_mcap(&args.input) => recorded_config(&args.input)?,
+        None => {
+            return Err(InvalidInput(format!(
+                "{}: a CSV file needs --config (only MCAP recordings carry their configuration)",
+                args.input.display()
+            ))
+            .into());
+        }
+    };
     let mut channel = pick(&cfg, args.channel.as_deref())?.clone();
     if let Some(r) = args.residual {
         channel.diagnosis.residual = match r {
@@ -136,19 +213,8 @@ pub(crate) fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
                 .map_err(|e| InvalidInput(format!("channel \"{}\": {e}", channel.name)))?;
         }
     }
-    if args
-        .input
-        .extension()
-        .is_some_and(|x| x.eq_ignore_ascii_case("mcap"))
-    {
-        return Err(InvalidInput(format!(
-            "{}: MCAP input is not supported by diagnose yet: give a CSV file",
-            args.input.display()
-        ))
-        .into());
-    }
     // First pass: the file's extent, so that the span and the history are known.
-    let extent = for_each_sample(&args.input, channel.dims, |_, _| Ok(true))?
+    let extent = for_each_sample(&args.input, &channel.name, channel.dims, |_, _| Ok(true))?
         .ok_or_else(|| InvalidInput(format!("{}: no samples", args.input.display())))?;
     let from = args.from.unwrap_or(extent.first);
     let to = args.to.unwrap_or(extent.last);
@@ -164,7 +230,7 @@ pub(crate) fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     let history = usize::try_from(to - from + 2).unwrap_or(usize::MAX);
     let mut engine = DiagnosisEngine::new(&channel, history)
         .map_err(|e| InvalidInput(format!("channel \"{}\": {e}", channel.name)))?;
-    for_each_sample(&args.input, channel.dims, |k, s| {
+    for_each_sample(&args.input, &channel.name, channel.dims, |k, s| {
         let sample = glrmon_core::Sample {
             k,
             u: &s.u,
