@@ -449,7 +449,7 @@ fn live_run_recorded_then_replayed_gives_identical_records() {
                 .arg(&finished[0])
                 .args(["--channel", "ltv3", "--json"]),
         );
-    let d: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let d: serde_json::Value = serde_json::from_slice(&diag.stdout).unwrap();
     assert_eq!(
         d["support"],
         serde_json::json!(["f05", "f16", "f28", "f39", "f42"]),
@@ -464,7 +464,7 @@ fn live_run_recorded_then_replayed_gives_identical_records() {
         "live vs replay, identical records: {compared:?}; replay said: {}",
         String::from_utf8_lossy(&out.stderr)
             .lines()
-            .next()
+            .find(|l| l.contains("replayed"))
             .unwrap_or("")
     );
 }
