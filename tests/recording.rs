@@ -442,7 +442,7 @@ fn live_run_recorded_then_replayed_gives_identical_records() {
         }
     }
     // `glrmon diagnose` reads a recording too (its configuration included).
-    let out =
+    let diag =
         run_ok(
             glrmon()
                 .arg("diagnose")
