@@ -4,7 +4,7 @@ CARGO ?= cargo
 
 .DEFAULT_GOAL := help
 
-.PHONY: help deps build test fmt fmt-check lint unit doc check-deps check-config demo bench bench-e2e
+.PHONY: help deps build test fmt fmt-check lint unit doc check-deps check-config demo bench bench-e2e bench-replay
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-11s %s\n", $$1, $$2}'
@@ -52,3 +52,16 @@ bench: ## criterion benchmarks of the per-sample step (figures in docs/PERFORMAN
 bench-e2e: ## end-to-end load through Zenoh on loopback, 100 and 1000 channels (figures in docs/PERFORMANCE.md)
 	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 100 --samples 2000 --batch 10
 	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 1000 --samples 300 --batch 10
+
+BENCH_DIR ?= /tmp/glrmon-bench
+BENCH_SAMPLES ?= 10000000
+bench-replay: ## replay throughput and peak RSS on a 10 M-sample bench-A recording; recording overhead (figures in docs/PERFORMANCE.md)
+	$(CARGO) build --release -q -p glrmon-cli
+	mkdir -p $(BENCH_DIR)
+	./target/release/glrmon simulate --config config/demo.toml --channel lpv --samples $(BENCH_SAMPLES) --output $(BENCH_DIR)/a.csv
+	./target/release/glrmon replay --quiet --config config/demo.toml --channel lpv $(BENCH_DIR)/a.csv --output $(BENCH_DIR)/a.mcap
+	ls -l $(BENCH_DIR)/a.mcap
+	/usr/bin/time -f "replay MCAP -> JSONL: %e s wall, %M KiB peak RSS" ./target/release/glrmon replay --quiet $(BENCH_DIR)/a.mcap --output /dev/null
+	/usr/bin/time -f "replay MCAP -> MCAP: %e s wall, %M KiB peak RSS" ./target/release/glrmon replay --quiet $(BENCH_DIR)/a.mcap --output $(BENCH_DIR)/b.mcap
+	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 100 --samples 2000 --batch 10
+	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 100 --samples 2000 --batch 10 --record $(BENCH_DIR)/rec

@@ -627,9 +627,13 @@ mod tests {
         assert_eq!(all, (0..n).collect::<Vec<_>>());
         assert!(read.iter().all(|(_, _, end)| *end == ReadEnd::Finished));
 
-        // The cap: a recorder over the same directory with room for about two files.
+        // The cap: a recorder over the same directory, with room for the two newest
+        // files of the first recorder and its own (empty) file.
+        let size = |p: &Path| std::fs::metadata(p).unwrap().len();
+        let newest: Vec<&PathBuf> = files.iter().rev().take(2).collect();
+        let cap = newest.iter().map(|p| size(p)).sum::<u64>() + 10_000;
         let capped = RecorderSettings {
-            max_total_bytes: Some(45_000),
+            max_total_bytes: Some(cap),
             max_file_bytes: Some(1_000_000),
             ..settings
         };
@@ -637,14 +641,22 @@ mod tests {
         let stats = rec.stats();
         let _ = rec.finish();
         let left = read_dir(&dir);
-        let total: u64 = left
-            .iter()
-            .map(|(p, _, _)| std::fs::metadata(p).unwrap().len())
-            .sum();
-        assert!(total <= 45_000, "{total} bytes left");
-        assert!(stats.deleted.load(Ordering::Relaxed) >= 3);
-        // The newest files survive: the last input recorded is still there.
-        assert!(left.iter().any(|(_, ks, _)| ks.last() == Some(&(n - 1))));
+        let total: u64 = left.iter().map(|(p, _, _)| size(p)).sum();
+        assert!(total <= cap, "{total} bytes left, cap {cap}");
+        assert_eq!(left.len(), 3, "the two newest and the new file");
+        assert_eq!(
+            stats.deleted.load(Ordering::Relaxed),
+            files.len() as u64 - 2
+        );
+        for p in newest {
+            assert!(
+                left.iter().any(|(q, _, _)| q == p),
+                "{} deleted",
+                p.display()
+            );
+        }
+        // The last input recorded is still there.
+        assert!(left.iter().any(|(_, ks, _)| ks.contains(&(n - 1))));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -144,12 +144,34 @@ async fn main() {
         stat_every: 0,
         ..RuntimeSettings::default()
     };
-    let runtime = Runtime::start(
-        monitors,
-        vec![Box::new(ZenohSink::new(daemon.clone()))],
-        &settings,
-        Arc::new(Quiet),
-    );
+    let mut sinks: Vec<Box<dyn glrmon_runtime::Sink>> =
+        vec![Box::new(ZenohSink::new(daemon.clone()))];
+    // `--record DIR`: also record every input and stat to MCAP, as `glrmon run` does.
+    let record_dir = {
+        let args: Vec<String> = std::env::args().collect();
+        args.iter()
+            .position(|a| a == "--record")
+            .and_then(|i| args.get(i + 1).cloned())
+    };
+    let mut recorder_stats = None;
+    if let Some(dir) = &record_dir {
+        let recorder = glrmon_record::Recorder::start(
+            glrmon_record::RecorderSettings {
+                directory: dir.into(),
+                prefix: "bench".into(),
+                ..glrmon_record::RecorderSettings::default()
+            },
+            glrmon_record::FileHeader {
+                config: cfg.source.clone(),
+                channels: cfg.channels.iter().map(|c| c.name.clone()).collect(),
+                extra: std::collections::BTreeMap::new(),
+            },
+        )
+        .expect("recorder");
+        recorder_stats = Some(recorder.stats());
+        sinks.push(Box::new(recorder));
+    }
+    let runtime = Runtime::start(monitors, sinks, &settings, Arc::new(Quiet));
     let keys: Vec<String> = cfg.channels.iter().map(|c| c.key.clone()).collect();
     let _source = ZenohSource::declare(&daemon, &keys, &runtime.intake())
         .await
@@ -287,5 +309,21 @@ async fn main() {
         rss0,
         rss1
     );
-    let _ = runtime.shutdown(Duration::from_secs(10));
+    let (_, sinks) = runtime.shutdown(Duration::from_secs(60));
+    drop(sinks);
+    if let Some(stats) = recorder_stats {
+        let files = stats.finished.lock().unwrap().clone();
+        let bytes: u64 = files
+            .iter()
+            .filter_map(|f| std::fs::metadata(f).ok())
+            .map(|m| m.len())
+            .sum();
+        println!(
+            "recorded {} messages in {} file(s), {:.1} MB ({:.1} bytes per message)",
+            stats.messages.load(Ordering::Relaxed),
+            files.len(),
+            bytes as f64 / 1e6,
+            bytes as f64 / stats.messages.load(Ordering::Relaxed).max(1) as f64
+        );
+    }
 }
