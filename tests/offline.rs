@@ -246,6 +246,48 @@ fn replaying_the_same_csv_twice_gives_byte_identical_jsonl() {
     assert_eq!(std::fs::read(&csv).unwrap(), std::fs::read(&csv2).unwrap());
 }
 
+/// `simulate --output X.mcap` and `--output X.csv` with the same seed replay to the same
+/// JSON lines: the MCAP path (recorded configuration, JSON samples) and the CSV path
+/// feed the monitor the same bits.
+#[test]
+fn simulated_mcap_and_csv_replay_to_identical_jsonl() {
+    let dir = TempDir::new("mcap-csv");
+    let cfg = config("examples/dc-motor.toml");
+    let args = |out: &str| -> Vec<String> {
+        [
+            "simulate",
+            "--config",
+            &cfg,
+            "--samples",
+            "3000",
+            "--seed",
+            "5",
+            "--fault",
+            "actuator_bias",
+            "--onset",
+            "1500",
+            "--magnitude",
+            "0.5",
+            "--output",
+            out,
+        ]
+        .map(str::to_owned)
+        .to_vec()
+    };
+    let (csv, mcap) = (dir.file("s.csv"), dir.file("s.mcap"));
+    for out in [&csv, &mcap] {
+        let a = args(out);
+        ok(&glrmon(&a.iter().map(String::as_str).collect::<Vec<_>>()));
+    }
+    let (a, b) = (dir.file("a.jsonl"), dir.file("b.jsonl"));
+    ok(&glrmon(&["replay", "--config", &cfg, &csv, "--output", &a]));
+    ok(&glrmon(&["replay", &mcap, "--output", &b]));
+    let (a, b) = (std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
+    assert!(a.len() > 500_000, "{} bytes", a.len());
+    assert!(a == b, "CSV and MCAP replays differ");
+    assert!(!alarms(&records(&dir.file("b.jsonl"))).is_empty());
+}
+
 #[test]
 fn bad_rows_become_error_records_and_the_replay_continues() {
     let dir = TempDir::new("badrows");

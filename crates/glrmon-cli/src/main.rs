@@ -43,7 +43,7 @@ enum Command {
     Demo(demo::DemoArgs),
     /// Validate a configuration; print each channel's summary and isolability report.
     Validate(validate::ValidateArgs),
-    /// Simulate a channel's model, optionally with a fault, to a CSV file.
+    /// Simulate a channel's model, optionally with a fault, to a CSV or MCAP file or to Zenoh.
     Simulate(simulate::SimulateArgs),
     /// Run the monitors over recorded samples (CSV, or an MCAP recording with its
     /// configuration) to the same numbers as live; JSON lines, MCAP, HTML report.

@@ -40,7 +40,7 @@ pub(crate) struct SimulateArgs {
     /// instead of the config's `simulation.signals` expressions.
     #[arg(long)]
     signals: Option<PathBuf>,
-    /// Output CSV file.
+    /// Output file: CSV, or an MCAP recording of the samples (with the configuration) when the name ends in .mcap.
     #[arg(long, required_unless_present = "publish")]
     output: Option<PathBuf>,
     /// Publish the samples on the channel's key expression instead of (or as well as)
@@ -195,15 +195,36 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
             }
         }));
     }
+    // An MCAP output holds the samples as a recording's inputs, with the configuration:
+    // `glrmon replay OUT.mcap` needs nothing else.
+    let mut mcap_out = match &args.output {
+        Some(path) if crate::mcapin::is_mcap(path) => Some(
+            glrmon_record::McapFile::create(
+                path,
+                glrmon_record::FileOptions::default(),
+                &glrmon_record::FileHeader {
+                    config: cfg.source.clone(),
+                    channels: vec![channel.name.clone()],
+                    extra: std::collections::BTreeMap::from([(
+                        "source".to_owned(),
+                        format!("glrmon simulate --seed {}", args.seed),
+                    )]),
+                },
+            )
+            .with_context(|| format!("creating {}", path.display()))?,
+        ),
+        _ => None,
+    };
+    let mut json = Vec::new();
     let mut csv_out = match &args.output {
-        Some(path) => {
+        Some(path) if mcap_out.is_none() => {
             let file = std::fs::File::create(path)
                 .with_context(|| format!("creating {}", path.display()))?;
             let mut out = std::io::BufWriter::new(file);
             csv::write_header(&mut out, channel.dims, channel.period.is_some())?;
             Some(out)
         }
-        None => None,
+        _ => None,
     };
     let mut x = SimSample {
         k: 0,
@@ -218,6 +239,25 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         if let Some(out) = &mut csv_out {
             csv::write_row(out, x.k, t, &x.u, &x.y, &x.p)?;
         }
+        if let Some(out) = &mut mcap_out {
+            let sample = glrmon_wire::Sample {
+                k: Some(x.k),
+                t,
+                u: x.u.clone(),
+                y: x.y.clone(),
+                p: x.p.clone(),
+            };
+            json.clear();
+            glrmon_wire::encode_sample(&channel.name, &sample, &mut json)?;
+            let time = glrmon_record::publish_time(t, x.k);
+            out.write(
+                &channel.name,
+                glrmon_record::TopicKind::Inputs,
+                time,
+                time,
+                &json,
+            )?;
+        }
         if args.publish {
             samples.push(glrmon_wire::Sample {
                 k: Some(x.k),
@@ -230,6 +270,9 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     }
     if let Some(mut out) = csv_out {
         out.flush()?;
+    }
+    if let Some(out) = mcap_out {
+        out.finish()?;
     }
     if args.publish {
         let rt = tokio::runtime::Builder::new_multi_thread()
