@@ -128,6 +128,14 @@ impl AlarmState {
         self.settings
     }
 
+    /// Ends any episode at once (the detector restarts): returns its start and peak.
+    pub fn reset(&mut self) -> Option<(u64, f64)> {
+        let ended = self.started.take().map(|s| (s, self.peak));
+        self.peak = 0.0;
+        self.below = 0;
+        ended
+    }
+
     /// Replaces the settings (e.g. a reloaded threshold) without ending an episode.
     pub fn set_settings(&mut self, settings: AlarmSettings) {
         self.settings = settings;

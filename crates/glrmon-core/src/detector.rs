@@ -140,6 +140,9 @@ pub struct Detector {
     input_moments: Vec<(f64, f64)>,
     input_count: u64,
     input_variance: Vec<f64>,
+    /// The initial state and covariance, for [`Detector::restart`].
+    x0: DVector<f64>,
+    p0: DMatrix<f64>,
 }
 
 impl Detector {
@@ -195,7 +198,7 @@ impl Detector {
             });
         }
         let (n, p, m) = (dims.states, dims.outputs, faults.len());
-        let filter = InnovationFilter::new(x0, p0, p)?;
+        let filter = InnovationFilter::new(x0.clone(), p0.clone(), p)?;
         let kinds = faults.faults().iter().map(|f| f.onset).collect();
         let bank = WindowBank::new(
             n,
@@ -225,7 +228,40 @@ impl Detector {
             input_moments: vec![(0.0, 0.0); dims.inputs],
             input_count: 0,
             input_variance: vec![0.0; dims.inputs],
+            x0,
+            p0,
         })
+    }
+
+    /// Forgets every sample: the filter starts again from (x̂₀, P₀), the window is
+    /// empty and the next sample may carry any index, as for a new detector. For a run
+    /// that cannot be continued: a gap longer than the channel tolerates (predict-only
+    /// steps over it would only blow P up on an unstable plant), or a numerical failure.
+    /// Allocates (it is off the per-sample path).
+    ///
+    /// # Errors
+    /// [`ModelError`] only if (x̂₀, P₀) were invalid, which [`Detector::new`] excludes.
+    pub fn restart(&mut self) -> Result<(), ModelError> {
+        let (n, p, m) = (self.dims.states, self.dims.outputs, self.faults.len());
+        self.filter = InnovationFilter::new(self.x0.clone(), self.p0.clone(), p)?;
+        let kinds = self.faults.faults().iter().map(|f| f.onset).collect();
+        self.bank = WindowBank::new(
+            n,
+            m,
+            p,
+            self.settings.window,
+            self.settings.min_lag,
+            kinds,
+            self.settings.rank_tolerance,
+        );
+        self.held_u.fill(0.0);
+        self.held_p.fill(0.0);
+        self.next_k = None;
+        self.last_measured = None;
+        self.input_moments.fill((0.0, 0.0));
+        self.input_count = 0;
+        self.input_variance.fill(0.0);
+        Ok(())
     }
 
     /// Processes sample k: the measurement update, the signatures and sufficient

@@ -66,8 +66,9 @@ pub struct MonitorSettings {
     pub isolation_alpha: f64,
     /// The isolation tests; empty means one per fault against all others.
     pub groups: Vec<IsolationGroup>,
-    /// Largest gap (missing samples) filled with predict-only steps; a larger jump is
-    /// rejected as `gap` and the sample dropped.
+    /// Largest gap (missing samples) filled with predict-only steps; after a longer one
+    /// the filter restarts from its initial state at the sample that follows it
+    /// (reported as `gap`), so that an outage never leaves a channel dead.
     pub max_gap: u64,
 }
 
@@ -82,6 +83,9 @@ pub struct MonitorCounters {
     pub alarms: u64,
     /// Sparse diagnoses emitted.
     pub diagnoses: u64,
+    /// Restarts of the filter from its initial state (after a gap longer than
+    /// `max_gap`, or a numerical failure).
+    pub restarts: u64,
     /// Rejections by code.
     pub errors: std::collections::BTreeMap<&'static str, u64>,
 }
@@ -263,34 +267,40 @@ impl Monitor {
             if k > next {
                 let missing = k - next;
                 if missing > self.settings.max_gap {
-                    self.reject(
-                        records,
-                        Some(k),
-                        ErrorCode::Gap,
-                        format!(
-                            "{missing} samples missing before k = {k}, more than max_gap = {}; sample dropped",
-                            self.settings.max_gap
-                        ),
+                    let why = format!(
+                        "{missing} samples missing before k = {k}, more than max_gap = {}: \
+                         the filter restarts from its initial state at k = {k}",
+                        self.settings.max_gap
                     );
-                    return;
-                }
-                for gap_k in next..k {
-                    if let Err(e) = self.detector.predict_only(gap_k) {
-                        self.reject(records, Some(gap_k), ErrorCode::Numerical, e.to_string());
-                        return;
+                    self.restart(k, sample.t, ErrorCode::Gap, why, records);
+                } else {
+                    let mut failed = None;
+                    for gap_k in next..k {
+                        if let Err(e) = self.detector.predict_only(gap_k) {
+                            failed = Some((gap_k, e));
+                            break;
+                        }
+                        self.counters.gap_samples += 1;
                     }
-                    self.counters.gap_samples += 1;
+                    if let Some((gap_k, e)) = failed {
+                        let why = format!(
+                            "predict-only step at k = {gap_k} failed ({e}): the filter \
+                             restarts from its initial state at k = {k}"
+                        );
+                        self.restart(k, sample.t, ErrorCode::Numerical, why, records);
+                    } else {
+                        self.diagnosis_restart = true;
+                        self.reject(
+                            records,
+                            Some(k),
+                            ErrorCode::Gap,
+                            format!(
+                                "samples {next}..{} missing: filled by predict-only steps",
+                                k - 1
+                            ),
+                        );
+                    }
                 }
-                self.diagnosis_restart = true;
-                self.reject(
-                    records,
-                    Some(k),
-                    ErrorCode::Gap,
-                    format!(
-                        "samples {next}..{} missing: filled by predict-only steps",
-                        k - 1
-                    ),
-                );
             }
         }
         let core_sample = glrmon_core::Sample {
@@ -321,7 +331,17 @@ impl Monitor {
                 StepError::OutOfOrder { .. } => ErrorCode::OutOfOrder,
                 _ => ErrorCode::Numerical,
             };
-            self.reject(records, Some(k), code, e.to_string());
+            if code == ErrorCode::Numerical {
+                // The filter cannot go on from this state (e.g. Σ_k lost definiteness):
+                // the next sample starts a new run.
+                let why = format!(
+                    "{e}: sample dropped; the filter restarts from its initial state at the \
+                     next sample"
+                );
+                self.restart(k, sample.t, code, why, records);
+            } else {
+                self.reject(records, Some(k), code, e.to_string());
+            }
             return;
         }
         self.counters.samples += 1;
@@ -459,6 +479,39 @@ impl Monitor {
                 })
             })
             .collect()
+    }
+
+    /// Restarts the detector from its initial state (see [`Detector::restart`]): an
+    /// ongoing alarm episode ends here (`alarm_end`), a pending isolation is dropped,
+    /// the residual filter of sparse diagnosis restarts too; reported as an `error`.
+    fn restart(
+        &mut self,
+        k: u64,
+        t: Option<f64>,
+        code: ErrorCode,
+        why: String,
+        records: &mut Vec<Record>,
+    ) {
+        if let Some((started, peak)) = self.alarm.reset() {
+            if self.pending.is_some() {
+                self.emit_alarm(k, t, records);
+            }
+            records.push(Record::AlarmEnd(AlarmEnd {
+                channel: self.channel.clone(),
+                k,
+                t,
+                onset: self.reported_onset,
+                duration: k - started,
+                peak_glr: peak,
+            }));
+        }
+        self.pending = None;
+        self.counters.restarts += 1;
+        self.diagnosis_restart = true;
+        if let Err(e) = self.detector.restart() {
+            self.reject(records, Some(k), ErrorCode::Numerical, e.to_string());
+        }
+        self.reject(records, Some(k), code, why);
     }
 
     fn reject(&mut self, records: &mut Vec<Record>, k: Option<u64>, code: ErrorCode, why: String) {
@@ -611,6 +664,49 @@ mod tests {
         );
         assert_eq!(mon.counters().alarms, 0);
     }
+    /// A gap longer than max_gap (10) in the middle of an alarm episode: the episode
+    /// ends there (`alarm_end`), the filter restarts at the next sample, and the
+    /// channel goes on detecting: the same fault later raises a new alarm. Before, the
+    /// sample after such a gap, and every later one, was dropped.
+    #[test]
+    fn a_gap_longer_than_max_gap_restarts_the_filter_and_monitoring_goes_on() {
+        let sc = scenarios::paper2014_unstable();
+        let mut sim = sc.simulator(3).unwrap();
+        let mut mon = monitor();
+        let mut records = Vec::new();
+        for i in 0..2000u64 {
+            let mut x = sim.next_sample();
+            if (210..1210).contains(&i) {
+                continue;
+            }
+            if i == 201 || i == 1601 {
+                x.y[0] += 4.0;
+            }
+            mon.on_sample(&sample(&x), &mut records);
+        }
+        let c = mon.counters();
+        assert_eq!(c.restarts, 1);
+        assert_eq!(c.samples, 1000);
+        let ends: Vec<&AlarmEnd> = records
+            .iter()
+            .filter_map(|r| match r {
+                Record::AlarmEnd(e) => Some(e),
+                _ => None,
+            })
+            .collect();
+        let alarms: Vec<&Alarm> = records
+            .iter()
+            .filter_map(|r| match r {
+                Record::Alarm(a) => Some(a),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(ends.first().map(|e| e.k), Some(1210), "{ends:?}");
+        assert!(alarms.iter().any(|a| a.onset == 1601), "{alarms:?}");
+        assert!(records.iter().any(|r| matches!(r, Record::Error(e)
+            if e.code == ErrorCode::Gap && e.k == Some(1210) && e.message.contains("restarts"))));
+    }
+
     /// A small plant with four step faults; the alarm's diagnosis isolates the
     /// injected sensor bias and sizes it. With only m = 4 faults the plateau rule of
     /// Zhang 2021 §IV competes with the path's lower end (a run of noise-level supports

@@ -660,6 +660,35 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    /// Rotation by age: a file older than `max_file_duration` is finished at the next
+    /// flush and a new one begun; no input is lost or repeated across the files.
+    #[test]
+    fn rotation_by_duration_finishes_files_as_they_age() {
+        let dir = scratch("age");
+        let settings = RecorderSettings {
+            directory: dir.clone(),
+            max_file_duration: Some(Duration::from_millis(30)),
+            flush_interval: Duration::from_millis(10),
+            ..RecorderSettings::default()
+        };
+        let mut rec = Recorder::start(settings, header()).unwrap();
+        let stats = rec.stats();
+        let mut k = 0;
+        // Until three files are finished (bounded), one input at a time.
+        let t = Instant::now();
+        while stats.files.load(Ordering::Relaxed) < 3 && t.elapsed() < Duration::from_secs(20) {
+            rec.write_input(&input(k, k)).unwrap();
+            k += 1;
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let files = rec.finish();
+        assert!(files.len() >= 4, "{files:?}");
+        let read = read_dir(&dir);
+        let all: Vec<u64> = read.iter().flat_map(|(_, ks, _)| ks.clone()).collect();
+        assert_eq!(all, (0..k).collect::<Vec<_>>());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     /// Capture mode: without an alarm no input is written; at an alarm the last
     /// `before` of inputs are, then `after` more.
     #[test]

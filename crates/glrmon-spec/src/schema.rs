@@ -337,7 +337,8 @@ pub struct GlrSpec {
     pub groups: Vec<GroupSpec>,
     /// Relative rank cut-off τ for C_k(r) (default 10⁻⁹).
     pub rank_tolerance: Option<f64>,
-    /// Largest run of missing samples filled by predict-only steps (default 100).
+    /// Largest run of missing samples filled by predict-only steps (default 100); after
+    /// a longer one the filter restarts from its initial state.
     #[serde(default = "default_max_gap")]
     pub max_gap: u64,
 }
