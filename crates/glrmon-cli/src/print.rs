@@ -2,7 +2,7 @@
 
 use std::fmt::Write as _;
 
-use glrmon_wire::{Alarm, AlarmEnd, Diagnosis, ErrorRecord, Record};
+use glrmon_wire::{Alarm, AlarmEnd, Consistency, Diagnosis, ErrorRecord, Record};
 
 /// One line for an alarm or alarm end; `None` for other records.
 pub(crate) fn line(record: &Record) -> Option<String> {
@@ -11,6 +11,7 @@ pub(crate) fn line(record: &Record) -> Option<String> {
         Record::AlarmEnd(e) => Some(end_line(e)),
         Record::Diagnosis(d) => Some(diagnosis_line(d)),
         Record::Error(e) => Some(error_line(e)),
+        Record::Consistency(c) => Some(consistency_line(c)),
         _ => None,
     }
 }
@@ -74,6 +75,21 @@ fn diagnosis_line(d: &Diagnosis) -> String {
         d.support.join(", "),
         est.join(", "),
         d.lambda
+    )
+}
+
+fn consistency_line(c: &Consistency) -> String {
+    format!(
+        "MODEL {} k={} consistency={} nis_mean={:.3} band=[{:.3}, {:.3}] expected={} window={}{}",
+        c.channel,
+        c.k,
+        c.state,
+        c.nis_mean,
+        c.band[0],
+        c.band[1],
+        c.expected,
+        c.window,
+        time(c.t)
     )
 }
 

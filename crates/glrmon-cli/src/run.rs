@@ -65,6 +65,14 @@ impl Sink for LogSink {
                     tracing::info!(channel = output.record.channel(), "{line}");
                 }
             }
+            Record::Consistency(c) => {
+                let line = print::line(&output.record).unwrap_or_default();
+                if c.state == "consistent" {
+                    tracing::info!(channel = %c.channel, "The model fits again: {line}");
+                } else {
+                    tracing::warn!(channel = %c.channel, "The model no longer fits the plant: {line}");
+                }
+            }
             Record::Error(e) => {
                 let key = (e.channel.clone(), e.code.as_str());
                 let now = Instant::now();

@@ -166,6 +166,21 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
     } else {
         let _ = writeln!(s, "  sparse diagnosis at alarms: off");
     }
+    match channel.consistency {
+        Some(c) => {
+            let band = glrmon_core::consistency::Consistency::new(channel.dims.outputs, c)
+                .map(|t| t.band())
+                .unwrap_or((f64::NAN, f64::NAN));
+            let _ = writeln!(
+                s,
+                "  model consistency: blocks of {} samples, mean of εᵀΣ⁻¹ε expected {} within [{:.3}, {:.3}] (α = {:e})",
+                c.window, channel.dims.outputs, band.0, band.1, c.alpha
+            );
+        }
+        None => {
+            let _ = writeln!(s, "  model consistency: off");
+        }
+    }
     let (info, steady, samples) = window_information(channel)?;
     match steady {
         Some(sigma) => {

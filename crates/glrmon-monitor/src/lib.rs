@@ -38,6 +38,7 @@ pub mod diagnosis;
 
 pub use diagnosis::{DiagnosisEngine, DiagnosisError, SpanDiagnosis};
 
+use glrmon_core::consistency::Consistency;
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{AlarmSettings, AlarmState, AlarmTransition, Detector, StepError, StepOutput};
 use glrmon_wire::{
@@ -111,6 +112,8 @@ pub struct Monitor {
     /// The residual filter is failing (reported once per run of failures, not at every
     /// sample).
     diagnosis_failing: bool,
+    /// The filter-consistency test, when enabled.
+    consistency: Option<Consistency>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -157,7 +160,16 @@ impl Monitor {
             diagnosis: None,
             diagnosis_restart: false,
             diagnosis_failing: false,
+            consistency: None,
         }
+    }
+
+    /// Adds the filter-consistency test (see [`glrmon_core::consistency`]): a
+    /// `consistency` record whenever a block's verdict changes.
+    #[must_use]
+    pub fn with_consistency(mut self, consistency: Consistency) -> Self {
+        self.consistency = Some(consistency);
+        self
     }
 
     /// Runs `engine` alongside the detector and emits a `diagnosis` record after every
@@ -196,7 +208,10 @@ impl Monitor {
                 .collect(),
             max_gap: channel.max_gap,
         };
-        let monitor = Self::new(&channel.name, channel.detector()?, settings);
+        let mut monitor = Self::new(&channel.name, channel.detector()?, settings);
+        if let Some(c) = channel.consistency {
+            monitor = monitor.with_consistency(Consistency::new(channel.dims.outputs, c)?);
+        }
         if !channel.diagnosis.enabled {
             return Ok(monitor);
         }
@@ -345,6 +360,27 @@ impl Monitor {
             return;
         }
         self.counters.samples += 1;
+        if let Some(block) = self
+            .consistency
+            .as_mut()
+            .and_then(|c| c.update(self.out.normalized_innovation))
+        {
+            if block.changed {
+                records.push(Record::Consistency(glrmon_wire::Consistency {
+                    channel: self.channel.clone(),
+                    k,
+                    t: sample.t,
+                    state: block.verdict.as_str().to_owned(),
+                    nis_mean: block.mean,
+                    expected: self.detector.dims().outputs as f64,
+                    band: [block.band.0, block.band.1],
+                    window: self
+                        .consistency
+                        .as_ref()
+                        .map_or(0, |c| c.settings().window as u64),
+                }));
+            }
+        }
         if let Some(engine) = &mut self.diagnosis {
             match engine.step(&core_sample) {
                 // A success right after a restart (a plain Kalman update, no unknown
@@ -507,6 +543,9 @@ impl Monitor {
         }
         self.pending = None;
         self.counters.restarts += 1;
+        if let Some(c) = &mut self.consistency {
+            c.reset_block();
+        }
         self.diagnosis_restart = true;
         if let Err(e) = self.detector.restart() {
             self.reject(records, Some(k), ErrorCode::Numerical, e.to_string());

@@ -26,11 +26,13 @@ pub enum TopicKind {
     Diagnosis,
     /// `error` records.
     Error,
+    /// `consistency` records.
+    Consistency,
 }
 
 impl TopicKind {
     /// Every kind, in topic order.
-    pub const ALL: [TopicKind; 7] = [
+    pub const ALL: [TopicKind; 8] = [
         TopicKind::Inputs,
         TopicKind::Intake,
         TopicKind::Stat,
@@ -38,6 +40,7 @@ impl TopicKind {
         TopicKind::AlarmEnd,
         TopicKind::Diagnosis,
         TopicKind::Error,
+        TopicKind::Consistency,
     ];
 
     /// The last part of the topic and the `kind` metadata value.
@@ -51,6 +54,7 @@ impl TopicKind {
             TopicKind::AlarmEnd => "alarm_end",
             TopicKind::Diagnosis => "diagnosis",
             TopicKind::Error => "error",
+            TopicKind::Consistency => "consistency",
         }
     }
 
@@ -70,6 +74,7 @@ impl TopicKind {
             Record::AlarmEnd(_) => TopicKind::AlarmEnd,
             Record::Diagnosis(_) => TopicKind::Diagnosis,
             Record::Error(_) => TopicKind::Error,
+            Record::Consistency(_) => TopicKind::Consistency,
             _ => return None,
         })
     }
@@ -85,6 +90,7 @@ impl TopicKind {
             TopicKind::AlarmEnd => "glrmon.AlarmEnd",
             TopicKind::Diagnosis => "glrmon.Diagnosis",
             TopicKind::Error => "glrmon.Error",
+            TopicKind::Consistency => "glrmon.Consistency",
         }
     }
 
@@ -99,6 +105,7 @@ impl TopicKind {
             TopicKind::AlarmEnd => ALARM_END,
             TopicKind::Diagnosis => DIAGNOSIS,
             TopicKind::Error => ERROR,
+            TopicKind::Consistency => CONSISTENCY,
         }
     }
 }
@@ -241,5 +248,24 @@ const ERROR: &str = r#"{
     "stage": {"type": "string", "enum": ["receiving", "processing", "sending"]}
   },
   "required": ["type", "channel", "code", "message", "stage"],
+  "additionalProperties": false
+}"#;
+
+const CONSISTENCY: &str = r#"{
+  "title": "glrmon consistency",
+  "description": "Filter consistency: block mean of the normalised innovation squared against its chi-square band.",
+  "type": "object",
+  "properties": {
+    "type": {"type": "string", "enum": ["consistency"]},
+    "channel": {"type": "string"},
+    "k": {"type": "integer"},
+    "t": {"type": ["number", "null"]},
+    "state": {"type": "string", "enum": ["consistent", "too_large", "too_small"]},
+    "nis_mean": {"type": "number"},
+    "expected": {"type": "number"},
+    "band": {"type": "array", "items": {"type": "number"}},
+    "window": {"type": "integer"}
+  },
+  "required": ["type", "channel", "k", "state", "nis_mean", "expected", "band", "window"],
   "additionalProperties": false
 }"#;

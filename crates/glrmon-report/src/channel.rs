@@ -3,7 +3,7 @@
 
 use std::collections::BTreeMap;
 
-use glrmon_wire::{Alarm, AlarmEnd, Diagnosis, ErrorRecord, Stat};
+use glrmon_wire::{Alarm, AlarmEnd, Consistency, Diagnosis, ErrorRecord, Stat};
 
 use crate::decimate::{ColumnId, Grid};
 
@@ -47,6 +47,9 @@ pub(crate) struct ChannelState {
     pub(crate) diagnoses_total: u64,
     pub(crate) errors: Vec<ErrorRecord>,
     pub(crate) error_counts: BTreeMap<&'static str, u64>,
+    /// Changes of the filter-consistency verdict (the first ones kept) and their count.
+    pub(crate) consistency: Vec<Consistency>,
+    pub(crate) consistency_total: u64,
 }
 
 impl ChannelState {
@@ -76,6 +79,8 @@ impl ChannelState {
             diagnoses_total: 0,
             errors: Vec::new(),
             error_counts: BTreeMap::new(),
+            consistency: Vec::new(),
+            consistency_total: 0,
         }
     }
 
@@ -139,6 +144,14 @@ impl ChannelState {
         self.see_k(d.k);
         if self.diagnoses.len() < MAX_DIAGNOSES {
             self.diagnoses.push(d.clone());
+        }
+    }
+
+    pub(crate) fn add_consistency(&mut self, c: &Consistency) {
+        self.see_k(c.k);
+        self.consistency_total = self.consistency_total.saturating_add(1);
+        if self.consistency.len() < MAX_DIAGNOSES {
+            self.consistency.push(c.clone());
         }
     }
 

@@ -102,7 +102,7 @@ pub(crate) fn write_page<W: Write>(report: &Report, mut out: W) -> io::Result<()
 
 fn summary_table(report: &Report) -> String {
     let mut s = String::from(
-        "<h2>Summary</h2>\n<table class=\"summary\"><tr><th>Channel</th><th>Samples</th><th>k range</th><th>Alarms</th><th>Episodes ended</th><th>Onsets r̂</th><th>Isolated faults</th><th>Diagnoses</th><th>Errors by code</th></tr>\n",
+        "<h2>Summary</h2>\n<table class=\"summary\"><tr><th>Channel</th><th>Samples</th><th>k range</th><th>Alarms</th><th>Episodes ended</th><th>Onsets r̂</th><th>Isolated faults</th><th>Diagnoses</th><th>Model consistency</th><th>Errors by code</th></tr>\n",
     );
     for (i, (name, ch)) in report.channels.iter().enumerate() {
         let k_range = ch
@@ -154,6 +154,24 @@ fn summary_table(report: &Report) -> String {
             ch.diagnoses_total,
             "<br>",
         );
+        let consistency = if ch.consistency_total == 0 {
+            "fits".to_owned()
+        } else {
+            listing(
+                ch.consistency.iter().map(|c| {
+                    format!(
+                        "k={}: {} (mean εᵀΣ⁻¹ε {} vs [{}, {}])",
+                        c.k,
+                        escape(&c.state),
+                        fmt_num(c.nis_mean),
+                        fmt_num(c.band[0]),
+                        fmt_num(c.band[1])
+                    )
+                }),
+                ch.consistency_total,
+                "<br>",
+            )
+        };
         let errors = if ch.error_counts.is_empty() {
             "0".to_owned()
         } else {
@@ -165,7 +183,7 @@ fn summary_table(report: &Report) -> String {
         };
         let _ = writeln!(
             s,
-            "<tr><td><a href=\"#ch-{i}\"><code>{}</code></a></td><td class=\"num\">{}</td><td class=\"num\">{k_range}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{onsets}</td><td>{isolated}</td><td>{diagnoses}</td><td>{errors}</td></tr>",
+            "<tr><td><a href=\"#ch-{i}\"><code>{}</code></a></td><td class=\"num\">{}</td><td class=\"num\">{k_range}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{onsets}</td><td>{isolated}</td><td>{diagnoses}</td><td>{consistency}</td><td>{errors}</td></tr>",
             escape(name),
             ch.stats,
             ch.alarms_total,

@@ -108,6 +108,7 @@ impl Report {
             Record::AlarmEnd(e) => ch.add_alarm_end(e),
             Record::Diagnosis(d) => ch.add_diagnosis(d),
             Record::Error(e) => ch.add_error(e),
+            Record::Consistency(c) => ch.add_consistency(c),
             _ => self.unknown_records = self.unknown_records.saturating_add(1),
         }
     }

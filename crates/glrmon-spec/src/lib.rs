@@ -247,6 +247,8 @@ pub struct Channel {
     pub simulation: SimulationPlan,
     /// Sparse diagnosis settings.
     pub diagnosis: DiagnosisSettings,
+    /// The filter-consistency test, when enabled.
+    pub consistency: Option<glrmon_core::consistency::ConsistencySettings>,
     faults: Vec<FaultPlan>,
 }
 
@@ -843,6 +845,23 @@ impl Validator {
             groups.push((g.name.clone(), idx));
         }
         let simulation = self.simulation(prefix, spec, dims, e.as_ref());
+        let c = spec.consistency;
+        let consistency = if c.enabled {
+            let settings = glrmon_core::consistency::ConsistencySettings {
+                window: c.window,
+                alpha: c.alpha,
+            };
+            match glrmon_core::consistency::Consistency::new(dims.outputs, settings) {
+                Ok(_) => Some(settings),
+                Err(e) => {
+                    let field = if c.window == 0 { "window" } else { "alpha" };
+                    self.error(format!("{prefix}.consistency.{field}"), e.to_string());
+                    None
+                }
+            }
+        } else {
+            None
+        };
         if self.errors.len() > before {
             return None;
         }
@@ -878,6 +897,7 @@ impl Validator {
             fault_names: faults.iter().map(|f| f.name.clone()).collect(),
             simulation,
             diagnosis,
+            consistency,
             faults,
         })
     }

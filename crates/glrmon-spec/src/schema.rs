@@ -228,6 +228,9 @@ pub struct ChannelSpec {
     /// Sparse fault diagnosis (Zhang 2021) at alarms and in `glrmon diagnose`.
     #[serde(default)]
     pub diagnosis: DiagnosisSpec,
+    /// Filter-consistency monitor (`[channels.consistency]`).
+    #[serde(default)]
+    pub consistency: ConsistencySpec,
 }
 
 /// Model matrices (letters of Zhang & Basseville 2014, eq. (1)).
@@ -457,4 +460,37 @@ pub struct LassoSpec {
     pub path_points: Option<usize>,
     /// λ_min/λ_max, in (0, 1) (default 1e-4).
     pub ratio: Option<f64>,
+}
+
+/// `[channels.consistency]`: the block χ² test of εᵀΣ⁻¹ε that warns when the model no
+/// longer fits the plant (a `consistency` record, distinct from fault alarms).
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConsistencySpec {
+    /// On by default.
+    #[serde(default = "default_true")]
+    pub enabled: bool,
+    /// Samples per block (default 500).
+    #[serde(default = "default_consistency_window")]
+    pub window: usize,
+    /// Probability that a block of a fitting model falls outside the band (default 10⁻⁶).
+    #[serde(default = "default_consistency_alpha")]
+    pub alpha: f64,
+}
+
+impl Default for ConsistencySpec {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            window: default_consistency_window(),
+            alpha: default_consistency_alpha(),
+        }
+    }
+}
+
+fn default_consistency_window() -> usize {
+    500
+}
+fn default_consistency_alpha() -> f64 {
+    1e-6
 }

@@ -16,8 +16,8 @@ pub use key::{
     validate_channel_name,
 };
 pub use record::{
-    Alarm, AlarmEnd, Diagnosis, ErrorRecord, IsolationResult, RECORD_KINDS, Record, Stat,
-    decode_record, encode_json,
+    Alarm, AlarmEnd, Consistency, Diagnosis, ErrorRecord, IsolationResult, RECORD_KINDS, Record,
+    Stat, decode_record, encode_json,
 };
 pub use sample::{DecodeLimits, Sample, decode_samples, encode_sample, encode_samples};
 

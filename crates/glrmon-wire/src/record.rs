@@ -132,6 +132,30 @@ impl Diagnosis {
     pub const RESIDUAL_KITANIDIS: &'static str = "kitanidis";
 }
 
+/// A change of the filter-consistency verdict (`type: "consistency"`): the block mean of
+/// the normalised innovation squared εᵀΣ⁻¹ε left, or came back into, its χ² band. A
+/// warning that the model no longer fits the plant, distinct from fault alarms.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Consistency {
+    /// Channel name.
+    pub channel: String,
+    /// The last sample of the block.
+    pub k: u64,
+    /// Its time.
+    pub t: Option<f64>,
+    /// `too_large` (innovations larger than the model says: Q, R or the model too
+    /// optimistic), `too_small` (too pessimistic) or `consistent` (back in the band).
+    pub state: String,
+    /// Mean of εᵀΣ⁻¹ε over the block.
+    pub nis_mean: f64,
+    /// Its expected value under a fitting model: p, the number of outputs.
+    pub expected: f64,
+    /// The band `[low, high]` on the block mean at the configured level.
+    pub band: [f64; 2],
+    /// Samples per block.
+    pub window: u64,
+}
+
 /// A counted rejection or failure (`type: "error"`).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ErrorRecord {
@@ -215,10 +239,19 @@ pub enum Record {
     Diagnosis(Diagnosis),
     /// `"error"`.
     Error(ErrorRecord),
+    /// `"consistency"`.
+    Consistency(Consistency),
 }
 
 /// Every record `type`, in the order of [`Record`]'s variants.
-pub const RECORD_KINDS: [&str; 5] = ["stat", "alarm", "alarm_end", "diagnosis", "error"];
+pub const RECORD_KINDS: [&str; 6] = [
+    "stat",
+    "alarm",
+    "alarm_end",
+    "diagnosis",
+    "error",
+    "consistency",
+];
 
 impl Record {
     /// The record's channel.
@@ -230,10 +263,12 @@ impl Record {
             Record::AlarmEnd(r) => &r.channel,
             Record::Diagnosis(r) => &r.channel,
             Record::Error(r) => &r.channel,
+            Record::Consistency(r) => &r.channel,
         }
     }
 
-    /// The `type` tag: `stat`, `alarm`, `alarm_end`, `diagnosis` or `error`.
+    /// The `type` tag: `stat`, `alarm`, `alarm_end`, `diagnosis`, `error` or
+    /// `consistency`.
     #[must_use]
     pub const fn kind_str(&self) -> &'static str {
         match self {
@@ -242,6 +277,7 @@ impl Record {
             Record::AlarmEnd(_) => "alarm_end",
             Record::Diagnosis(_) => "diagnosis",
             Record::Error(_) => "error",
+            Record::Consistency(_) => "consistency",
         }
     }
 
@@ -254,6 +290,7 @@ impl Record {
             Record::AlarmEnd(r) => Some(r.k),
             Record::Diagnosis(r) => Some(r.k),
             Record::Error(r) => r.k,
+            Record::Consistency(r) => Some(r.k),
         }
     }
 
@@ -309,6 +346,12 @@ impl Record {
                 c.all("plateau", &r.plateau)
             }
             Record::Error(_) => Ok(()),
+            Record::Consistency(r) => {
+                c.opt("t", r.t)?;
+                c.one("nis_mean", r.nis_mean)?;
+                c.one("expected", r.expected)?;
+                c.all("band", &r.band)
+            }
         }
     }
 }
@@ -351,7 +394,7 @@ macro_rules! record_from {
         }
     )*};
 }
-record_from!(Stat => Stat, Alarm => Alarm, AlarmEnd => AlarmEnd, Diagnosis => Diagnosis, ErrorRecord => Error);
+record_from!(Stat => Stat, Alarm => Alarm, AlarmEnd => AlarmEnd, Diagnosis => Diagnosis, ErrorRecord => Error, Consistency => Consistency);
 
 /// Appends `record` as one JSON object (no trailing newline) to `out`.
 ///
@@ -585,8 +628,20 @@ const ERROR_SCHEMA: Schema = &[
     ("stage", Ty::Stage),
 ];
 
+const CONSISTENCY_SCHEMA: Schema = &[
+    ("channel", Ty::Str),
+    ("k", Ty::U64),
+    ("t", Ty::OptF64),
+    ("state", Ty::Str),
+    ("nis_mean", Ty::F64),
+    ("expected", Ty::F64),
+    ("band", Ty::Pair),
+    ("window", Ty::U64),
+];
+
 fn schema(kind: &str) -> Option<Schema> {
     match kind {
+        "consistency" => Some(CONSISTENCY_SCHEMA),
         "stat" => Some(STAT_SCHEMA),
         "alarm" => Some(ALARM_SCHEMA),
         "alarm_end" => Some(ALARM_END_SCHEMA),
@@ -599,7 +654,7 @@ fn schema(kind: &str) -> Option<Schema> {
 type Located = (String, DecodeErrorKind);
 
 fn locate(obj: &Map<String, Value>) -> Option<Located> {
-    const EXPECT_KIND: &str = "one of stat, alarm, alarm_end, diagnosis, error";
+    const EXPECT_KIND: &str = "one of stat, alarm, alarm_end, diagnosis, error, consistency";
     let kind = match obj.get("type") {
         None => return Some(("type".to_owned(), DecodeErrorKind::MissingField)),
         Some(Value::String(kind)) => kind,
@@ -794,6 +849,17 @@ mod tests {
             diagnosis().into(),
             error().into(),
             ErrorRecord { k: None, ..error() }.into(),
+            Consistency {
+                channel: "pump3".into(),
+                k: 999,
+                t: Some(12.5),
+                state: "too_large".into(),
+                nis_mean: 4.25,
+                expected: 1.0,
+                band: [0.7, 1.3],
+                window: 500,
+            }
+            .into(),
         ]
     }
 
@@ -835,6 +901,12 @@ mod tests {
                     .for_each(&mut push);
             }
             Record::Error(_) => {}
+            Record::Consistency(r) => {
+                r.t.into_iter()
+                    .chain([r.nis_mean, r.expected])
+                    .chain(r.band)
+                    .for_each(&mut push)
+            }
         }
         out
     }
@@ -923,7 +995,8 @@ mod tests {
                 "alarm_end",
                 "diagnosis",
                 "error",
-                "error"
+                "error",
+                "consistency"
             ]
         );
         for record in all_records() {
