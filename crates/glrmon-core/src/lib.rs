@@ -2,6 +2,7 @@
 #![warn(missing_docs)]
 
 pub mod alarm;
+pub mod calibration;
 pub mod consistency;
 pub mod detector;
 pub mod error;
