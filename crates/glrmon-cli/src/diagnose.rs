@@ -67,13 +67,17 @@ struct Extent {
 }
 
 /// The samples of one channel from a CSV file or an MCAP recording.
-enum Samples {
+pub(crate) enum Samples {
     Csv(CsvReader<std::io::BufReader<std::fs::File>>),
     Mcap(Box<McapInput>, String),
 }
 
 impl Samples {
-    fn open(path: &Path, channel: &str, dims: glrmon_core::Dims) -> anyhow::Result<Self> {
+    pub(crate) fn open(
+        path: &Path,
+        channel: &str,
+        dims: glrmon_core::Dims,
+    ) -> anyhow::Result<Self> {
         if is_mcap(path) {
             return Ok(Self::Mcap(
                 Box::new(McapInput::open(path)?),
@@ -90,7 +94,10 @@ impl Samples {
 
     /// The next sample; `Some(Err)` for a sample that cannot be used (a bad row, a
     /// refused or dropped payload in the recording).
-    fn next_into(&mut self, sample: &mut Sample) -> anyhow::Result<Option<Result<(), String>>> {
+    pub(crate) fn next_into(
+        &mut self,
+        sample: &mut Sample,
+    ) -> anyhow::Result<Option<Result<(), String>>> {
         match self {
             Self::Csv(csv) => Ok(csv
                 .next_into(sample)
@@ -124,7 +131,7 @@ impl Samples {
 }
 
 /// The configuration recorded in an MCAP file.
-fn recorded_config(path: &Path) -> anyhow::Result<glrmon_spec::Config> {
+pub(crate) fn recorded_config(path: &Path) -> anyhow::Result<glrmon_spec::Config> {
     let input = McapInput::open(path)?;
     match input.header {
         Some(h) if !h.config.is_empty() => glrmon_spec::parse(&h.config).map_err(|e| {

@@ -3,6 +3,7 @@
 //! Exit codes: 0 success, 1 invalid input or configuration, 2 usage error, 3 runtime
 //! failure.
 
+mod calibrate;
 mod csv;
 mod demo;
 mod diagnose;
@@ -48,6 +49,9 @@ enum Command {
     /// Run the monitors over recorded samples (CSV, or an MCAP recording with its
     /// configuration) to the same numbers as live; JSON lines, MCAP, HTML report.
     Replay(replay::ReplayArgs),
+    /// Find a channel's detection threshold for a target mean time between false
+    /// alarms, on fault-free data (recorded or simulated).
+    Calibrate(calibrate::CalibrateArgs),
     /// Rewrite an unfinished or damaged MCAP recording as a finished file with
     /// everything readable in it.
     Recover(recover::RecoverArgs),
@@ -95,6 +99,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => simulate::run(args),
         Command::Replay(args) => replay::run(args),
         Command::Recover(args) => recover::run(args),
+        Command::Calibrate(args) => calibrate::run(args),
         Command::Diagnose(args) => diagnose::run(args),
         Command::Run(args) => run::run(args),
         Command::Watch(args) => watch::run(args),

@@ -139,9 +139,25 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
     let threshold = match channel.threshold_source {
         ThresholdSource::Explicit => format!("{:.4} (explicit)", channel.alarm.threshold),
         ThresholdSource::Bonferroni { false_alarm } => format!(
-            "{:.4} (χ²({}) upper quantile at {false_alarm:e}/(w − s), Bonferroni)",
+            "{:.4} (χ²({}) upper quantile at {false_alarm:e}/(w − s), Bonferroni: conservative)",
             channel.alarm.threshold,
             channel.fault_names.len()
+        ),
+        ThresholdSource::Chi2 { false_alarm } => format!(
+            "{:.4} (χ²({}) upper quantile at {false_alarm:e} per onset: optimistic, the window's \
+             maximum exceeds it far more often; see `glrmon calibrate`)",
+            channel.alarm.threshold,
+            channel.fault_names.len()
+        ),
+        ThresholdSource::Calibrated {
+            mtbfa,
+            samples,
+            episodes,
+            interval,
+        } => format!(
+            "{:.4} (calibrated for one false-alarm episode per {mtbfa} samples on {samples} \
+             fault-free samples, {episodes} episodes; 95 % interval {:.4}–{:.4})",
+            channel.alarm.threshold, interval[0], interval[1]
         ),
     };
     let _ = writeln!(s, "  model: {model}; {window}; threshold {threshold}");

@@ -135,6 +135,22 @@ pub enum ThresholdSource {
         /// α.
         false_alarm: f64,
     },
+    /// χ²(m) upper quantile at α: right for one onset, optimistic for the window.
+    Chi2 {
+        /// α.
+        false_alarm: f64,
+    },
+    /// Found by `glrmon calibrate` on fault-free data.
+    Calibrated {
+        /// Target mean number of samples between false-alarm episodes.
+        mtbfa: f64,
+        /// Samples used.
+        samples: u64,
+        /// Episodes at λ on them.
+        episodes: u64,
+        /// 95 % confidence interval of λ.
+        interval: [f64; 2],
+    },
 }
 
 /// PI controller of a simulated channel.
@@ -794,36 +810,81 @@ impl Validator {
         }
         let m = faults.len().max(1);
         let known = faults.iter().all(|f| f.onset == Onset::Known);
-        let (threshold, threshold_source) = match (glr.threshold, glr.false_alarm) {
-            (Some(_), Some(_)) => {
+        let given = [
+            glr.threshold.is_some(),
+            glr.false_alarm.is_some(),
+            glr.calibrated.is_some(),
+        ];
+        if given.iter().filter(|&&g| g).count() > 1 {
+            self.error(
+                gpath("threshold"),
+                "give one of `threshold`, `false_alarm` and `[channels.glr.calibrated]`".into(),
+            );
+        }
+        if glr.threshold_mode.is_some() && glr.threshold.is_some() {
+            self.error(
+                gpath("threshold_mode"),
+                "applies to `false_alarm`, not to an explicit `threshold`".into(),
+            );
+        }
+        let positive = |t: f64| t.is_finite() && t > 0.0;
+        let (threshold, threshold_source) = if let Some(t) = glr.threshold {
+            if !positive(t) {
                 self.error(
                     gpath("threshold"),
-                    "give either `threshold` or `false_alarm`, not both".into(),
+                    format!("{t} must be finite and positive"),
                 );
-                (0.0, ThresholdSource::Explicit)
             }
-            (Some(t), None) => {
-                if !(t.is_finite() && t > 0.0) {
+            (t, ThresholdSource::Explicit)
+        } else if let Some(c) = &glr.calibrated {
+            if !positive(c.threshold) {
+                self.error(
+                    gpath("calibrated.threshold"),
+                    format!("{} must be finite and positive", c.threshold),
+                );
+            }
+            if !(c.interval[0] <= c.threshold && c.threshold <= c.interval[1]) {
+                self.error(
+                    gpath("calibrated.interval"),
+                    format!(
+                        "[{}, {}] does not contain the threshold {}",
+                        c.interval[0], c.interval[1], c.threshold
+                    ),
+                );
+            }
+            (
+                c.threshold,
+                ThresholdSource::Calibrated {
+                    mtbfa: c.mtbfa,
+                    samples: c.samples,
+                    episodes: c.episodes,
+                    interval: c.interval,
+                },
+            )
+        } else {
+            let a = glr.false_alarm.unwrap_or(1e-4);
+            let chi2 = match glr.threshold_mode.as_deref() {
+                None | Some("bonferroni") => false,
+                Some("chi2") => true,
+                Some(other) => {
                     self.error(
-                        gpath("threshold"),
-                        format!("{t} must be finite and positive"),
+                        gpath("threshold_mode"),
+                        format!("\"{other}\" is not one of bonferroni, chi2"),
                     );
+                    false
                 }
-                (t, ThresholdSource::Explicit)
-            }
-            (None, alpha) => {
-                let a = alpha.unwrap_or(1e-4);
-                let onsets = if known {
-                    1
-                } else {
-                    glr.window.saturating_sub(glr.min_lag).max(1)
-                };
-                match chi2_upper_quantile(m as f64, a / onsets as f64) {
-                    Ok(t) => (t, ThresholdSource::Bonferroni { false_alarm: a }),
-                    Err(e) => {
-                        self.error(gpath("false_alarm"), e.to_string());
-                        (0.0, ThresholdSource::Explicit)
-                    }
+            };
+            let onsets = if known || chi2 {
+                1
+            } else {
+                glr.window.saturating_sub(glr.min_lag).max(1)
+            };
+            match chi2_upper_quantile(m as f64, a / onsets as f64) {
+                Ok(t) if chi2 => (t, ThresholdSource::Chi2 { false_alarm: a }),
+                Ok(t) => (t, ThresholdSource::Bonferroni { false_alarm: a }),
+                Err(e) => {
+                    self.error(gpath("false_alarm"), e.to_string());
+                    (0.0, ThresholdSource::Explicit)
                 }
             }
         };

@@ -322,8 +322,15 @@ pub struct GlrSpec {
     /// Explicit threshold λ on l_k.
     pub threshold: Option<f64>,
     /// Target false-alarm probability per sample (default 10⁻⁴ when no threshold is
-    /// given): λ is the χ²(m) upper quantile at α/(w − s) (Bonferroni over the window).
+    /// given): λ is the χ²(m) upper quantile at α/(w − s) (Bonferroni over the window),
+    /// or at α with `threshold_mode = "chi2"`.
     pub false_alarm: Option<f64>,
+    /// How `false_alarm` becomes λ: `bonferroni` (default; a conservative bound) or
+    /// `chi2` (the per-onset quantile; optimistic: the maximum over the window exceeds
+    /// it far more often than α).
+    pub threshold_mode: Option<String>,
+    /// A threshold found by `glrmon calibrate` for a mean time between false alarms.
+    pub calibrated: Option<CalibratedSpec>,
     /// Hysteresis h: an episode ends below λ(1 − h) (default 0.1).
     #[serde(default = "default_hysteresis")]
     pub hysteresis: f64,
@@ -353,6 +360,8 @@ impl Default for GlrSpec {
             min_lag: default_min_lag(),
             threshold: None,
             false_alarm: None,
+            threshold_mode: None,
+            calibrated: None,
             hysteresis: default_hysteresis(),
             clear_samples: default_clear(),
             isolation_delay: None,
@@ -493,4 +502,24 @@ fn default_consistency_window() -> usize {
 }
 fn default_consistency_alpha() -> f64 {
     1e-6
+}
+
+/// `[channels.glr.calibrated]`: a threshold from `glrmon calibrate`, with what it was
+/// calibrated for and on.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibratedSpec {
+    /// λ.
+    pub threshold: f64,
+    /// Target mean number of samples between false-alarm episodes.
+    pub mtbfa: f64,
+    /// Fault-free samples it was calibrated on.
+    pub samples: u64,
+    /// Episodes at λ on those samples.
+    pub episodes: u64,
+    /// 95 % confidence interval of λ.
+    pub interval: [f64; 2],
+    /// Where the data came from (free text).
+    #[serde(default)]
+    pub source: String,
 }

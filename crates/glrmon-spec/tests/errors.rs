@@ -217,7 +217,22 @@ fn threshold_and_false_alarm_together() {
             "window = 50",
             "window = 50\nthreshold = 20.0\nfalse_alarm = 1e-3",
         ),
-        "give either `threshold` or `false_alarm`",
+        "give one of `threshold`, `false_alarm` and `[channels.glr.calibrated]`",
+    );
+}
+
+#[test]
+fn unknown_threshold_mode_and_calibrated_interval_not_containing_the_threshold() {
+    assert_error(
+        &with("window = 50", "window = 50\nthreshold_mode = \"magic\""),
+        "\"magic\" is not one of bonferroni, chi2",
+    );
+    assert_error(
+        &with(
+            "window = 50\nmin_lag = 1",
+            "window = 50\nmin_lag = 1\n[channels.glr.calibrated]\nthreshold = 20.0\nmtbfa = 1e4\nsamples = 1000000\nepisodes = 98\ninterval = [21.0, 22.0]",
+        ),
+        "does not contain the threshold 20",
     );
 }
 

@@ -1,0 +1,302 @@
+//! `glrmon calibrate`: the detection threshold of a channel for a target mean time
+//! between false alarms, found on fault-free data (a recording, or data simulated from
+//! the channel's model) with the channel's own monitor, so that gaps, restarts and the
+//! hysteresis count as they do live. See [`glrmon_core::calibration`].
+
+use std::io::IsTerminal as _;
+use std::path::{Path, PathBuf};
+
+use clap::Args;
+use glrmon_core::calibration::{Calibration, CalibrationError, calibrate};
+use glrmon_monitor::Monitor;
+use glrmon_sim::SimSample;
+use glrmon_wire::{Record, Sample};
+
+use crate::diagnose::{Samples, recorded_config};
+use crate::mcapin::is_mcap;
+use crate::simulate::{pick, simulator};
+use crate::{InvalidInput, load_config};
+
+#[derive(Debug, Args)]
+pub(crate) struct CalibrateArgs {
+    /// Configuration file (optional for MCAP input: the recorded one is used).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Channel to calibrate (optional when the configuration has one channel).
+    #[arg(long)]
+    channel: Option<String>,
+    /// Fault-free recorded samples: CSV or MCAP.
+    #[arg(conflicts_with = "simulate", required_unless_present = "simulate")]
+    input: Option<PathBuf>,
+    /// Simulate this many fault-free samples from the channel's model instead (split
+    /// over the cores, each part with its own seed).
+    #[arg(long)]
+    simulate: Option<u64>,
+    /// Seed of the first simulated part.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Target mean number of samples between false-alarm episodes.
+    #[arg(long)]
+    mtbfa: f64,
+    /// Write the result into the configuration file as `[channels.glr.calibrated]`
+    /// (comments and layout kept).
+    #[arg(long)]
+    write: bool,
+    /// Print the result as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    let cfg = match (&args.config, &args.input) {
+        (Some(path), _) => load_config(path)?,
+        (None, Some(input)) if is_mcap(input) => recorded_config(input)?,
+        _ => {
+            return Err(InvalidInput(
+                "give --config (only an MCAP recording carries its configuration)".into(),
+            )
+            .into());
+        }
+    };
+    if args.write && args.config.is_none() {
+        return Err(InvalidInput("--write needs --config: the file to update".into()).into());
+    }
+    let channel = pick(&cfg, args.channel.as_deref())?;
+    let (glr, source) = match (args.simulate, &args.input) {
+        (Some(n), _) => (
+            simulated(channel, n, args.seed)?,
+            format!("{n} samples simulated from seed {}", args.seed),
+        ),
+        (None, Some(input)) => (recorded(channel, input)?, format!("{}", input.display())),
+        (None, None) => unreachable!("clap requires one"),
+    };
+    let g = &channel.alarm;
+    let c = calibrate(&glr, args.mtbfa, g.hysteresis, g.clear_samples).map_err(|e| match e {
+        CalibrationError::TooLittleData { .. } | CalibrationError::Invalid(_) => {
+            InvalidInput(format!("channel \"{}\": {e}", channel.name))
+        }
+    })?;
+    if args.json {
+        println!(
+            "{{\"channel\":{:?},\"threshold\":{:?},\"interval\":[{:?},{:?}],\"mtbfa\":{:?},\"mtbfa_interval\":[{:?},{:?}],\"samples\":{},\"episodes\":{},\"expected_episodes\":{:?}}}",
+            channel.name,
+            c.threshold,
+            c.threshold_interval.0,
+            c.threshold_interval.1,
+            c.mtbfa,
+            c.mtbfa_interval.0,
+            c.mtbfa_interval.1,
+            c.samples,
+            c.episodes,
+            c.expected_episodes
+        );
+    } else {
+        print!("{}", text(&channel.name, &c, g.threshold, &source));
+    }
+    if args.write {
+        if let Some(path) = &args.config {
+            write(path, &channel.name, &c, &source)?;
+            eprintln!("glrmon calibrate: {} updated", path.display());
+        }
+    }
+    Ok(())
+}
+
+fn text(channel: &str, c: &Calibration, current: f64, source: &str) -> String {
+    let precision = 1.96 / (c.episodes.max(1) as f64).sqrt();
+    format!(
+        "channel \"{channel}\": threshold {:.4} for one false-alarm episode per {} samples\n  \
+         data: {} fault-free samples ({source}), {} episodes at the threshold (the target \
+         expects {:.1})\n  95 % interval: threshold {:.4}–{:.4}, mean samples between false \
+         alarms {:.0}–{:.0} (about ±{:.0} % on the rate; {} samples would give ±30 %)\n  \
+         current threshold {current:.4}\n\n[channels.glr.calibrated]\nthreshold = {:?}\nmtbfa = {:?}\nsamples = {}\nepisodes = {}\ninterval = [{:?}, {:?}]\n",
+        c.threshold,
+        c.mtbfa,
+        c.samples,
+        c.episodes,
+        c.expected_episodes,
+        c.threshold_interval.0,
+        c.threshold_interval.1,
+        c.mtbfa_interval.0,
+        c.mtbfa_interval.1,
+        precision * 100.0,
+        (43.0 * c.mtbfa).ceil(),
+        c.threshold,
+        c.mtbfa,
+        c.samples,
+        c.episodes,
+        c.threshold_interval.0,
+        c.threshold_interval.1,
+    )
+}
+
+/// l_k of every sample (NaN where no onset is admissible) of the channel's monitor fed
+/// with `samples`; a sample the monitor rejects contributes nothing.
+fn monitor_glr(
+    channel: &glrmon_spec::Channel,
+    mut next: impl FnMut(&mut Sample) -> anyhow::Result<bool>,
+    progress: Option<&indicatif::ProgressBar>,
+) -> anyhow::Result<Vec<f64>> {
+    let mut mon = Monitor::from_channel(channel)?;
+    let mut sample = Sample::default();
+    let mut records = Vec::new();
+    let mut glr = Vec::new();
+    let mut n = 0u64;
+    while next(&mut sample)? {
+        mon.on_sample(&sample, &mut records);
+        for r in records.drain(..) {
+            if let Record::Stat(s) = r {
+                glr.push(s.glr.unwrap_or(f64::NAN));
+            }
+        }
+        n += 1;
+        if n % 65_536 == 0 {
+            if let Some(p) = progress {
+                p.inc(65_536);
+            }
+        }
+    }
+    Ok(glr)
+}
+
+fn bar(len: u64) -> Option<indicatif::ProgressBar> {
+    std::io::stderr().is_terminal().then(|| {
+        let b = indicatif::ProgressBar::new(len);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} samples, eta {eta}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b
+    })
+}
+
+/// `n` fault-free samples from the model, in one part per core (seeds seed, seed+1, …).
+fn simulated(channel: &glrmon_spec::Channel, n: u64, seed: u64) -> anyhow::Result<Vec<f64>> {
+    let parts = std::thread::available_parallelism()
+        .map_or(1, std::num::NonZero::get)
+        .min(usize::try_from(n / 10_000).unwrap_or(1).max(1)) as u64;
+    let progress = bar(n);
+    let results: Vec<anyhow::Result<Vec<f64>>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..parts)
+            .map(|i| {
+                let len = n / parts + u64::from(i < n % parts);
+                let progress = progress.as_ref();
+                scope.spawn(move || {
+                    let mut sim = simulator(channel, seed + i, &[], 0, &[])?;
+                    let mut x = SimSample {
+                        k: 0,
+                        u: vec![],
+                        y: vec![],
+                        p: vec![],
+                    };
+                    let mut left = len;
+                    monitor_glr(
+                        channel,
+                        |s| {
+                            if left == 0 {
+                                return Ok(false);
+                            }
+                            left -= 1;
+                            sim.next_into(&mut x);
+                            s.k = Some(x.k);
+                            s.t = None;
+                            s.u.clone_from(&x.u);
+                            s.y.clone_from(&x.y);
+                            s.p.clone_from(&x.p);
+                            Ok(true)
+                        },
+                        progress,
+                    )
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|_| Err(anyhow::anyhow!("a calibration thread panicked")))
+            })
+            .collect()
+    });
+    if let Some(b) = progress {
+        b.finish_and_clear();
+    }
+    let mut all = Vec::with_capacity(usize::try_from(n).unwrap_or(0));
+    for r in results {
+        // The parts are independent runs: joined, one sample with no admissible onset
+        // between them keeps an episode from spanning two parts.
+        all.extend(r?);
+        all.push(f64::NAN);
+    }
+    Ok(all)
+}
+
+fn recorded(channel: &glrmon_spec::Channel, input: &Path) -> anyhow::Result<Vec<f64>> {
+    let mut samples = Samples::open(input, &channel.name, channel.dims)?;
+    let progress = bar(0);
+    let glr = monitor_glr(
+        channel,
+        |s| loop {
+            match samples.next_into(s)? {
+                None => return Ok(false),
+                Some(Ok(())) => return Ok(true),
+                // A row or payload the monitor never saw: skipped, as live.
+                Some(Err(_)) => {}
+            }
+        },
+        progress.as_ref(),
+    )?;
+    if let Some(b) = progress {
+        b.finish_and_clear();
+    }
+    Ok(glr)
+}
+
+/// Sets `[channels.glr.calibrated]` of `channel` in the file, removing the other ways of
+/// setting the threshold; everything else (comments, order) is kept.
+fn write(path: &Path, channel: &str, c: &Calibration, source: &str) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(path)?;
+    let mut doc: toml_edit::DocumentMut = text
+        .parse()
+        .map_err(|e| InvalidInput(format!("{}: {e}", path.display())))?;
+    let channels = doc
+        .get_mut("channels")
+        .and_then(toml_edit::Item::as_array_of_tables_mut)
+        .ok_or_else(|| InvalidInput(format!("{}: no [[channels]]", path.display())))?;
+    let table = channels
+        .iter_mut()
+        .find(|t| t.get("name").and_then(|v| v.as_str()) == Some(channel))
+        .ok_or_else(|| InvalidInput(format!("{}: no channel \"{channel}\"", path.display())))?;
+    if table.get("glr").is_none() {
+        table.insert("glr", toml_edit::table());
+    }
+    let glr = table
+        .get_mut("glr")
+        .and_then(toml_edit::Item::as_table_mut)
+        .ok_or_else(|| InvalidInput(format!("{}: channels.glr is not a table", path.display())))?;
+    for key in ["threshold", "false_alarm", "threshold_mode"] {
+        glr.remove(key);
+    }
+    let mut cal = toml_edit::Table::new();
+    cal.insert("threshold", toml_edit::value(c.threshold));
+    cal.insert("mtbfa", toml_edit::value(c.mtbfa));
+    cal.insert(
+        "samples",
+        toml_edit::value(i64::try_from(c.samples).unwrap_or(i64::MAX)),
+    );
+    cal.insert(
+        "episodes",
+        toml_edit::value(i64::try_from(c.episodes).unwrap_or(i64::MAX)),
+    );
+    let mut interval = toml_edit::Array::new();
+    interval.push(c.threshold_interval.0);
+    interval.push(c.threshold_interval.1);
+    cal.insert("interval", toml_edit::value(interval));
+    cal.insert("source", toml_edit::value(source));
+    glr.insert("calibrated", toml_edit::Item::Table(cal));
+    let updated = doc.to_string();
+    glrmon_spec::parse(&updated)
+        .map_err(|e| InvalidInput(format!("the updated configuration would be invalid:\n{e}")))?;
+    std::fs::write(path, updated)?;
+    Ok(())
+}
