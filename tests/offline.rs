@@ -418,3 +418,59 @@ fn simulate_takes_scheduling_signals_from_a_file() {
             .contains("has 50 rows of signals, 60 samples requested")
     );
 }
+
+/// Issue 7, `glrmon evaluate` on the DC motor, both faults, 200 seeded runs each: every
+/// run detects, the sensor drift within 30 samples (median), the actuator bias within 5,
+/// and the isolation names the injected fault alone in at least 90 % of the runs.
+#[test]
+fn evaluate_dc_motor_reports_detection_delay_and_confusion() {
+    let dir = TempDir::new("evaluate");
+    let cfg = config("examples/dc-motor.toml");
+    let json = dir.file("eval.json");
+    let text = ok(&glrmon(&[
+        "evaluate",
+        "--config",
+        &cfg,
+        "--fault",
+        "speed_sensor_drift:0.01",
+        "--fault",
+        "actuator_bias:0.5",
+        "--runs",
+        "200",
+        "--json",
+        &json,
+    ]));
+    assert!(text.contains("isolation at the first alarm"), "{text}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let onset = v["onset"].as_u64().unwrap();
+    for (r, max_delay) in v["results"].as_array().unwrap().iter().zip([30, 5]) {
+        let fault = r["fault"].as_str().unwrap();
+        let runs = r["runs"].as_array().unwrap();
+        assert_eq!(runs.len(), 200);
+        let mut delays: Vec<u64> = runs
+            .iter()
+            .map(|x| x["crossing"].as_u64().expect("every run detects") - onset)
+            .collect();
+        delays.sort_unstable();
+        assert!(
+            delays[100] <= max_delay,
+            "{fault}: median delay {}",
+            delays[100]
+        );
+        let right = runs
+            .iter()
+            .filter(|x| x["isolated"] == serde_json::json!([fault]))
+            .count();
+        assert!(
+            right >= 180,
+            "{fault}: isolated alone in {right} of 200 runs"
+        );
+        let false_alarms: u64 = runs
+            .iter()
+            .map(|x| x["false_alarms"].as_u64().unwrap())
+            .sum();
+        assert_eq!(false_alarms, 0, "{fault}");
+    }
+    eprintln!("{text}");
+}

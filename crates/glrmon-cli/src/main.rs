@@ -7,6 +7,7 @@ mod calibrate;
 mod csv;
 mod demo;
 mod diagnose;
+mod evaluate;
 mod mcapin;
 mod net;
 mod print;
@@ -52,6 +53,9 @@ enum Command {
     /// Find a channel's detection threshold for a target mean time between false
     /// alarms, on fault-free data (recorded or simulated).
     Calibrate(calibrate::CalibrateArgs),
+    /// Monte-Carlo fault injection through the simulator and the monitor: detection
+    /// rate, delay, onset error, false alarms and the isolation confusion matrix.
+    Evaluate(evaluate::EvaluateArgs),
     /// Rewrite an unfinished or damaged MCAP recording as a finished file with
     /// everything readable in it.
     Recover(recover::RecoverArgs),
@@ -100,6 +104,7 @@ fn main() -> ExitCode {
         Command::Replay(args) => replay::run(args),
         Command::Recover(args) => recover::run(args),
         Command::Calibrate(args) => calibrate::run(args),
+        Command::Evaluate(args) => evaluate::run(args),
         Command::Diagnose(args) => diagnose::run(args),
         Command::Run(args) => run::run(args),
         Command::Watch(args) => watch::run(args),
