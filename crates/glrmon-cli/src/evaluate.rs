@@ -191,13 +191,12 @@ fn one_run(
         mon.on_sample(&sample, &mut records);
         for r in records.drain(..) {
             match r {
-                Record::Stat(s) => {
+                Record::Stat(s)
                     if run.crossing.is_none()
                         && s.k >= onset
-                        && s.glr.is_some_and(|l| l > threshold)
-                    {
-                        run.crossing = Some(s.k);
-                    }
+                        && s.glr.is_some_and(|l| l > threshold) =>
+                {
+                    run.crossing = Some(s.k);
                 }
                 Record::Alarm(a) if a.k < onset => run.false_alarms += 1,
                 Record::Alarm(a) if !alarmed => {
