@@ -94,5 +94,45 @@ fn calibrated_threshold_gives_its_false_alarm_rate_on_an_independent_run() {
         (70.0..=130.0).contains(&alarms),
         "{alarms} episodes: {said}"
     );
+
+    // The isolation thresholds written with it: on independent fault-free data the
+    // minmax statistic at r̂ exceeds each of them with the channel's α = 1 % (±30 %),
+    // where the χ²(1) quantile (6.63) is exceeded far more often.
+    assert!(written.contains("isolation = {"), "{written}");
+    let out = glrmon(&[
+        "calibrate",
+        "--config",
+        cfg,
+        "--simulate",
+        "1000000",
+        "--seed",
+        "77",
+        "--mtbfa",
+        "10000",
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let episodes = v["current_episodes"].as_u64().unwrap();
+    assert!((70..=130).contains(&episodes), "{v}");
+    for test in v["isolation"].as_array().unwrap() {
+        let rate = test["current_rate"].as_f64().unwrap();
+        eprintln!(
+            "isolation test {}: calibrated threshold {} exceeded by {:.2} % of independent fault-free samples (target 1 %)",
+            test["test"],
+            test["current_threshold"],
+            100.0 * rate
+        );
+        assert!((0.007..=0.013).contains(&rate), "{test}");
+    }
+    let before: Vec<f64> = said
+        .lines()
+        .filter_map(|l| l.split("is exceeded by ").nth(1))
+        .filter_map(|r| r.split(" %").next()?.parse().ok())
+        .collect();
+    assert_eq!(before.len(), 2, "{said}");
+    assert!(
+        before.iter().all(|&p| p > 5.0),
+        "χ²(1) thresholds over-isolate: {before:?}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

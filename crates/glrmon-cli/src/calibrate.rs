@@ -7,7 +7,11 @@ use std::io::IsTerminal as _;
 use std::path::{Path, PathBuf};
 
 use clap::Args;
-use glrmon_core::calibration::{Calibration, CalibrationError, calibrate};
+use std::collections::BTreeMap;
+
+use glrmon_core::calibration::{
+    Calibration, CalibrationError, Quantile, calibrate, count_episodes, upper_quantile,
+};
 use glrmon_monitor::Monitor;
 use glrmon_sim::SimSample;
 use glrmon_wire::{Record, Sample};
@@ -62,7 +66,7 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         return Err(InvalidInput("--write needs --config: the file to update".into()).into());
     }
     let channel = pick(&cfg, args.channel.as_deref())?;
-    let (glr, source) = match (args.simulate, &args.input) {
+    let (stats, source) = match (args.simulate, &args.input) {
         (Some(n), _) => (
             simulated(channel, n, args.seed)?,
             format!("{n} samples simulated from seed {}", args.seed),
@@ -71,14 +75,43 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         (None, None) => unreachable!("clap requires one"),
     };
     let g = &channel.alarm;
-    let c = calibrate(&glr, args.mtbfa, g.hysteresis, g.clear_samples).map_err(|e| match e {
-        CalibrationError::TooLittleData { .. } | CalibrationError::Invalid(_) => {
-            InvalidInput(format!("channel \"{}\": {e}", channel.name))
-        }
-    })?;
+    let current_episodes = count_episodes(&stats.glr, *g);
+    let c =
+        calibrate(&stats.glr, args.mtbfa, g.hysteresis, g.clear_samples).map_err(|e| match e {
+            CalibrationError::TooLittleData { .. } | CalibrationError::Invalid(_) => {
+                InvalidInput(format!("channel \"{}\": {e}", channel.name))
+            }
+        })?;
+    let alpha = channel.isolation_alpha;
+    let mut isolation = Vec::new();
+    for (test, mut values) in stats.isolation {
+        let current = current_isolation_threshold(channel, &test);
+        let exceeded =
+            values.iter().filter(|&&v| v > current).count() as f64 / values.len().max(1) as f64;
+        let q = upper_quantile(&mut values, alpha);
+        isolation.push(IsolationCalibration {
+            test,
+            quantile: q,
+            current,
+            current_rate: exceeded,
+        });
+    }
     if args.json {
+        let iso: Vec<String> = isolation
+            .iter()
+            .map(|i| {
+                format!(
+                    "{{\"test\":{:?},\"threshold\":{},\"samples\":{},\"current_threshold\":{:?},\"current_rate\":{:?}}}",
+                    i.test,
+                    i.quantile.map_or("null".into(), |q| format!("{:?}", q.value)),
+                    i.quantile.map_or(0, |q| q.samples),
+                    i.current,
+                    i.current_rate
+                )
+            })
+            .collect();
         println!(
-            "{{\"channel\":{:?},\"threshold\":{:?},\"interval\":[{:?},{:?}],\"mtbfa\":{:?},\"mtbfa_interval\":[{:?},{:?}],\"samples\":{},\"episodes\":{},\"expected_episodes\":{:?}}}",
+            "{{\"channel\":{:?},\"threshold\":{:?},\"interval\":[{:?},{:?}],\"mtbfa\":{:?},\"mtbfa_interval\":[{:?},{:?}],\"samples\":{},\"episodes\":{},\"expected_episodes\":{:?},\"current_threshold\":{:?},\"current_episodes\":{current_episodes},\"isolation_alpha\":{alpha:?},\"isolation\":[{}]}}",
             channel.name,
             c.threshold,
             c.threshold_interval.0,
@@ -88,28 +121,86 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             c.mtbfa_interval.1,
             c.samples,
             c.episodes,
-            c.expected_episodes
+            c.expected_episodes,
+            g.threshold,
+            iso.join(",")
         );
     } else {
-        print!("{}", text(&channel.name, &c, g.threshold, &source));
+        print!(
+            "{}",
+            text(&channel.name, &c, g.threshold, current_episodes, &source)
+        );
+        print!("{}", isolation_text(&isolation, alpha));
     }
     if args.write {
         if let Some(path) = &args.config {
-            write(path, &channel.name, &c, &source)?;
+            write(path, &channel.name, &c, &isolation, &source)?;
             eprintln!("glrmon calibrate: {} updated", path.display());
         }
     }
     Ok(())
 }
 
-fn text(channel: &str, c: &Calibration, current: f64, source: &str) -> String {
+/// The isolation threshold of one test.
+struct IsolationCalibration {
+    test: String,
+    /// The (1 − α) quantile of its minmax statistic at r̂ on the data.
+    quantile: Option<Quantile>,
+    /// The threshold in force and the fraction of the data above it.
+    current: f64,
+    current_rate: f64,
+}
+
+/// The isolation threshold the channel uses now for `test`.
+fn current_isolation_threshold(channel: &glrmon_spec::Channel, test: &str) -> f64 {
+    if let Some(&(_, t)) = channel.isolation_thresholds.iter().find(|(n, _)| n == test) {
+        return t;
+    }
+    let dof = channel
+        .groups
+        .iter()
+        .find(|(n, _)| n == test)
+        .map_or(1, |(_, f)| f.len().max(1));
+    glrmon_core::threshold::chi2_upper_quantile(dof as f64, channel.isolation_alpha)
+        .unwrap_or(f64::NAN)
+}
+
+fn isolation_text(isolation: &[IsolationCalibration], alpha: f64) -> String {
+    let mut s = format!("\nisolation tests at r̂ (type-I probability α = {alpha}):\n");
+    for i in isolation {
+        let q = i.quantile.map_or_else(
+            || "too little data for this α".to_owned(),
+            |q| {
+                format!(
+                    "threshold {:.4} (95 % interval {:.4}–{:.4}, {} samples)",
+                    q.value, q.interval.0, q.interval.1, q.samples
+                )
+            },
+        );
+        s.push_str(&format!(
+            "  {}: {q}; the current threshold {:.4} is exceeded by {:.2} % of the fault-free samples\n",
+            i.test,
+            i.current,
+            100.0 * i.current_rate
+        ));
+    }
+    s
+}
+
+fn text(
+    channel: &str,
+    c: &Calibration,
+    current: f64,
+    current_episodes: u64,
+    source: &str,
+) -> String {
     let precision = 1.96 / (c.episodes.max(1) as f64).sqrt();
     format!(
         "channel \"{channel}\": threshold {:.4} for one false-alarm episode per {} samples\n  \
          data: {} fault-free samples ({source}), {} episodes at the threshold (the target \
          expects {:.1})\n  95 % interval: threshold {:.4}–{:.4}, mean samples between false \
          alarms {:.0}–{:.0} (about ±{:.0} % on the rate; {} samples would give ±30 %)\n  \
-         current threshold {current:.4}\n\n[channels.glr.calibrated]\nthreshold = {:?}\nmtbfa = {:?}\nsamples = {}\nepisodes = {}\ninterval = [{:?}, {:?}]\n",
+         current threshold {current:.4}: {current_episodes} episodes on this data\n\n[channels.glr.calibrated]\nthreshold = {:?}\nmtbfa = {:?}\nsamples = {}\nepisodes = {}\ninterval = [{:?}, {:?}]\n",
         c.threshold,
         c.mtbfa,
         c.samples,
@@ -130,23 +221,35 @@ fn text(channel: &str, c: &Calibration, current: f64, source: &str) -> String {
     )
 }
 
-/// l_k of every sample (NaN where no onset is admissible) of the channel's monitor fed
-/// with `samples`; a sample the monitor rejects contributes nothing.
+/// What the channel's monitor gave on the fault-free data.
+#[derive(Debug, Default)]
+struct Statistics {
+    /// l_k of every sample (NaN where no onset is admissible).
+    glr: Vec<f64>,
+    /// The minmax statistic of each isolation test at r̂, by test.
+    isolation: BTreeMap<String, Vec<f64>>,
+}
+
+/// The statistics of the channel's monitor fed with `samples`; a sample the monitor
+/// rejects contributes nothing.
 fn monitor_glr(
     channel: &glrmon_spec::Channel,
     mut next: impl FnMut(&mut Sample) -> anyhow::Result<bool>,
     progress: Option<&indicatif::ProgressBar>,
-) -> anyhow::Result<Vec<f64>> {
+) -> anyhow::Result<Statistics> {
     let mut mon = Monitor::from_channel(channel)?;
     let mut sample = Sample::default();
     let mut records = Vec::new();
-    let mut glr = Vec::new();
+    let mut stats = Statistics::default();
     let mut n = 0u64;
     while next(&mut sample)? {
         mon.on_sample(&sample, &mut records);
         for r in records.drain(..) {
             if let Record::Stat(s) = r {
-                glr.push(s.glr.unwrap_or(f64::NAN));
+                stats.glr.push(s.glr.unwrap_or(f64::NAN));
+                for (test, value) in mon.isolation_statistics() {
+                    stats.isolation.entry(test).or_default().push(value);
+                }
             }
         }
         n += 1;
@@ -156,7 +259,7 @@ fn monitor_glr(
             }
         }
     }
-    Ok(glr)
+    Ok(stats)
 }
 
 fn bar(len: u64) -> Option<indicatif::ProgressBar> {
@@ -171,12 +274,12 @@ fn bar(len: u64) -> Option<indicatif::ProgressBar> {
 }
 
 /// `n` fault-free samples from the model, in one part per core (seeds seed, seed+1, …).
-fn simulated(channel: &glrmon_spec::Channel, n: u64, seed: u64) -> anyhow::Result<Vec<f64>> {
+fn simulated(channel: &glrmon_spec::Channel, n: u64, seed: u64) -> anyhow::Result<Statistics> {
     let parts = std::thread::available_parallelism()
         .map_or(1, std::num::NonZero::get)
         .min(usize::try_from(n / 10_000).unwrap_or(1).max(1)) as u64;
     let progress = bar(n);
-    let results: Vec<anyhow::Result<Vec<f64>>> = std::thread::scope(|scope| {
+    let results: Vec<anyhow::Result<Statistics>> = std::thread::scope(|scope| {
         let handles: Vec<_> = (0..parts)
             .map(|i| {
                 let len = n / parts + u64::from(i < n % parts);
@@ -221,20 +324,24 @@ fn simulated(channel: &glrmon_spec::Channel, n: u64, seed: u64) -> anyhow::Resul
     if let Some(b) = progress {
         b.finish_and_clear();
     }
-    let mut all = Vec::with_capacity(usize::try_from(n).unwrap_or(0));
+    let mut all = Statistics::default();
     for r in results {
         // The parts are independent runs: joined, one sample with no admissible onset
         // between them keeps an episode from spanning two parts.
-        all.extend(r?);
-        all.push(f64::NAN);
+        let r = r?;
+        all.glr.extend(r.glr);
+        all.glr.push(f64::NAN);
+        for (test, values) in r.isolation {
+            all.isolation.entry(test).or_default().extend(values);
+        }
     }
     Ok(all)
 }
 
-fn recorded(channel: &glrmon_spec::Channel, input: &Path) -> anyhow::Result<Vec<f64>> {
+fn recorded(channel: &glrmon_spec::Channel, input: &Path) -> anyhow::Result<Statistics> {
     let mut samples = Samples::open(input, &channel.name, channel.dims)?;
     let progress = bar(0);
-    let glr = monitor_glr(
+    let stats = monitor_glr(
         channel,
         |s| loop {
             match samples.next_into(s)? {
@@ -249,12 +356,18 @@ fn recorded(channel: &glrmon_spec::Channel, input: &Path) -> anyhow::Result<Vec<
     if let Some(b) = progress {
         b.finish_and_clear();
     }
-    Ok(glr)
+    Ok(stats)
 }
 
 /// Sets `[channels.glr.calibrated]` of `channel` in the file, removing the other ways of
 /// setting the threshold; everything else (comments, order) is kept.
-fn write(path: &Path, channel: &str, c: &Calibration, source: &str) -> anyhow::Result<()> {
+fn write(
+    path: &Path,
+    channel: &str,
+    c: &Calibration,
+    isolation: &[IsolationCalibration],
+    source: &str,
+) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(path)?;
     let mut doc: toml_edit::DocumentMut = text
         .parse()
@@ -293,6 +406,15 @@ fn write(path: &Path, channel: &str, c: &Calibration, source: &str) -> anyhow::R
     interval.push(c.threshold_interval.1);
     cal.insert("interval", toml_edit::value(interval));
     cal.insert("source", toml_edit::value(source));
+    let mut iso = toml_edit::InlineTable::new();
+    for i in isolation {
+        if let Some(q) = i.quantile {
+            iso.insert(&i.test, q.value.into());
+        }
+    }
+    if !iso.is_empty() {
+        cal.insert("isolation", toml_edit::value(iso));
+    }
     glr.insert("calibrated", toml_edit::Item::Table(cal));
     let updated = doc.to_string();
     glrmon_spec::parse(&updated)

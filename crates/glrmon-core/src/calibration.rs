@@ -162,6 +162,39 @@ pub fn calibrate(
     })
 }
 
+/// An upper quantile estimated from samples.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Quantile {
+    /// The value exceeded by a fraction α of the samples.
+    pub value: f64,
+    /// 95 % interval from the order statistics, for independent samples (consecutive
+    /// statistics of a window test are correlated, so it is optimistic).
+    pub interval: (f64, f64),
+    /// Samples used.
+    pub samples: u64,
+}
+
+/// The (1 − α) quantile of `values` (sorted in place), for thresholds that fault-free
+/// statistics exceed with probability α: e.g. the isolation tests' minmax statistic at
+/// r̂, which is larger than χ² under no fault (the maximising onset is selected on the
+/// same data). `None` with fewer than 10/α samples (fewer than 10 exceedances).
+#[must_use]
+pub fn upper_quantile(values: &mut [f64], alpha: f64) -> Option<Quantile> {
+    let n = values.len();
+    if !(alpha > 0.0 && alpha < 1.0) || (n as f64) * alpha < 10.0 {
+        return None;
+    }
+    values.sort_by(f64::total_cmp);
+    let at = |rank: f64| values[(rank.round().max(0.0) as usize).min(n - 1)];
+    let centre = (n as f64) * (1.0 - alpha);
+    let spread = 1.96 * ((n as f64) * alpha * (1.0 - alpha)).sqrt();
+    Some(Quantile {
+        value: at(centre),
+        interval: (at(centre - spread), at(centre + spread)),
+        samples: n as u64,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -176,6 +209,15 @@ mod tests {
         // 11 starts; 6 stays above 5, 4 ends; 12 starts again; NaN ends.
         let glr = [1.0, 11.0, 6.0, 4.0, 12.0, f64::NAN, 11.0, 3.0];
         assert_eq!(count_episodes(&glr, s), 3);
+    }
+
+    #[test]
+    fn upper_quantile_of_a_uniform_grid() {
+        let mut v: Vec<f64> = (0..10_000).map(f64::from).collect();
+        let q = upper_quantile(&mut v, 0.01).unwrap();
+        assert_eq!(q.value, 9900.0);
+        assert!(q.interval.0 < 9900.0 && q.interval.1 > 9900.0);
+        assert!(upper_quantile(&mut v[..500], 0.01).is_none());
     }
 
     /// On i.i.d. exponential-like statistics with no hysteresis, an episode is a run

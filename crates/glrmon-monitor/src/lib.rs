@@ -67,6 +67,9 @@ pub struct MonitorSettings {
     pub isolation_alpha: f64,
     /// The isolation tests; empty means one per fault against all others.
     pub groups: Vec<IsolationGroup>,
+    /// Calibrated isolation thresholds by test (group or fault) name, replacing the χ²
+    /// quantile for those tests (found by `glrmon calibrate`).
+    pub isolation_thresholds: Vec<(String, f64)>,
     /// Largest gap (missing samples) filled with predict-only steps; after a longer one
     /// the filter restarts from its initial state at the sample that follows it
     /// (reported as `gap`), so that an outage never leaves a channel dead.
@@ -198,6 +201,7 @@ impl Monitor {
             alarm: channel.alarm,
             isolation_delay: channel.isolation_delay,
             isolation_alpha: channel.isolation_alpha,
+            isolation_thresholds: channel.isolation_thresholds.clone(),
             groups: channel
                 .groups
                 .iter()
@@ -505,7 +509,15 @@ impl Monitor {
                 let minmax = fisher.minmax(&g.faults).ok()?;
                 let sensitivity = fisher.sensitivity(&g.faults).ok()?;
                 let dof = minmax.dof.max(1) as f64;
-                let threshold = chi2_upper_quantile(dof, self.settings.isolation_alpha).ok()?;
+                let threshold = match self
+                    .settings
+                    .isolation_thresholds
+                    .iter()
+                    .find(|(name, _)| *name == g.name)
+                {
+                    Some(&(_, t)) => t,
+                    None => chi2_upper_quantile(dof, self.settings.isolation_alpha).ok()?,
+                };
                 Some(IsolationResult {
                     fault: g.name.clone(),
                     minmax: minmax.value,
@@ -514,6 +526,25 @@ impl Monitor {
                     isolated: minmax.value > threshold,
                 })
             })
+            .collect()
+    }
+
+    /// The minmax statistic of every isolation test at the current onset estimate r̂
+    /// (after the last sample), by test name: what isolation would compare with its
+    /// thresholds if an alarm were raised now. Empty while no onset is admissible. For
+    /// calibrating the isolation thresholds on fault-free data (off the per-sample path:
+    /// it allocates).
+    #[must_use]
+    pub fn isolation_statistics(&self) -> Vec<(String, f64)> {
+        let Some(onset) = self.out.onset.filter(|_| self.out.glr.is_some()) else {
+            return Vec::new();
+        };
+        let Some(fisher) = self.detector.fisher_statistics(onset) else {
+            return Vec::new();
+        };
+        self.groups
+            .iter()
+            .filter_map(|g| Some((g.name.clone(), fisher.minmax(&g.faults).ok()?.value)))
             .collect()
     }
 
@@ -581,6 +612,7 @@ mod tests {
                 isolation_delay: 2,
                 isolation_alpha: 0.01,
                 groups: vec![],
+                isolation_thresholds: vec![],
                 max_gap: 10,
             },
         )

@@ -255,6 +255,9 @@ pub struct Channel {
     pub isolation_alpha: f64,
     /// Isolation groups `(name, fault indices)`.
     pub groups: Vec<(String, Vec<usize>)>,
+    /// Calibrated isolation thresholds by test name (`[channels.glr.calibrated]
+    /// isolation`), replacing the χ² quantile of those tests.
+    pub isolation_thresholds: Vec<(String, f64)>,
     /// Largest gap filled by predict-only steps.
     pub max_gap: u64,
     /// Fault names in dictionary order.
@@ -905,6 +908,26 @@ impl Validator {
             }
             groups.push((g.name.clone(), idx));
         }
+        if let Some(cal) = &glr.calibrated {
+            let tests: Vec<&str> = if glr.groups.is_empty() {
+                faults.iter().map(|f| f.name.as_str()).collect()
+            } else {
+                glr.groups.iter().map(|g| g.name.as_str()).collect()
+            };
+            for (name, t) in &cal.isolation {
+                if !tests.contains(&name.as_str()) {
+                    self.error(
+                        gpath(&format!("calibrated.isolation.{name}")),
+                        format!("no isolation test \"{name}\" (tests: {})", tests.join(", ")),
+                    );
+                } else if !(t.is_finite() && *t > 0.0) {
+                    self.error(
+                        gpath(&format!("calibrated.isolation.{name}")),
+                        format!("{t} must be finite and positive"),
+                    );
+                }
+            }
+        }
         let simulation = self.simulation(prefix, spec, dims, e.as_ref());
         let c = spec.consistency;
         let consistency = if c.enabled {
@@ -953,6 +976,11 @@ impl Validator {
             threshold_source,
             isolation_delay: glr.isolation_delay.unwrap_or(n as u32),
             isolation_alpha: glr.isolation_alpha,
+            isolation_thresholds: glr
+                .calibrated
+                .as_ref()
+                .map(|c| c.isolation.iter().map(|(k, v)| (k.clone(), *v)).collect())
+                .unwrap_or_default(),
             groups,
             max_gap: glr.max_gap,
             fault_names: faults.iter().map(|f| f.name.clone()).collect(),

@@ -522,4 +522,9 @@ pub struct CalibratedSpec {
     /// Where the data came from (free text).
     #[serde(default)]
     pub source: String,
+    /// Calibrated isolation thresholds by test name (a fault, or a `[[channels.glr.groups]]`
+    /// name): the minmax statistic at r̂ exceeds them on fault-free data with the
+    /// channel's `isolation_alpha`.
+    #[serde(default)]
+    pub isolation: BTreeMap<String, f64>,
 }
