@@ -143,6 +143,10 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
             channel.alarm.threshold,
             channel.fault_names.len()
         ),
+        ThresholdSource::Chi2 { false_alarm } if channel.chi2_detector => format!(
+            "{:.4} (χ²({}) upper quantile at {false_alarm:e} per sample)",
+            channel.alarm.threshold, channel.dims.outputs
+        ),
         ThresholdSource::Chi2 { false_alarm } => format!(
             "{:.4} (χ²({}) upper quantile at {false_alarm:e} per onset: optimistic, the window's \
              maximum exceeds it far more often; see `glrmon calibrate`)",
@@ -161,6 +165,13 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
         ),
     };
     let _ = writeln!(s, "  model: {model}; {window}; threshold {threshold}");
+    if channel.chi2_detector {
+        let _ = writeln!(
+            s,
+            "  detector: the plain χ²({}) test of εᵀΣ⁻¹ε on each sample (baseline; no onset estimate, no isolation)",
+            channel.dims.outputs
+        );
+    }
     let faults: Vec<String> = channel
         .fault_names
         .iter()

@@ -70,6 +70,9 @@ pub struct MonitorSettings {
     /// Calibrated isolation thresholds by test (group or fault) name, replacing the χ²
     /// quantile for those tests (found by `glrmon calibrate`).
     pub isolation_thresholds: Vec<(String, f64)>,
+    /// Alarm on the plain χ² test of εᵀΣ⁻¹ε (the classical baseline) instead of the
+    /// windowed GLR: `glr` in the records is then εᵀΣ⁻¹ε and the onset k itself.
+    pub chi2_detector: bool,
     /// Largest gap (missing samples) filled with predict-only steps; after a longer one
     /// the filter restarts from its initial state at the sample that follows it
     /// (reported as `gap`), so that an outage never leaves a channel dead.
@@ -202,6 +205,7 @@ impl Monitor {
             isolation_delay: channel.isolation_delay,
             isolation_alpha: channel.isolation_alpha,
             isolation_thresholds: channel.isolation_thresholds.clone(),
+            chi2_detector: channel.chi2_detector,
             groups: channel
                 .groups
                 .iter()
@@ -364,6 +368,10 @@ impl Monitor {
             return;
         }
         self.counters.samples += 1;
+        if self.settings.chi2_detector {
+            self.out.glr = Some(self.out.normalized_innovation);
+            self.out.onset = Some(k);
+        }
         if let Some(block) = self
             .consistency
             .as_mut()
@@ -613,6 +621,7 @@ mod tests {
                 isolation_alpha: 0.01,
                 groups: vec![],
                 isolation_thresholds: vec![],
+                chi2_detector: false,
                 max_gap: 10,
             },
         )

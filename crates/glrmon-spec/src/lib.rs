@@ -258,6 +258,8 @@ pub struct Channel {
     /// Calibrated isolation thresholds by test name (`[channels.glr.calibrated]
     /// isolation`), replacing the χ² quantile of those tests.
     pub isolation_thresholds: Vec<(String, f64)>,
+    /// The detection statistic is the plain χ² test of εᵀΣ⁻¹ε instead of the GLR.
+    pub chi2_detector: bool,
     /// Largest gap filled by predict-only steps.
     pub max_gap: u64,
     /// Fault names in dictionary order.
@@ -811,7 +813,23 @@ impl Validator {
                 format!("{tolerance} is not in (0, 1)"),
             );
         }
-        let m = faults.len().max(1);
+        let chi2_detector = match glr.detector.as_deref() {
+            None | Some("glr") => false,
+            Some("chi2") => true,
+            Some(other) => {
+                self.error(
+                    gpath("detector"),
+                    format!("\"{other}\" is not one of glr, chi2"),
+                );
+                false
+            }
+        };
+        // The χ² detector tests εᵀΣ⁻¹ε ~ χ²(p) on one sample: no window to correct for.
+        let m = if chi2_detector {
+            dims.outputs.max(1)
+        } else {
+            faults.len().max(1)
+        };
         let known = faults.iter().all(|f| f.onset == Onset::Known);
         let given = [
             glr.threshold.is_some(),
@@ -877,13 +895,13 @@ impl Validator {
                     false
                 }
             };
-            let onsets = if known || chi2 {
+            let onsets = if known || chi2 || chi2_detector {
                 1
             } else {
                 glr.window.saturating_sub(glr.min_lag).max(1)
             };
             match chi2_upper_quantile(m as f64, a / onsets as f64) {
-                Ok(t) if chi2 => (t, ThresholdSource::Chi2 { false_alarm: a }),
+                Ok(t) if chi2 || chi2_detector => (t, ThresholdSource::Chi2 { false_alarm: a }),
                 Ok(t) => (t, ThresholdSource::Bonferroni { false_alarm: a }),
                 Err(e) => {
                     self.error(gpath("false_alarm"), e.to_string());
@@ -976,6 +994,7 @@ impl Validator {
             threshold_source,
             isolation_delay: glr.isolation_delay.unwrap_or(n as u32),
             isolation_alpha: glr.isolation_alpha,
+            chi2_detector,
             isolation_thresholds: glr
                 .calibrated
                 .as_ref()

@@ -331,6 +331,10 @@ pub struct GlrSpec {
     pub threshold_mode: Option<String>,
     /// A threshold found by `glrmon calibrate` for a mean time between false alarms.
     pub calibrated: Option<CalibratedSpec>,
+    /// The detection statistic: `glr` (default; the windowed GLR of Zhang & Basseville
+    /// 2014) or `chi2` (the plain χ²(p) test of εᵀΣ⁻¹ε on each sample: the classical
+    /// baseline, for comparing with the GLR on your data; alarms then carry r̂ = k).
+    pub detector: Option<String>,
     /// Hysteresis h: an episode ends below λ(1 − h) (default 0.1).
     #[serde(default = "default_hysteresis")]
     pub hysteresis: f64,
@@ -362,6 +366,7 @@ impl Default for GlrSpec {
             false_alarm: None,
             threshold_mode: None,
             calibrated: None,
+            detector: None,
             hysteresis: default_hysteresis(),
             clear_samples: default_clear(),
             isolation_delay: None,
