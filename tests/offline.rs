@@ -419,14 +419,101 @@ fn simulate_takes_scheduling_signals_from_a_file() {
     );
 }
 
+/// The HTML of `glrmon evaluate --report` against the JSON of the same runs: one
+/// self-contained page; per injected fault its name, a delay and an onset-error histogram
+/// (inline SVG) with one bar per distinct delay (the delays span fewer samples than the
+/// bin cap, so bins are 1 sample wide), and the detection and isolated-alone counts of
+/// the JSON in the summary and confusion tables.
+fn evaluate_report_matches_json(html: &str, v: &serde_json::Value) {
+    let results = v["results"].as_array().unwrap();
+    assert!(html.starts_with("<!DOCTYPE html>"));
+    assert!(
+        !html.contains("<script") && !html.contains("src="),
+        "not self-contained"
+    );
+    assert_eq!(html.matches("<svg").count(), 2 * results.len());
+    assert_eq!(
+        html.matches("class=\"fig delay-histogram\"").count(),
+        results.len()
+    );
+    let onset = v["onset"].as_u64().unwrap();
+    let summary = html
+        .split("<h2>Summary</h2>")
+        .nth(1)
+        .unwrap()
+        .split("<h2>")
+        .next()
+        .unwrap();
+    let confusion = html
+        .split("<table class=\"confusion\">")
+        .nth(1)
+        .unwrap()
+        .split("</table>")
+        .next()
+        .unwrap();
+    for (i, r) in results.iter().enumerate() {
+        let fault = r["fault"].as_str().unwrap();
+        let runs = r["runs"].as_array().unwrap();
+        let delays: Vec<u64> = runs
+            .iter()
+            .filter_map(|x| x["crossing"].as_u64())
+            .map(|c| c - onset)
+            .collect();
+        let alone = runs
+            .iter()
+            .filter(|x| x["isolated"] == serde_json::json!([fault]))
+            .count();
+        // The row whose first cell names the fault (header rows name every fault).
+        let row = |table: &str| -> String {
+            table
+                .lines()
+                .find(|l| {
+                    l.starts_with(&format!("<tr><th><code>{fault}</code>"))
+                        || l.contains(&format!("\"><code>{fault}</code></a></td>"))
+                })
+                .unwrap_or_else(|| panic!("no row of {fault}"))
+                .to_owned()
+        };
+        assert!(
+            row(summary).contains(&format!("<td class=\"num detected\">{}</td>", delays.len())),
+            "{fault}: summary row {} does not state {} detections",
+            row(summary),
+            delays.len()
+        );
+        assert!(
+            row(confusion).contains(&format!(">{alone}<br><span class=\"pct\">")),
+            "{fault}: confusion row {} does not state {alone} isolated alone",
+            row(confusion)
+        );
+        let section = html
+            .split(&format!("<section id=\"fault-{i}\">"))
+            .nth(1)
+            .unwrap();
+        assert!(section.contains(&format!("<code>{fault}</code>")));
+        let delay_svg = section.split("</svg>").next().unwrap();
+        assert!(delay_svg.contains(&format!("runs of {fault} that detected ({})", delays.len())));
+        let mut distinct = delays.clone();
+        distinct.sort_unstable();
+        distinct.dedup();
+        assert_eq!(
+            delay_svg.matches("class=\"bar\"").count(),
+            distinct.len(),
+            "{fault}: one bar per distinct delay {distinct:?}"
+        );
+    }
+}
+
 /// Issue 7, `glrmon evaluate` on the DC motor, both faults, 200 seeded runs each: every
 /// run detects, the sensor drift within 30 samples (median), the actuator bias within 5,
-/// and the isolation names the injected fault alone in at least 90 % of the runs.
+/// and the isolation names the injected fault alone in at least 90 % of the runs. The
+/// `--report` page of the same runs states the JSON's numbers (see
+/// `evaluate_report_matches_json`).
 #[test]
 fn evaluate_dc_motor_reports_detection_delay_and_confusion() {
     let dir = TempDir::new("evaluate");
     let cfg = config("examples/dc-motor.toml");
     let json = dir.file("eval.json");
+    let html = dir.file("eval.html");
     let text = ok(&glrmon(&[
         "evaluate",
         "--config",
@@ -439,10 +526,13 @@ fn evaluate_dc_motor_reports_detection_delay_and_confusion() {
         "200",
         "--json",
         &json,
+        "--report",
+        &html,
     ]));
     assert!(text.contains("isolation at the first alarm"), "{text}");
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    evaluate_report_matches_json(&std::fs::read_to_string(&html).unwrap(), &v);
     let onset = v["onset"].as_u64().unwrap();
     for (r, max_delay) in v["results"].as_array().unwrap().iter().zip([30, 5]) {
         let fault = r["fault"].as_str().unwrap();

@@ -4,13 +4,16 @@
 //! the onset estimate r̂ at the alarm, false alarms before the onset, and which faults
 //! the isolation tests named (a confusion matrix) — what a user tunes w, s and the
 //! thresholds with (Zhang & Basseville 2014, §6: Figures 7-8 are such histograms).
+//! `--report` hands the summaries to `glrmon-report`, which draws those histograms.
 
-use std::collections::BTreeMap;
 use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::PathBuf;
 
+use anyhow::Context as _;
 use clap::Args;
 use glrmon_monitor::Monitor;
+use glrmon_report::{Evaluation, FaultEvaluation};
 use glrmon_sim::SimSample;
 use glrmon_wire::{Record, Sample};
 
@@ -44,6 +47,11 @@ pub(crate) struct EvaluateArgs {
     /// Also write the results as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Also write a self-contained HTML report here: per injected fault, histograms of
+    /// the detection delay and of the onset error r̂ − r, the summary and the confusion
+    /// matrix.
+    #[arg(long, value_name = "OUT.html")]
+    report: Option<PathBuf>,
 }
 
 /// What one run gave.
@@ -142,21 +150,49 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
             runs: runs.into_iter().collect::<Result<_, _>>()?,
         });
     }
+    let columns = outcome_columns(&channel.fault_names, &results);
+    let summaries: Vec<FaultEvaluation> = results
+        .iter()
+        .map(|r| summarize(r, onset, &columns))
+        .collect();
     print!(
         "{}",
-        text(
-            &channel.name,
-            &channel.fault_names,
-            &results,
-            onset,
-            samples
-        )
+        text(&channel.name, &columns, &summaries, onset, samples)
     );
     if let Some(path) = &args.json {
         std::fs::write(
             path,
             json(&channel.name, &channel.fault_names, &results, onset),
         )?;
+    }
+    if let Some(path) = &args.report {
+        let detector = if channel.chi2_detector {
+            "χ² test of εᵀΣ⁻¹ε per sample".to_owned()
+        } else {
+            format!(
+                "GLR, window w = {}, s = {}",
+                channel.window.window, channel.window.min_lag
+            )
+        };
+        let evaluation = Evaluation {
+            title: format!("glrmon evaluate: channel {}", channel.name),
+            config: args.config.display().to_string(),
+            channel: channel.name.clone(),
+            detector,
+            threshold: channel.alarm.threshold,
+            onset,
+            samples,
+            runs: args.runs,
+            seed: args.seed,
+            outcomes: columns,
+            faults: summaries,
+        };
+        let write = || -> std::io::Result<()> {
+            let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+            evaluation.write_html(&mut out)?;
+            out.flush()
+        };
+        write().with_context(|| format!("writing the report {}", path.display()))?;
     }
     Ok(())
 }
@@ -216,6 +252,72 @@ fn one_run(
     Ok(run)
 }
 
+/// Columns of the confusion matrix: the dictionary's faults, any other isolated name
+/// (an isolation group), then the outcomes without a single isolated fault.
+fn outcome_columns(faults: &[String], results: &[FaultResult]) -> Vec<String> {
+    let mut columns: Vec<String> = faults.to_vec();
+    let fixed = ["none", "several", "undetected"];
+    let mut others: Vec<String> = results
+        .iter()
+        .flat_map(|r| r.runs.iter().map(isolated_label))
+        .filter(|l| !columns.contains(l) && !fixed.contains(&l.as_str()))
+        .collect();
+    others.sort_unstable();
+    others.dedup();
+    columns.extend(others);
+    columns.extend(fixed.map(str::to_owned));
+    columns
+}
+
+/// The figures of one injected fault that the text output and the HTML report state.
+fn summarize(r: &FaultResult, onset: u64, columns: &[String]) -> FaultEvaluation {
+    let delays: Vec<u64> = r
+        .runs
+        .iter()
+        .filter_map(|x| x.crossing.map(|c| c - onset))
+        .collect();
+    let delays_f64: Vec<f64> = delays.iter().map(|d| *d as f64).collect();
+    let delay_quantiles = match (
+        quantile(delays_f64.clone(), 0.1),
+        median(delays_f64.clone()),
+        quantile(delays_f64, 0.9),
+    ) {
+        (Some(p10), Some(p50), Some(p90)) => Some([p10, p50, p90]),
+        _ => None,
+    };
+    let onset_errors: Vec<i64> = r
+        .runs
+        .iter()
+        .filter_map(|x| x.onset_estimate)
+        .map(|e| i64::try_from(i128::from(e) - i128::from(onset)).unwrap_or(i64::MAX))
+        .collect();
+    let mut isolated = vec![0; columns.len()];
+    for run in &r.runs {
+        let label = isolated_label(run);
+        if let Some(i) = columns.iter().position(|c| *c == label) {
+            isolated[i] += 1;
+        }
+    }
+    FaultEvaluation {
+        fault: r.fault.clone(),
+        magnitude: r.magnitude,
+        runs: r.runs.len() as u64,
+        detected: delays.len() as u64,
+        delays,
+        delay_quantiles,
+        onset_error_median_abs: median(
+            onset_errors
+                .iter()
+                .map(|e| e.unsigned_abs() as f64)
+                .collect(),
+        ),
+        onset_errors,
+        false_alarms: r.runs.iter().map(|x| x.false_alarms).sum(),
+        runs_with_false_alarms: r.runs.iter().filter(|x| x.false_alarms > 0).count() as u64,
+        isolated,
+    }
+}
+
 fn median(mut v: Vec<f64>) -> Option<f64> {
     if v.is_empty() {
         return None;
@@ -251,8 +353,8 @@ fn isolated_label(r: &Run) -> String {
 
 fn text(
     channel: &str,
-    faults: &[String],
-    results: &[FaultResult],
+    columns: &[String],
+    results: &[FaultEvaluation],
     onset: u64,
     samples: u64,
 ) -> String {
@@ -271,57 +373,35 @@ fn text(
         "false alarms"
     );
     for r in results {
-        let n = r.runs.len();
-        let detected = r.runs.iter().filter(|x| x.crossing.is_some()).count();
-        let delays: Vec<f64> = r
-            .runs
-            .iter()
-            .filter_map(|x| x.crossing.map(|c| (c - onset) as f64))
-            .collect();
-        let errors: Vec<f64> = r
-            .runs
-            .iter()
-            .filter_map(|x| x.onset_estimate.map(|e| (e as f64 - onset as f64).abs()))
-            .collect();
-        let fa: u64 = r.runs.iter().map(|x| x.false_alarms).sum();
         let fmt = |v: Option<f64>| v.map_or("–".to_owned(), |v| format!("{v:.0}"));
+        let q = |i: usize| fmt(r.delay_quantiles.map(|q| q[i]));
         let _ = writeln!(
             s,
             "{:<24} {:>8.1}% {:>6} {:>9} {:>15} {:>16} {:>12}",
             format!("{} ({})", r.fault, r.magnitude),
-            100.0 * detected as f64 / n as f64,
-            n,
-            fmt(median(delays.clone())),
-            format!(
-                "{}–{}",
-                fmt(quantile(delays.clone(), 0.1)),
-                fmt(quantile(delays, 0.9))
-            ),
-            fmt(median(errors)),
-            fa
+            100.0 * r.detected as f64 / r.runs.max(1) as f64,
+            r.runs,
+            q(1),
+            format!("{}–{}", q(0), q(2)),
+            fmt(r.onset_error_median_abs),
+            r.false_alarms
         );
     }
     // Confusion matrix: rows injected, columns isolated.
-    let mut columns: Vec<String> = faults.to_vec();
-    columns.extend(["none", "several", "undetected"].map(str::to_owned));
     let _ = writeln!(
         s,
         "\nisolation at the first alarm (rows: injected, columns: isolated)"
     );
     let width = columns.iter().map(String::len).max().unwrap_or(8).max(8);
     let _ = write!(s, "{:<24}", "");
-    for c in &columns {
+    for c in columns {
         let _ = write!(s, " {c:>width$}");
     }
     s.push('\n');
     for r in results {
-        let mut counts: BTreeMap<String, u64> = BTreeMap::new();
-        for run in &r.runs {
-            *counts.entry(isolated_label(run)).or_insert(0) += 1;
-        }
         let _ = write!(s, "{:<24}", r.fault);
-        for c in &columns {
-            let _ = write!(s, " {:>width$}", counts.get(c).copied().unwrap_or(0));
+        for n in &r.isolated {
+            let _ = write!(s, " {n:>width$}");
         }
         s.push('\n');
     }

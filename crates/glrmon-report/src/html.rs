@@ -24,7 +24,7 @@ const MAX_LABELS: usize = 6;
 /// Items listed per cell of the summary table.
 const MAX_SUMMARY_ITEMS: usize = 8;
 
-const CSS: &str = "body{font-family:Helvetica,Arial,sans-serif;margin:0 auto;max-width:1080px;padding:16px 20px;color:#222;line-height:1.35}\
+pub(crate) const CSS: &str = "body{font-family:Helvetica,Arial,sans-serif;margin:0 auto;max-width:1080px;padding:16px 20px;color:#222;line-height:1.35}\
 h1{font-size:24px;margin-bottom:4px}h2{font-size:20px;border-bottom:2px solid #ddd;padding-bottom:4px;margin-top:36px}h3{font-size:16px;margin-top:24px}\
 table{border-collapse:collapse;margin:8px 0 16px;font-size:13px}th,td{border:1px solid #ccc;padding:3px 7px;text-align:left;vertical-align:top}\
 th{background:#f2f2f2}td.num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}\

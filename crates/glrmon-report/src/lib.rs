@@ -2,8 +2,13 @@
 
 mod channel;
 mod decimate;
+mod evaluation;
+mod histogram;
 mod html;
 mod svg;
+
+pub use evaluation::{Evaluation, FaultEvaluation};
+pub use histogram::Histogram;
 
 use std::collections::BTreeMap;
 

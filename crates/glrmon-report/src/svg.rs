@@ -281,11 +281,15 @@ pub(crate) struct Figure {
     /// k → t pairs (increasing k) for a second row of x tick labels in seconds.
     secondary_x: Vec<(f64, f64)>,
     left: f64,
+    /// Width of the whole SVG, margins included.
+    total_width: f64,
     w: f64,
     h: f64,
     body: String,
     front: String,
     legend: Vec<LegendItem>,
+    /// One legend entry per row, so that figures side by side line up.
+    stacked_legend: bool,
     class: String,
 }
 
@@ -303,6 +307,22 @@ impl Figure {
             fig.w -= MIN_LEFT - fig.left;
             fig.left = MIN_LEFT;
         }
+        fig
+    }
+
+    /// A figure `total_width` pixels wide overall (margins included), for figures set
+    /// side by side; its y axis needs no alignment with others, so the left margin is
+    /// only what the tick labels take.
+    pub(crate) fn with_width(title: &str, x: Axis, y: Axis, height: f64, total_width: f64) -> Self {
+        let widest = y
+            .ticks(6)
+            .iter()
+            .map(|(_, s)| s.chars().count())
+            .max()
+            .unwrap_or(1);
+        let mut fig = Figure::build(title, x, y, Vec::new(), widest, height);
+        fig.total_width = total_width.clamp(200.0, 4000.0);
+        fig.w = fig.total_width - fig.left - RIGHT;
         fig
     }
 
@@ -335,11 +355,13 @@ impl Figure {
             categories,
             secondary_x: Vec::new(),
             left,
+            total_width: FIG_WIDTH,
             w: FIG_WIDTH - left - RIGHT,
             h: height.clamp(40.0, 4000.0),
             body: String::new(),
             front: String::new(),
             legend: Vec::new(),
+            stacked_legend: false,
             class: String::new(),
         }
     }
@@ -347,6 +369,12 @@ impl Figure {
     /// Adds a CSS class to the `<svg>` element (for tests and styling).
     pub(crate) fn set_class(&mut self, class: &str) {
         self.class = class.to_owned();
+    }
+
+    /// Puts each legend entry on a row of its own: figures set side by side with the
+    /// same number of entries then have their plot areas at the same height.
+    pub(crate) fn stack_legend(&mut self) {
+        self.stacked_legend = true;
     }
 
     /// Labels x ticks a second time with the interpolated time `t` (pairs `(k, t)`).
@@ -589,8 +617,9 @@ impl Figure {
         };
         let _ = write!(
             s,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" class="{class}" viewBox="0 0 {FIG_WIDTH} {total_h:.0}" width="{FIG_WIDTH}" height="{total_h:.0}" role="img" aria-label="{t}" font-family="Helvetica, Arial, sans-serif" font-size="{FONT}">"#,
-            t = escape(&self.title)
+            r#"<svg xmlns="http://www.w3.org/2000/svg" class="{class}" viewBox="0 0 {fig_w:.0} {total_h:.0}" width="{fig_w:.0}" height="{total_h:.0}" role="img" aria-label="{t}" font-family="Helvetica, Arial, sans-serif" font-size="{FONT}">"#,
+            t = escape(&self.title),
+            fig_w = self.total_width
         );
         let _ = write!(
             s,
@@ -703,7 +732,7 @@ impl Figure {
         let mut x = 0.0;
         for item in &self.legend {
             let width = 30.0 + item.label.chars().count() as f64 * CHAR_W + 18.0;
-            if rows.is_empty() || (x + width > self.w && x > 0.0) {
+            if rows.is_empty() || (x > 0.0 && (self.stacked_legend || x + width > self.w)) {
                 rows.push(Vec::new());
                 x = 0.0;
             }
