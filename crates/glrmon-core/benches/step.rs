@@ -1,4 +1,5 @@
-//! Per-sample cost of `Detector::step` (bench-A and a larger LPV channel).
+//! Per-sample cost of `Detector::step`: bench-A, a larger LPV channel, and an LTI
+//! channel with and without the stationary fast path.
 //!
 //! `cargo bench -p glrmon-core --bench step`; figures in docs/PERFORMANCE.md.
 
@@ -57,6 +58,11 @@ fn bench_scenario(c: &mut Criterion, name: &str, sc: &scenarios::Scenario) {
 fn steps(c: &mut Criterion) {
     bench_scenario(c, "bench_a_lpv_n2_p1_m2_w100", &scenarios::bench_a());
     bench_scenario(c, "lpv_n3_p2_m4_w160", &scenarios::lpv_n3_p2_m4());
+    let lti = scenarios::lti_n3_p2_m3();
+    bench_scenario(c, "lti_n3_p2_m3_w160_fast_path", &lti);
+    let mut general = lti.clone();
+    general.window.steady_tolerance = 0.0;
+    bench_scenario(c, "lti_n3_p2_m3_w160_general_path", &general);
 }
 
 criterion_group! {

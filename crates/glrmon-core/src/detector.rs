@@ -13,6 +13,9 @@ use crate::isolation::FisherStatistics;
 use crate::linalg::{gemm, solve_lower_in_place};
 use crate::model::{Dims, Signals, StateSpace, SystemMatrices};
 
+/// Default [`WindowSettings::steady_tolerance`].
+pub const DEFAULT_STEADY_TOLERANCE: f64 = 1e-12;
+
 /// Settings of the moving-window GLR.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WindowSettings {
@@ -24,6 +27,13 @@ pub struct WindowSettings {
     /// τ: relative cut-off for the rank of C_k(r) (pivots or eigenvalues ≤ τ·scale are
     /// treated as zero).
     pub rank_tolerance: f64,
+    /// Relative tolerance on max|P_{k+1} − P_k| / max|P_{k+1}| below which the Riccati
+    /// recursion counts as converged. When the model, the fault columns and P have been
+    /// constant for w samples, the detector switches to the stationary regime (the LTI
+    /// fast path: Γ, S, C and C⁻ tabulated per lag, the gain held) and switches back at
+    /// the first sample whose matrices or fault columns differ, or at a gap. 0 turns the
+    /// fast path off.
+    pub steady_tolerance: f64,
 }
 
 impl Default for WindowSettings {
@@ -32,6 +42,7 @@ impl Default for WindowSettings {
             window: 100,
             min_lag: 1,
             rank_tolerance: DEFAULT_RANK_TOLERANCE,
+            steady_tolerance: DEFAULT_STEADY_TOLERANCE,
         }
     }
 }
@@ -143,6 +154,17 @@ pub struct Detector {
     /// The initial state and covariance, for [`Detector::restart`].
     x0: DVector<f64>,
     p0: DMatrix<f64>,
+    /// The matrices and fault columns the stationary regime is built on (or is being
+    /// checked against), P_k before the last time update, and how many consecutive
+    /// measured samples had the same matrices and a converged P.
+    reference: SystemMatrices,
+    reference_psi: DMatrix<f64>,
+    reference_phi: DMatrix<f64>,
+    cov_before: DMatrix<f64>,
+    steady_samples: u64,
+    /// The model is LTI and every fault column constant ([`StateSpace::is_constant`],
+    /// [`FaultDictionary::is_constant`]).
+    constant: bool,
 }
 
 impl Detector {
@@ -191,6 +213,15 @@ impl Detector {
                 ),
             });
         }
+        if !(settings.steady_tolerance >= 0.0 && settings.steady_tolerance < 1.0) {
+            return Err(ModelError::Setting {
+                what: "steady_tolerance",
+                detail: format!(
+                    "must be in [0, 1) (0 turns the LTI fast path off), got {}",
+                    settings.steady_tolerance
+                ),
+            });
+        }
         if !(settings.rank_tolerance > 0.0 && settings.rank_tolerance < 1.0) {
             return Err(ModelError::Setting {
                 what: "rank_tolerance",
@@ -198,6 +229,7 @@ impl Detector {
             });
         }
         let (n, p, m) = (dims.states, dims.outputs, faults.len());
+        let (model_constant, faults_constant) = (model.is_constant(), faults.is_constant());
         let filter = InnovationFilter::new(x0.clone(), p0.clone(), p)?;
         let kinds = faults.faults().iter().map(|f| f.onset).collect();
         let bank = WindowBank::new(
@@ -230,6 +262,12 @@ impl Detector {
             input_variance: vec![0.0; dims.inputs],
             x0,
             p0,
+            reference: SystemMatrices::zeros(dims),
+            reference_psi: DMatrix::zeros(n, m),
+            reference_phi: DMatrix::zeros(p, m),
+            cov_before: DMatrix::zeros(n, n),
+            steady_samples: 0,
+            constant: model_constant && faults_constant,
         })
     }
 
@@ -261,6 +299,7 @@ impl Detector {
         self.input_moments.fill((0.0, 0.0));
         self.input_count = 0;
         self.input_variance.fill(0.0);
+        self.steady_samples = 0;
         Ok(())
     }
 
@@ -279,19 +318,18 @@ impl Detector {
             u: sample.u,
             p: sample.p,
         };
-        self.model.evaluate(sample.k, &signals, &mut self.system);
+        let k = sample.k;
+        if self.bank.is_steady() && self.constant {
+            // An LTI model with constant fault columns: nothing to evaluate or compare.
+            self.step_steady(sample, out);
+            return Ok(());
+        }
+        self.model.evaluate(k, &signals, &mut self.system);
         if !self.system.is_finite() {
             return Err(StepError::Numerical {
                 what: "the model evaluated at this sample's signals is not finite",
             });
         }
-        self.filter.measure(&self.system, sample.u, sample.y)?;
-        match self.next_k {
-            None => self.bank.start(sample.k),
-            Some(_) => self.bank.begin(sample.k),
-        }
-        let (n, p, m) = (self.dims.states, self.dims.outputs, self.faults.len());
-        let k = sample.k;
         self.faults.evaluate(
             k,
             &signals,
@@ -299,6 +337,19 @@ impl Detector {
             self.psi.as_mut_slice(),
             self.phi.as_mut_slice(),
         );
+        if self.bank.is_steady() {
+            if self.matches_reference() {
+                self.step_steady(sample, out);
+                return Ok(());
+            }
+            self.leave_steady();
+        }
+        self.filter.measure(&self.system, sample.u, sample.y)?;
+        match self.next_k {
+            None => self.bank.start(k),
+            Some(_) => self.bank.begin(k),
+        }
+        let (n, p, m) = (self.dims.states, self.dims.outputs, self.faults.len());
         self.phi_last.copy_from(&self.phi);
         // Whiten Φ̃_k in place; F_kK_kΦ̃_k uses the unwhitened copy after the time update.
         solve_lower_in_place(
@@ -315,24 +366,9 @@ impl Detector {
         );
         let best = self.bank.maximize(k);
 
-        out.k = k;
-        out.innovation.copy_from(self.filter.innovation());
-        out.normalized_innovation = self.filter.normalized_innovation_squared();
-        match best {
-            Some(b) => {
-                out.glr = Some(b.glr);
-                out.onset = Some(b.onset);
-                out.rank = b.rank;
-                self.bank.magnitude(b.onset, out.magnitude.as_mut_slice());
-            }
-            None => {
-                out.glr = None;
-                out.onset = None;
-                out.rank = 0;
-                out.magnitude.fill(0.0);
-            }
-        }
+        self.write_output(k, best, out);
 
+        self.cov_before.copy_from(self.filter.covariance());
         self.filter.time_update(&self.system, sample.u);
         gemm(
             1.0,
@@ -352,6 +388,49 @@ impl Detector {
             self.fk_phi.as_slice(),
             false,
         );
+        self.track_stationarity(k);
+        self.finish_measured(sample);
+        Ok(())
+    }
+
+    /// A measured sample in the stationary regime (model and fault columns checked equal
+    /// to the tables' by the caller): the held-gain filter, d and the statistic per
+    /// onset from the tables, no Riccati or Γ recursion.
+    fn step_steady(&mut self, sample: &Sample<'_>, out: &mut StepOutput) {
+        let k = sample.k;
+        self.filter.measure_steady(&self.system, sample.u, sample.y);
+        self.bank.begin(k);
+        self.bank
+            .accumulate_steady(k, self.filter.whitened_innovation().as_slice());
+        let best = self.bank.maximize_steady(k);
+        self.write_output(k, best, out);
+        self.filter.time_update_steady(&self.system, sample.u);
+        self.bank.advance_steady(k);
+        self.finish_measured(sample);
+    }
+
+    fn write_output(&mut self, k: u64, best: Option<crate::glr::WindowMax>, out: &mut StepOutput) {
+        out.k = k;
+        out.innovation.copy_from(self.filter.innovation());
+        out.normalized_innovation = self.filter.normalized_innovation_squared();
+        match best {
+            Some(b) => {
+                out.glr = Some(b.glr);
+                out.onset = Some(b.onset);
+                out.rank = b.rank;
+                self.bank.magnitude(b.onset, out.magnitude.as_mut_slice());
+            }
+            None => {
+                out.glr = None;
+                out.onset = None;
+                out.rank = 0;
+                out.magnitude.fill(0.0);
+            }
+        }
+    }
+
+    /// Held signals, input moments and indices after a measured sample.
+    fn finish_measured(&mut self, sample: &Sample<'_>) {
         self.held_u.copy_from_slice(sample.u);
         self.held_p.copy_from_slice(sample.p);
         self.input_count += 1;
@@ -361,9 +440,69 @@ impl Detector {
             *mean += delta / count;
             *m2 += delta * (u - *mean);
         }
-        self.next_k = Some(k + 1);
-        self.last_measured = Some(k);
-        Ok(())
+        self.next_k = Some(sample.k + 1);
+        self.last_measured = Some(sample.k);
+    }
+
+    /// Whether this sample's matrices and fault columns equal those the stationary
+    /// regime was built on (bit for bit).
+    fn matches_reference(&self) -> bool {
+        self.system == self.reference
+            && self.psi == self.reference_psi
+            && self.phi == self.reference_phi
+    }
+
+    /// After a general measured step at k: counts the samples over which the model, the
+    /// fault columns and P stayed constant, and enters the stationary regime once the
+    /// whole window has been built under them.
+    fn track_stationarity(&mut self, k: u64) {
+        let tol = self.settings.steady_tolerance;
+        if tol == 0.0 {
+            return;
+        }
+        let same = self.system == self.reference
+            && self.psi == self.reference_psi
+            && self.phi_last == self.reference_phi;
+        if !same {
+            self.reference.clone_from(&self.system);
+            self.reference_psi.copy_from(&self.psi);
+            self.reference_phi.copy_from(&self.phi_last);
+            self.steady_samples = 0;
+            return;
+        }
+        let cov = self.filter.covariance();
+        let scale = cov.amax();
+        let change = cov
+            .iter()
+            .zip(self.cov_before.iter())
+            .fold(0.0_f64, |a, (x, y)| a.max((x - y).abs()));
+        if change > tol * scale {
+            self.steady_samples = 0;
+            return;
+        }
+        self.steady_samples += 1;
+        if self.steady_samples >= self.settings.window as u64 {
+            self.bank.enter_steady(
+                k,
+                self.filter.closed_loop().as_slice(),
+                self.psi.as_slice(),
+                self.fk_phi.as_slice(),
+                self.filter.whitened_output_matrix().as_slice(),
+                self.phi.as_slice(),
+            );
+        }
+    }
+
+    /// Back to the general recursion (between steps).
+    fn leave_steady(&mut self) {
+        self.bank.leave_steady();
+        self.steady_samples = 0;
+    }
+
+    /// Whether the stationary regime (the LTI fast path) is in force.
+    #[must_use]
+    pub fn is_stationary(&self) -> bool {
+        self.bank.is_steady()
     }
 
     /// Predict-only step for a missing sample k: no measurement, so C and d do not
@@ -391,6 +530,8 @@ impl Detector {
                 });
             }
         }
+        // A gap breaks the stationary regime (no measurement: K = 0 at this step).
+        self.leave_steady();
         let signals = Signals {
             u: &self.held_u,
             p: &self.held_p,

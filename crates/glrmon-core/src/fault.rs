@@ -252,6 +252,21 @@ impl FaultDictionary {
         self.faults.iter().all(|f| f.onset == Onset::Known)
     }
 
+    /// True when every column is the same at every sample given constant model
+    /// matrices (zero, constant, or an actuator bias column of G): with an LTI model
+    /// the stationary regime then need not evaluate the columns at all.
+    #[must_use]
+    pub fn is_constant(&self) -> bool {
+        self.faults.iter().all(|f| {
+            [&f.state, &f.output].iter().all(|c| {
+                matches!(
+                    c,
+                    Column::Zero | Column::Constant(_) | Column::InputBias { .. }
+                )
+            })
+        })
+    }
+
     /// The dimensions the columns were checked against.
     #[must_use]
     pub fn dims(&self) -> Dims {

@@ -34,6 +34,16 @@
 //! C⁻ (C C⁻ C = C); since d ∈ range(C), dᵀC⁻d = dᵀC⁺d is exactly 2 ln LR and is χ²
 //! with dof = rank C = the number of kept pivots. The magnitude θ̂ at r̂ uses the
 //! Moore–Penrose pseudo-inverse (eigenvalues ≤ τ·λ_max dropped) when C is deficient.
+//!
+//! # Stationary regime (LTI fast path)
+//! When A_k, F_kK_k, L_k⁻¹H_k, Ψ̃_k and Φ̃_k are constant (an LTI model whose Riccati
+//! recursion has converged), eq. (46) from Γ_r(r) = a_entry·Ψ̃ gives the same Γ for every
+//! onset at the same lag ℓ = k − r, hence S_k(r) = S(ℓ) and C_k(r) = C(ℓ) (eq. (32)).
+//! [`WindowBank::enter_steady`] tabulates S(ℓ), C(ℓ), a generalised inverse C(ℓ)⁻ (the
+//! same dropped-pivot LDLᵀ) and Γ(ℓ + 1) once for ℓ = 0 … w − 1; each sample then only
+//! adds S(ℓ)ᵀL⁻¹ε_k to d_k(r) (eq. (33)) and evaluates d_k(r)ᵀC(ℓ)⁻d_k(r) per onset.
+//! [`WindowBank::leave_steady`] writes Γ, C and S back from the tables so that the
+//! general recursion continues exactly where the tables stand.
 
 use crate::fault::Onset;
 use crate::linalg::{at, jacobi_eigen};
@@ -94,6 +104,35 @@ pub(crate) struct WindowBank {
     eig_a: Vec<f64>,
     eig_vals: Vec<f64>,
     eig_vecs: Vec<f64>,
+    /// Sample index of the last measured step (the k of `lag = k − r` in the tables).
+    current: u64,
+    /// Whether the stationary tables are in force.
+    steady: bool,
+    tables: LagTables,
+}
+
+/// Per-lag tables of the stationary regime, lag-reversed: the entry for lag ℓ of
+/// component c is at [c·w + (w − 1 − ℓ)], so that the slots of the ring, taken in
+/// increasing order from the newest onset's slot, meet the table in increasing order.
+/// Allocated with the bank, so entering the regime allocates nothing.
+#[derive(Debug, Clone)]
+struct LagTables {
+    /// L⁻¹S(ℓ) (p×m components).
+    signature: Vec<f64>,
+    /// C(ℓ), packed lower triangle.
+    info: Vec<f64>,
+    /// C(ℓ)⁻, the dropped-pivot generalised inverse, packed lower triangle.
+    inverse: Vec<f64>,
+    /// rank C(ℓ).
+    rank: Vec<f64>,
+    /// Γ(ℓ + 1) = Γ_{r+ℓ+1}(r), the value after the time update at lag ℓ (n×m).
+    gamma: Vec<f64>,
+    /// Scratch for the construction: Γ(ℓ), C(ℓ), the m×m LDLᵀ.
+    work_gamma: Vec<f64>,
+    work_next: Vec<f64>,
+    work_ldl: Vec<f64>,
+    work_inv_pivot: Vec<f64>,
+    work_linv: Vec<f64>,
 }
 
 /// The GLR decision quantities of one step.
@@ -149,6 +188,20 @@ impl WindowBank {
             eig_a: z(m * m),
             eig_vals: z(m),
             eig_vecs: z(m * m),
+            current: 0,
+            steady: false,
+            tables: LagTables {
+                signature: z(p * m * slots),
+                info: z(t * slots),
+                inverse: z(t * slots),
+                rank: z(slots),
+                gamma: z(n * m * slots),
+                work_gamma: z(n * m),
+                work_next: z(n * m),
+                work_ldl: z(m * m),
+                work_inv_pivot: z(m),
+                work_linv: z(m * m),
+            },
         }
     }
 
@@ -219,6 +272,7 @@ impl WindowBank {
         phi_white: &[f64],
         eps_white: &[f64],
     ) {
+        self.current = k;
         self.compute_factors(k);
         let (n, m, p, w) = (self.n, self.m, self.p, self.slots);
         for j in 0..m {
@@ -290,6 +344,11 @@ impl WindowBank {
             2 => self.statistic_m2(),
             _ => self.statistic_generic(),
         }
+        self.best(k)
+    }
+
+    /// The maximum over admissible onsets after [`WindowBank::accumulate_steady`].
+    pub(crate) fn maximize_steady(&self, k: u64) -> Option<WindowMax> {
         self.best(k)
     }
 
@@ -440,23 +499,25 @@ impl WindowBank {
         if newest < oldest {
             return None;
         }
-        // Scan the ring in onset order as two contiguous runs; strict `>` keeps the
-        // earliest onset on ties.
+        // Scan the ring in onset order as two contiguous runs: the largest value first
+        // (branch-free, in independent lanes), then its earliest position. Statistics
+        // that are NaN never win, as with a strict `>` scan.
         let start = self.slot_of(oldest);
         let count = (newest - oldest + 1) as usize;
         let first_run = count.min(self.slots - start);
-        let mut best_value = f64::NEG_INFINITY;
-        let mut best_pos = 0usize;
-        for (pos, v) in self.stat[start..start + first_run]
+        let runs = [
+            &self.stat[start..start + first_run],
+            &self.stat[..count - first_run],
+        ];
+        let best_value = runs
             .iter()
-            .chain(&self.stat[..count - first_run])
-            .enumerate()
-        {
-            if *v > best_value {
-                best_value = *v;
-                best_pos = pos;
-            }
-        }
+            .map(|r| lane_max(r))
+            .fold(f64::NEG_INFINITY, |a, b| if b > a { b } else { a });
+        let best_pos = runs[0]
+            .iter()
+            .chain(runs[1])
+            .position(|v| *v == best_value)
+            .unwrap_or(0);
         let slot = (start + best_pos) % self.slots;
         Some(WindowMax {
             glr: self.stat[slot],
@@ -472,7 +533,23 @@ impl WindowBank {
             return false;
         };
         let (m, w) = (self.m, self.slots);
-        if self.rank[s] as usize == m {
+        // Where C(r) is stored: the slot of the ring, or the lag's entry of the tables.
+        let (info, at_index) = if self.steady {
+            let t = self.table_index(s);
+            if self.tables.rank[t] as usize == m {
+                // θ = C⁻d with the tabulated inverse (C is regular here, C⁻ = C⁻¹).
+                for (a, o) in out.iter_mut().enumerate().take(m) {
+                    *o = (0..m)
+                        .map(|b| {
+                            let (hi, lo) = if a >= b { (a, b) } else { (b, a) };
+                            self.tables.inverse[tri(hi, lo) * w + t] * self.score[b * w + s]
+                        })
+                        .sum();
+                }
+                return true;
+            }
+            (&self.tables.info, t)
+        } else if self.rank[s] as usize == m {
             // Back-substitution on the slot's LDLᵀ: θ = L⁻ᵀ D⁻¹ z.
             for (j, o) in out.iter_mut().enumerate().take(m) {
                 *o = self.solved[j * w + s] * self.inv_pivot[j * w + s];
@@ -484,26 +561,28 @@ impl WindowBank {
                 }
                 out[j] = v;
             }
+            return true;
         } else {
-            for a in 0..m {
-                for b in 0..=a {
-                    let c = self.info[tri(a, b) * w + s];
-                    self.eig_a[at(m, a, b)] = c;
-                    self.eig_a[at(m, b, a)] = c;
-                }
+            (&self.info, s)
+        };
+        for a in 0..m {
+            for b in 0..=a {
+                let c = info[tri(a, b) * w + at_index];
+                self.eig_a[at(m, a, b)] = c;
+                self.eig_a[at(m, b, a)] = c;
             }
-            jacobi_eigen(&mut self.eig_a, m, &mut self.eig_vals, &mut self.eig_vecs);
-            let lmax = self.eig_vals.iter().fold(0.0_f64, |a, b| a.max(*b));
-            let cut = self.tolerance * lmax;
-            out.iter_mut().for_each(|x| *x = 0.0);
-            for e in 0..m {
-                let lam = self.eig_vals[e];
-                if lam > cut && lam > 0.0 {
-                    let v = &self.eig_vecs[e * m..(e + 1) * m];
-                    let proj: f64 = (0..m).map(|a| v[a] * self.score[a * w + s]).sum();
-                    for a in 0..m {
-                        out[a] += v[a] * proj / lam;
-                    }
+        }
+        jacobi_eigen(&mut self.eig_a, m, &mut self.eig_vals, &mut self.eig_vecs);
+        let lmax = self.eig_vals.iter().fold(0.0_f64, |a, b| a.max(*b));
+        let cut = self.tolerance * lmax;
+        out.iter_mut().for_each(|x| *x = 0.0);
+        for e in 0..m {
+            let lam = self.eig_vals[e];
+            if lam > cut && lam > 0.0 {
+                let v = &self.eig_vecs[e * m..(e + 1) * m];
+                let proj: f64 = (0..m).map(|a| v[a] * self.score[a * w + s]).sum();
+                for a in 0..m {
+                    out[a] += v[a] * proj / lam;
                 }
             }
         }
@@ -585,8 +664,9 @@ impl WindowBank {
         let Some(s) = self.slot_for(onset) else {
             return false;
         };
+        let (src, i) = self.stored(&self.gamma, &self.tables.gamma, s);
         for (c, o) in out.iter_mut().enumerate().take(self.n * self.m) {
-            *o = self.gamma[c * self.slots + s];
+            *o = src[c * self.slots + i];
         }
         true
     }
@@ -596,8 +676,9 @@ impl WindowBank {
         let Some(s) = self.slot_for(onset) else {
             return false;
         };
+        let (src, i) = self.stored(&self.signature, &self.tables.signature, s);
         for (c, o) in out.iter_mut().enumerate().take(self.p * self.m) {
-            *o = self.signature[c * self.slots + s];
+            *o = src[c * self.slots + i];
         }
         true
     }
@@ -608,9 +689,10 @@ impl WindowBank {
             return false;
         };
         let (m, w) = (self.m, self.slots);
+        let (src, i) = self.stored(&self.info, &self.tables.info, s);
         for a in 0..m {
             for b in 0..=a {
-                let c = self.info[tri(a, b) * w + s];
+                let c = src[tri(a, b) * w + i];
                 info[at(m, a, b)] = c;
                 info[at(m, b, a)] = c;
             }
@@ -627,6 +709,361 @@ impl WindowBank {
     /// Statistic of onset r at the last [`WindowBank::maximize`].
     pub(crate) fn statistic_of(&self, onset: u64) -> Option<f64> {
         self.slot_for(onset).map(|s| self.stat[s])
+    }
+
+    /// The array holding a per-onset quantity of slot s and the index within a component:
+    /// the ring itself, or the lag's entry of the stationary tables.
+    fn stored<'a>(&self, ring: &'a [f64], table: &'a [f64], s: usize) -> (&'a [f64], usize) {
+        if self.steady {
+            (table, self.table_index(s))
+        } else {
+            (ring, s)
+        }
+    }
+
+    /// Entry of the lag-reversed tables for slot s at the last measured step.
+    fn table_index(&self, s: usize) -> usize {
+        let lag = (self.current - self.onset[s]) as usize;
+        self.slots - 1 - lag
+    }
+
+    /// Whether the stationary tables are in force.
+    pub(crate) fn is_steady(&self) -> bool {
+        self.steady
+    }
+
+    /// Tabulates the stationary regime after the time update at step k and switches to
+    /// it (see the module docs). The arguments are the constant A (n×n), Ψ̃ (n×m),
+    /// FKΦ̃ (n×m), L⁻¹H (p×n) and L⁻¹Φ̃ (p×m). Returns false, changing nothing, when the
+    /// window is not yet full or the profile is known (C then grows without bound).
+    pub(crate) fn enter_steady(
+        &mut self,
+        k: u64,
+        closed_loop: &[f64],
+        psi: &[f64],
+        fk_phi: &[f64],
+        h_white: &[f64],
+        phi_white: &[f64],
+    ) -> bool {
+        let Some(first) = self.first else {
+            return false;
+        };
+        if self.known || self.steady || k + 1 < first + self.slots as u64 || self.current != k {
+            return false;
+        }
+        let (n, m, p, w) = (self.n, self.m, self.p, self.slots);
+        let tol = self.tolerance;
+        let tb = &mut self.tables;
+        for (j, kind) in self.kinds.iter().enumerate() {
+            let f = kind.entry_factor();
+            for i in 0..n {
+                tb.work_gamma[i + n * j] = f * psi[at(n, i, j)];
+            }
+        }
+        for lag in 0..w {
+            let idx = w - 1 - lag;
+            // S(ℓ) = L⁻¹H Γ(ℓ) + b(ℓ) L⁻¹Φ̃ (eq. (45)), in the order of `accumulate`.
+            for (j, kind) in self.kinds.iter().enumerate() {
+                let of = kind.output_factor(lag as u64);
+                for i in 0..p {
+                    let mut v = phi_white[at(p, i, j)] * of;
+                    for l in 0..n {
+                        v += h_white[at(p, i, l)] * tb.work_gamma[l + n * j];
+                    }
+                    tb.signature[(i + p * j) * w + idx] = v;
+                }
+            }
+            // C(ℓ) = C(ℓ − 1) + S(ℓ)ᵀS(ℓ) (eq. (32)).
+            for a in 0..m {
+                for b in 0..=a {
+                    let c = tri(a, b);
+                    let mut v = if lag == 0 {
+                        0.0
+                    } else {
+                        tb.info[c * w + idx + 1]
+                    };
+                    for i in 0..p {
+                        v += tb.signature[(i + p * a) * w + idx]
+                            * tb.signature[(i + p * b) * w + idx];
+                    }
+                    tb.info[c * w + idx] = v;
+                }
+            }
+            // C(ℓ)⁻ = L⁻ᵀD⁺L⁻¹ from the dropped-pivot LDLᵀ of `statistic_generic`.
+            let cut = (0..m)
+                .map(|a| tb.info[tri(a, a) * w + idx])
+                .fold(0.0_f64, f64::max)
+                * tol;
+            let mut rank = 0.0;
+            for j in 0..m {
+                let mut d = tb.info[tri(j, j) * w + idx];
+                for q in 0..j {
+                    let l = tb.work_ldl[at(m, j, q)];
+                    d -= l * l * tb.work_ldl[at(m, q, q)];
+                }
+                tb.work_ldl[at(m, j, j)] = d;
+                let keep = d > cut && d > 0.0;
+                tb.work_inv_pivot[j] = if keep { 1.0 / d } else { 0.0 };
+                rank += if keep { 1.0 } else { 0.0 };
+                for i in (j + 1)..m {
+                    let mut x = tb.info[tri(i, j) * w + idx];
+                    for q in 0..j {
+                        x -= tb.work_ldl[at(m, i, q)]
+                            * tb.work_ldl[at(m, j, q)]
+                            * tb.work_ldl[at(m, q, q)];
+                    }
+                    tb.work_ldl[at(m, i, j)] = x * tb.work_inv_pivot[j];
+                }
+            }
+            tb.rank[idx] = rank;
+            // L⁻¹ (unit lower triangular).
+            for j in 0..m {
+                for i in 0..m {
+                    tb.work_linv[at(m, i, j)] = if i == j { 1.0 } else { 0.0 };
+                }
+                for i in (j + 1)..m {
+                    let mut x = 0.0;
+                    for q in j..i {
+                        x -= tb.work_ldl[at(m, i, q)] * tb.work_linv[at(m, q, j)];
+                    }
+                    tb.work_linv[at(m, i, j)] = x;
+                }
+            }
+            for a in 0..m {
+                for b in 0..=a {
+                    let mut g = 0.0;
+                    for j in a..m {
+                        g += tb.work_linv[at(m, j, a)]
+                            * tb.work_inv_pivot[j]
+                            * tb.work_linv[at(m, j, b)];
+                    }
+                    tb.inverse[tri(a, b) * w + idx] = g;
+                }
+            }
+            // Γ(ℓ + 1) = AΓ(ℓ) + a(ℓ)Ψ̃ − b(ℓ)FKΦ̃ (eq. (46)), in the order of `gamma_column`.
+            for (j, kind) in self.kinds.iter().enumerate() {
+                let (sf, of) = (
+                    kind.state_factor(lag as u64),
+                    kind.output_factor(lag as u64),
+                );
+                for i in 0..n {
+                    let mut v = psi[at(n, i, j)] * sf - fk_phi[at(n, i, j)] * of;
+                    for l in 0..n {
+                        v += closed_loop[at(n, i, l)] * tb.work_gamma[l + n * j];
+                    }
+                    tb.work_next[i + n * j] = v;
+                    tb.gamma[(i + n * j) * w + idx] = v;
+                }
+            }
+            std::mem::swap(&mut tb.work_gamma, &mut tb.work_next);
+        }
+        self.steady = true;
+        true
+    }
+
+    /// Measurement step k in the stationary regime: d_k(r) += S(ℓ)ᵀL⁻¹ε_k (eq. (33))
+    /// and the statistic d_k(r)ᵀC(ℓ)⁻d_k(r) for every slot, two contiguous runs of the
+    /// ring against two contiguous runs of the tables.
+    pub(crate) fn accumulate_steady(&mut self, k: u64, eps_white: &[f64]) {
+        self.current = k;
+        let (m, p, w) = (self.m, self.p, self.slots);
+        let base = self.slot_of(k);
+        for (start, len, idx) in [(0, base + 1, w - 1 - base), (base + 1, w - 1 - base, 0)] {
+            if len == 0 {
+                continue;
+            }
+            let run = SteadyRun { w, start, idx, len };
+            let (score, stat) = (&mut self.score[..], &mut self.stat[..]);
+            let (sig, inv) = (&self.tables.signature[..], &self.tables.inverse[..]);
+            macro_rules! fused {
+                ($(($mm:literal, $pp:literal)),*) => {
+                    match (m, p) {
+                        $(($mm, $pp) => steady_fused::<$mm, $pp>(
+                            run, score, stat, sig, inv, eps_white[..$pp].try_into().unwrap_or(&[0.0; $pp]),
+                        ),)*
+                        _ => steady_passes(run, m, p, score, stat, sig, inv, eps_white),
+                    }
+                };
+            }
+            fused!(
+                (1, 1),
+                (1, 2),
+                (1, 3),
+                (1, 4),
+                (2, 1),
+                (2, 2),
+                (2, 3),
+                (2, 4),
+                (3, 1),
+                (3, 2),
+                (3, 3),
+                (3, 4),
+                (4, 1),
+                (4, 2),
+                (4, 3),
+                (4, 4)
+            );
+            self.rank[start..start + len].copy_from_slice(&self.tables.rank[idx..idx + len]);
+        }
+    }
+
+    /// Time update k → k + 1 in the stationary regime: Γ lives in the tables, so only
+    /// the next onset is announced.
+    pub(crate) fn advance_steady(&mut self, k: u64) {
+        self.pending = Some(k + 1);
+    }
+
+    /// Leaves the stationary regime between steps: Γ, C and S of every onset are
+    /// written back from the tables (d was kept in the ring), and the general
+    /// recursion goes on from there.
+    pub(crate) fn leave_steady(&mut self) {
+        if !self.steady {
+            return;
+        }
+        let (n, m, p, w) = (self.n, self.m, self.p, self.slots);
+        let t = m * (m + 1) / 2;
+        for s in 0..w {
+            if self.active[s] == 0.0 || self.onset[s] > self.current {
+                continue;
+            }
+            let idx = self.table_index(s);
+            for c in 0..n * m {
+                self.gamma[c * w + s] = self.tables.gamma[c * w + idx];
+            }
+            for c in 0..t {
+                self.info[c * w + s] = self.tables.info[c * w + idx];
+            }
+            for c in 0..p * m {
+                self.signature[c * w + s] = self.tables.signature[c * w + idx];
+            }
+            self.lag[s] = (self.current + 1 - self.onset[s]) as f64;
+        }
+        self.steady = false;
+    }
+}
+
+/// The largest value of `values` (NaN ignored; −∞ when empty or all NaN), in four
+/// independent lanes so that the loop vectorises.
+fn lane_max(values: &[f64]) -> f64 {
+    const L: usize = 4;
+    let mut acc = [f64::NEG_INFINITY; L];
+    let mut chunks = values.chunks_exact(L);
+    for c in &mut chunks {
+        for l in 0..L {
+            acc[l] = if c[l] > acc[l] { c[l] } else { acc[l] };
+        }
+    }
+    let mut m = f64::NEG_INFINITY;
+    for v in acc.iter().chain(chunks.remainder()) {
+        m = if *v > m { *v } else { m };
+    }
+    m
+}
+
+/// A contiguous run of slots [start, start + len) of the ring against the table entries
+/// [idx, idx + len), components w apart.
+#[derive(Debug, Clone, Copy)]
+struct SteadyRun {
+    w: usize,
+    start: usize,
+    idx: usize,
+    len: usize,
+}
+
+/// The stationary measurement step over a run, m = M and p = P known at compile time:
+/// one pass, four slots at a time (loaded into registers, so the lanes vectorise), then
+/// the remainder one slot at a time with the same operations.
+fn steady_fused<const M: usize, const P: usize>(
+    run: SteadyRun,
+    score: &mut [f64],
+    stat: &mut [f64],
+    signature: &[f64],
+    inverse: &[f64],
+    eps: &[f64; P],
+) {
+    let mut s = 0;
+    while s + 4 <= run.len {
+        steady_lanes::<M, P, 4>(run, s, score, stat, signature, inverse, eps);
+        s += 4;
+    }
+    while s < run.len {
+        steady_lanes::<M, P, 1>(run, s, score, stat, signature, inverse, eps);
+        s += 1;
+    }
+}
+
+/// L slots from offset s of the run: d += S(ℓ)ᵀL⁻¹ε (eq. (33)), then dᵀC(ℓ)⁻d.
+#[inline(always)]
+fn steady_lanes<const M: usize, const P: usize, const L: usize>(
+    run: SteadyRun,
+    s: usize,
+    score: &mut [f64],
+    stat: &mut [f64],
+    signature: &[f64],
+    inverse: &[f64],
+    eps: &[f64; P],
+) {
+    let (w, at_slot, at_table) = (run.w, run.start + s, run.idx + s);
+    let mut d = [[0.0; L]; M];
+    for (a, da) in d.iter_mut().enumerate() {
+        da.copy_from_slice(&score[a * w + at_slot..a * w + at_slot + L]);
+        for (i, e) in eps.iter().enumerate() {
+            let c = (i + P * a) * w + at_table;
+            let x = &signature[c..c + L];
+            for l in 0..L {
+                da[l] += x[l] * e;
+            }
+        }
+        score[a * w + at_slot..a * w + at_slot + L].copy_from_slice(da);
+    }
+    let mut st = [0.0; L];
+    for a in 0..M {
+        for b in 0..=a {
+            let c = tri(a, b) * w + at_table;
+            let g = &inverse[c..c + L];
+            let f = if a == b { 1.0 } else { 2.0 };
+            for l in 0..L {
+                st[l] += f * g[l] * d[a][l] * d[b][l];
+            }
+        }
+    }
+    stat[at_slot..at_slot + L].copy_from_slice(&st);
+}
+
+/// The stationary measurement step over a run for any m, p: one pass per component.
+#[allow(clippy::too_many_arguments)]
+fn steady_passes(
+    run: SteadyRun,
+    m: usize,
+    p: usize,
+    score: &mut [f64],
+    stat: &mut [f64],
+    signature: &[f64],
+    inverse: &[f64],
+    eps: &[f64],
+) {
+    let SteadyRun { w, start, idx, len } = run;
+    for a in 0..m {
+        let d = &mut score[a * w + start..a * w + start + len];
+        for (i, e) in eps.iter().enumerate().take(p) {
+            let c = (i + p * a) * w + idx;
+            for (d, x) in d.iter_mut().zip(&signature[c..c + len]) {
+                *d += x * e;
+            }
+        }
+    }
+    let stat = &mut stat[start..start + len];
+    stat.fill(0.0);
+    for a in 0..m {
+        let da = &score[a * w + start..a * w + start + len];
+        for b in 0..=a {
+            let db = &score[b * w + start..b * w + start + len];
+            let c = tri(a, b) * w + idx;
+            let f = if a == b { 1.0 } else { 2.0 };
+            for (((st, x), y), g) in stat.iter_mut().zip(da).zip(db).zip(&inverse[c..c + len]) {
+                *st += f * g * x * y;
+            }
+        }
     }
 }
 

@@ -294,6 +294,73 @@ impl InnovationFilter {
         self.propagate(sys, u);
     }
 
+    /// Measurement step of the stationary filter: ε_k and L⁻¹ε_k with the gain, Σ and
+    /// L of the last full [`InnovationFilter::measure`] held (the Riccati recursion has
+    /// converged: eqs. (7)-(8) would give them again). Cannot fail.
+    pub fn measure_steady(&mut self, sys: &SystemMatrices, u: &[f64], y: &[f64]) {
+        let (n, p, l) = (self.n, self.p, sys.g.ncols());
+        self.innovation.as_mut_slice().copy_from_slice(y);
+        gemv(
+            -1.0,
+            sys.j.as_slice(),
+            p,
+            l,
+            u,
+            1.0,
+            self.innovation.as_mut_slice(),
+        );
+        gemv(
+            -1.0,
+            sys.h.as_slice(),
+            p,
+            n,
+            self.state.as_slice(),
+            1.0,
+            self.innovation.as_mut_slice(),
+        );
+        self.innovation_white.copy_from(&self.innovation);
+        solve_lower_in_place(
+            self.chol.as_slice(),
+            p,
+            self.innovation_white.as_mut_slice(),
+            1,
+        );
+    }
+
+    /// Time update of the stationary filter: X̂_{k+1} = F_k(X̂_k + Kε_k) + G_kU_k
+    /// (eq. (6)) with the held gain; P, A and FK are unchanged.
+    pub fn time_update_steady(&mut self, sys: &SystemMatrices, u: &[f64]) {
+        let (n, p, l) = (self.n, self.p, sys.g.ncols());
+        self.tmp_n.copy_from(&self.state);
+        gemv(
+            1.0,
+            self.gain.as_slice(),
+            n,
+            p,
+            self.innovation.as_slice(),
+            1.0,
+            self.tmp_n.as_mut_slice(),
+        );
+        gemv(
+            1.0,
+            sys.f.as_slice(),
+            n,
+            n,
+            self.tmp_n.as_slice(),
+            0.0,
+            self.state.as_mut_slice(),
+        );
+        gemv(
+            1.0,
+            sys.g.as_slice(),
+            n,
+            l,
+            u,
+            1.0,
+            self.state.as_mut_slice(),
+        );
+    }
+
     /// Predict-only step for a missing sample: X̂_{k+1} = F_kX̂_k + G_kU_k,
     /// P_{k+1} = F_kP_kF_kᵀ + Q_k + G_k diag(σ²_u) G_kᵀ, A_k = F_k, F_kK_k = 0 (no
     /// measurement, no gain). The input of a missing sample is unknown: `u` is a guess

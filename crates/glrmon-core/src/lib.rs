@@ -18,7 +18,7 @@ pub mod sparse;
 pub mod threshold;
 
 pub use alarm::{AlarmSettings, AlarmState, AlarmTransition};
-pub use detector::{Detector, Sample, StepOutput, WindowSettings};
+pub use detector::{DEFAULT_STEADY_TOLERANCE, Detector, Sample, StepOutput, WindowSettings};
 pub use error::{ModelError, StepError};
 pub use fault::{Column, ColumnFn, Fault, FaultDictionary, Onset};
 pub use glr::DEFAULT_RANK_TOLERANCE;

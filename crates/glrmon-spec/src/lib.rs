@@ -985,6 +985,7 @@ impl Validator {
                 window: glr.window,
                 min_lag: glr.min_lag,
                 rank_tolerance: tolerance,
+                ..WindowSettings::default()
             },
             alarm: AlarmSettings {
                 threshold,
