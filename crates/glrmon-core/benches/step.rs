@@ -4,12 +4,16 @@
 //! `cargo bench -p glrmon-core --bench step`; figures in docs/PERFORMANCE.md.
 
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
-use glrmon_core::{Sample, StepOutput};
+use glrmon_core::{Sample, StepOutput, VectorLevel};
 use glrmon_sim::{SimSample, scenarios};
 
 const BATCH: usize = 10_000;
 
 fn bench_scenario(c: &mut Criterion, name: &str, sc: &scenarios::Scenario) {
+    bench_at(c, name, sc, VectorLevel::detect());
+}
+
+fn bench_at(c: &mut Criterion, name: &str, sc: &scenarios::Scenario, level: VectorLevel) {
     let mut sim = sc.simulator(42).unwrap();
     let data: Vec<SimSample> = (0..2 * BATCH).map(|_| sim.next_sample()).collect();
     let mut group = c.benchmark_group(name);
@@ -19,6 +23,7 @@ fn bench_scenario(c: &mut Criterion, name: &str, sc: &scenarios::Scenario) {
             || {
                 // Warm the window up outside the timing: the bank is full from here on.
                 let mut det = sc.detector().unwrap();
+                assert!(det.set_vector_level(level));
                 let mut out = StepOutput::new(sc.model_outputs(), sc.faults.len());
                 for (k, x) in data[..BATCH].iter().enumerate() {
                     det.step(
@@ -63,6 +68,16 @@ fn steps(c: &mut Criterion) {
     let mut general = lti.clone();
     general.window.steady_tolerance = 0.0;
     bench_scenario(c, "lti_n3_p2_m3_w160_general_path", &general);
+    // The same loops at each vector width this processor has (same bits, other speed).
+    for level in VectorLevel::supported() {
+        bench_at(
+            c,
+            &format!("bench_a_at_{level:?}"),
+            &scenarios::bench_a(),
+            level,
+        );
+        bench_at(c, &format!("lti_fast_path_at_{level:?}"), &lti, level);
+    }
 }
 
 criterion_group! {

@@ -283,6 +283,7 @@ impl Detector {
         let (n, p, m) = (self.dims.states, self.dims.outputs, self.faults.len());
         self.filter = InnovationFilter::new(self.x0.clone(), self.p0.clone(), p)?;
         let kinds = self.faults.faults().iter().map(|f| f.onset).collect();
+        let level = self.bank.level();
         self.bank = WindowBank::new(
             n,
             m,
@@ -292,6 +293,7 @@ impl Detector {
             kinds,
             self.settings.rank_tolerance,
         );
+        self.bank.set_level(level);
         self.held_u.fill(0.0);
         self.held_p.fill(0.0);
         self.next_k = None;
@@ -464,7 +466,17 @@ impl Detector {
             && self.psi == self.reference_psi
             && self.phi_last == self.reference_phi;
         if !same {
-            self.reference.clone_from(&self.system);
+            let (r, s) = (&mut self.reference, &self.system);
+            for (to, from) in [
+                (&mut r.f, &s.f),
+                (&mut r.g, &s.g),
+                (&mut r.h, &s.h),
+                (&mut r.j, &s.j),
+                (&mut r.q, &s.q),
+                (&mut r.r, &s.r),
+            ] {
+                to.copy_from(from);
+            }
             self.reference_psi.copy_from(&self.psi);
             self.reference_phi.copy_from(&self.phi_last);
             self.steady_samples = 0;
@@ -497,6 +509,24 @@ impl Detector {
     fn leave_steady(&mut self) {
         self.bank.leave_steady();
         self.steady_samples = 0;
+    }
+
+    /// The vector width the window loops run at (the widest the processor has, unless
+    /// set).
+    #[must_use]
+    pub fn vector_level(&self) -> crate::VectorLevel {
+        self.bank.level()
+    }
+
+    /// Runs the window loops at `level`; false, changing nothing, when this processor
+    /// does not support it. Every level gives the same bits (a test compares them), so
+    /// this only serves to measure and to check that claim.
+    pub fn set_vector_level(&mut self, level: crate::VectorLevel) -> bool {
+        if !crate::VectorLevel::supported().contains(&level) {
+            return false;
+        }
+        self.bank.set_level(level);
+        true
     }
 
     /// Whether the stationary regime (the LTI fast path) is in force.

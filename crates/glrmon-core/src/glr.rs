@@ -47,6 +47,45 @@
 
 use crate::fault::Onset;
 use crate::linalg::{at, jacobi_eigen};
+use crate::simd::VectorLevel as Level;
+
+/// Defines `$avx2` and `$avx512`: the method `$body` (an `#[inline(always)]` method of
+/// the bank) compiled for AVX2 and for AVX-512F (see crate::simd). `$wide => $avx512`
+/// compiles another body for AVX-512F (eight lanes instead of four).
+macro_rules! wide {
+    ($body:ident, $avx2:ident, $avx512:ident, ($($a:ident: $t:ty),*) $(-> $r:ty)?) => {
+        wide!($body, $avx2, $body => $avx512, ($($a: $t),*) $(-> $r)?);
+    };
+    ($body:ident, $avx2:ident, $wide:ident => $avx512:ident, ($($a:ident: $t:ty),*) $(-> $r:ty)?) => {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        unsafe fn $avx2(&mut self, $($a: $t),*) $(-> $r)? {
+            self.$body($($a),*)
+        }
+
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx512f")]
+        unsafe fn $avx512(&mut self, $($a: $t),*) $(-> $r)? {
+            self.$wide($($a),*)
+        }
+    };
+}
+
+/// Calls the variant of a [`wide!`] method for the bank's vector level.
+macro_rules! wide_call {
+    ($this:ident, $body:ident, $avx2:ident, $avx512:ident, ($($a:expr),*)) => {
+        match $this.level {
+            // SAFETY: the level is Avx2 or Avx512 only when the processor has the
+            // feature (`VectorLevel::detect`, or `Detector::set_vector_level`, which
+            // checks `VectorLevel::supported`).
+            #[cfg(target_arch = "x86_64")]
+            Level::Avx2 => unsafe { $this.$avx2($($a),*) },
+            #[cfg(target_arch = "x86_64")]
+            Level::Avx512 => unsafe { $this.$avx512($($a),*) },
+            _ => $this.$body($($a),*),
+        }
+    };
+}
 
 /// Default relative tolerance τ for the rank decision on C_k(r).
 pub const DEFAULT_RANK_TOLERANCE: f64 = 1e-9;
@@ -109,6 +148,8 @@ pub(crate) struct WindowBank {
     /// Whether the stationary tables are in force.
     steady: bool,
     tables: LagTables,
+    /// Vector width of the window loops (same bits at every width).
+    level: Level,
 }
 
 /// Per-lag tables of the stationary regime, lag-reversed: the entry for lag ℓ of
@@ -121,7 +162,8 @@ struct LagTables {
     signature: Vec<f64>,
     /// C(ℓ), packed lower triangle.
     info: Vec<f64>,
-    /// C(ℓ)⁻, the dropped-pivot generalised inverse, packed lower triangle.
+    /// C(ℓ)⁻, the dropped-pivot generalised inverse, packed lower triangle, with the
+    /// off-diagonal entries doubled (the coefficients of the quadratic form dᵀC⁻d).
     inverse: Vec<f64>,
     /// rank C(ℓ).
     rank: Vec<f64>,
@@ -190,6 +232,7 @@ impl WindowBank {
             eig_vecs: z(m * m),
             current: 0,
             steady: false,
+            level: Level::detect(),
             tables: LagTables {
                 signature: z(p * m * slots),
                 info: z(t * slots),
@@ -231,6 +274,7 @@ impl WindowBank {
 
     /// Per-slot profile factors at step k: a_j(k − r) and b_j(k − r), one loop per
     /// profile kind so that the loops over slots are branch-free.
+    #[inline(always)]
     fn compute_factors(&mut self, k: u64) {
         let slots = self.slots;
         let newest = self.first.map(|_| self.slot_of(k));
@@ -272,6 +316,19 @@ impl WindowBank {
         phi_white: &[f64],
         eps_white: &[f64],
     ) {
+        wide_call!(
+            self,
+            accumulate_body,
+            accumulate_avx2,
+            accumulate_avx512,
+            (k, h_white, phi_white, eps_white)
+        )
+    }
+
+    wide!(accumulate_body, accumulate_avx2, accumulate_avx512, (k: u64, h_white: &[f64], phi_white: &[f64], eps_white: &[f64]));
+
+    #[inline(always)]
+    fn accumulate_body(&mut self, k: u64, h_white: &[f64], phi_white: &[f64], eps_white: &[f64]) {
         self.current = k;
         self.compute_factors(k);
         let (n, m, p, w) = (self.n, self.m, self.p, self.slots);
@@ -319,6 +376,7 @@ impl WindowBank {
 
     /// C and d updates for m = 2, p = 1 in one pass (same operations and order as the
     /// generic loops).
+    #[inline(always)]
     fn accumulate_m2_p1(&mut self, e: f64) {
         let w = self.slots;
         let (s0, s1) = self.signature.split_at(w);
@@ -339,6 +397,13 @@ impl WindowBank {
     /// d_k(r)ᵀC_k(r)⁺d_k(r) and rank C_k(r) for every slot (batched LDLᵀ with dropped
     /// pivots, vectorised over slots), then the maximum over admissible onsets.
     pub(crate) fn maximize(&mut self, k: u64) -> Option<WindowMax> {
+        wide_call!(self, maximize_body, maximize_avx2, maximize_avx512, (k))
+    }
+
+    wide!(maximize_body, maximize_avx2, maximize_avx512, (k: u64) -> Option<WindowMax>);
+
+    #[inline(always)]
+    fn maximize_body(&mut self, k: u64) -> Option<WindowMax> {
         match self.m {
             1 => self.statistic_m1(),
             2 => self.statistic_m2(),
@@ -348,11 +413,19 @@ impl WindowBank {
     }
 
     /// The maximum over admissible onsets after [`WindowBank::accumulate_steady`].
-    pub(crate) fn maximize_steady(&self, k: u64) -> Option<WindowMax> {
+    pub(crate) fn maximize_steady(&mut self, k: u64) -> Option<WindowMax> {
+        wide_call!(self, best_body, best_avx2, best_avx512, (k))
+    }
+
+    wide!(best_body, best_avx2, best_avx512, (k: u64) -> Option<WindowMax>);
+
+    #[inline(always)]
+    fn best_body(&mut self, k: u64) -> Option<WindowMax> {
         self.best(k)
     }
 
     /// The LDLᵀ statistic for m = 1 in one pass: d²/C where C > τ·C.
+    #[inline(always)]
     fn statistic_m1(&mut self) {
         let w = self.slots;
         let tol = self.tolerance;
@@ -373,6 +446,7 @@ impl WindowBank {
 
     /// The LDLᵀ statistic for m = 2 fused into one branch-free pass over the slots; the
     /// same operations, in the same order, as [`WindowBank::statistic_generic`].
+    #[inline(always)]
     fn statistic_m2(&mut self) {
         let w = self.slots;
         let tol = self.tolerance;
@@ -403,6 +477,7 @@ impl WindowBank {
     }
 
     /// The batched LDLᵀ statistic for any m.
+    #[inline(always)]
     fn statistic_generic(&mut self) {
         let (m, w) = (self.m, self.slots);
         // Rank cut-off per slot: τ·max_a C_aa.
@@ -485,6 +560,7 @@ impl WindowBank {
     }
 
     /// Earliest onset with the largest statistic among r ∈ {max(k−w+1, k0), …, k − s}.
+    #[inline(always)]
     fn best(&self, k: u64) -> Option<WindowMax> {
         let first = self.first?;
         if self.known {
@@ -509,15 +585,9 @@ impl WindowBank {
             &self.stat[start..start + first_run],
             &self.stat[..count - first_run],
         ];
-        let best_value = runs
-            .iter()
-            .map(|r| lane_max(r))
-            .fold(f64::NEG_INFINITY, |a, b| if b > a { b } else { a });
-        let best_pos = runs[0]
-            .iter()
-            .chain(runs[1])
-            .position(|v| *v == best_value)
-            .unwrap_or(0);
+        let (v0, p0) = lane_argmax(runs[0]);
+        let (v1, p1) = lane_argmax(runs[1]);
+        let best_pos = if v1 > v0 { first_run + p1 } else { p0 };
         let slot = (start + best_pos) % self.slots;
         Some(WindowMax {
             glr: self.stat[slot],
@@ -542,7 +612,10 @@ impl WindowBank {
                     *o = (0..m)
                         .map(|b| {
                             let (hi, lo) = if a >= b { (a, b) } else { (b, a) };
-                            self.tables.inverse[tri(hi, lo) * w + t] * self.score[b * w + s]
+                            // The table holds 2·C⁻_ab off the diagonal (halving is exact).
+                            let g = self.tables.inverse[tri(hi, lo) * w + t];
+                            let g = if a == b { g } else { 0.5 * g };
+                            g * self.score[b * w + s]
                         })
                         .sum();
                 }
@@ -596,6 +669,27 @@ impl WindowBank {
     /// `closed_loop` is A_k (n×n), `psi` is Ψ̃_k (n×m), `fk_phi` is F_kK_kΦ̃_k (n×m).
     /// After a predict-only step `fk_phi` is zero and the factors are recomputed here.
     pub(crate) fn time_update(
+        &mut self,
+        k: u64,
+        closed_loop: &[f64],
+        psi: &[f64],
+        fk_phi: &[f64],
+        recompute_factors: bool,
+    ) {
+        wide_call!(
+            self,
+            time_update_body,
+            time_update_avx2,
+            time_update_avx512,
+            (k, closed_loop, psi, fk_phi, recompute_factors)
+        )
+    }
+
+    wide!(time_update_body, time_update_avx2, time_update_avx512,
+        (k: u64, closed_loop: &[f64], psi: &[f64], fk_phi: &[f64], recompute_factors: bool));
+
+    #[inline(always)]
+    fn time_update_body(
         &mut self,
         k: u64,
         closed_loop: &[f64],
@@ -727,6 +821,16 @@ impl WindowBank {
         self.slots - 1 - lag
     }
 
+    /// The vector width of the window loops.
+    pub(crate) fn level(&self) -> Level {
+        self.level
+    }
+
+    /// Sets the vector width; the caller has checked that the processor supports it.
+    pub(crate) fn set_level(&mut self, level: Level) {
+        self.level = level;
+    }
+
     /// Whether the stationary tables are in force.
     pub(crate) fn is_steady(&self) -> bool {
         self.steady
@@ -837,7 +941,9 @@ impl WindowBank {
                             * tb.work_inv_pivot[j]
                             * tb.work_linv[at(m, j, b)];
                     }
-                    tb.inverse[tri(a, b) * w + idx] = g;
+                    // Off the diagonal the table holds 2·C⁻_ab, the factor of d_a d_b in
+                    // the quadratic form.
+                    tb.inverse[tri(a, b) * w + idx] = if a == b { g } else { 2.0 * g };
                 }
             }
             // Γ(ℓ + 1) = AΓ(ℓ) + a(ℓ)Ψ̃ − b(ℓ)FKΦ̃ (eq. (46)), in the order of `gamma_column`.
@@ -865,6 +971,24 @@ impl WindowBank {
     /// and the statistic d_k(r)ᵀC(ℓ)⁻d_k(r) for every slot, two contiguous runs of the
     /// ring against two contiguous runs of the tables.
     pub(crate) fn accumulate_steady(&mut self, k: u64, eps_white: &[f64]) {
+        wide_call!(self, steady_4, steady_avx2, steady_avx512, (k, eps_white))
+    }
+
+    wide!(steady_4, steady_avx2, steady_8 => steady_avx512, (k: u64, eps_white: &[f64]));
+
+    #[inline(always)]
+    fn steady_4(&mut self, k: u64, eps_white: &[f64]) {
+        self.accumulate_steady_body::<4>(k, eps_white);
+    }
+
+    #[inline(always)]
+    fn steady_8(&mut self, k: u64, eps_white: &[f64]) {
+        self.accumulate_steady_body::<8>(k, eps_white);
+    }
+
+    /// [`WindowBank::accumulate_steady`] with L onsets per step of the fused loop.
+    #[inline(always)]
+    fn accumulate_steady_body<const L: usize>(&mut self, k: u64, eps_white: &[f64]) {
         self.current = k;
         let (m, p, w) = (self.m, self.p, self.slots);
         let base = self.slot_of(k);
@@ -878,7 +1002,7 @@ impl WindowBank {
             macro_rules! fused {
                 ($(($mm:literal, $pp:literal)),*) => {
                     match (m, p) {
-                        $(($mm, $pp) => steady_fused::<$mm, $pp>(
+                        $(($mm, $pp) => steady_fused::<$mm, $pp, L>(
                             run, score, stat, sig, inv, eps_white[..$pp].try_into().unwrap_or(&[0.0; $pp]),
                         ),)*
                         _ => steady_passes(run, m, p, score, stat, sig, inv, eps_white),
@@ -942,22 +1066,43 @@ impl WindowBank {
     }
 }
 
-/// The largest value of `values` (NaN ignored; −∞ when empty or all NaN), in four
-/// independent lanes so that the loop vectorises.
-fn lane_max(values: &[f64]) -> f64 {
+/// The largest value of `values` and its first position (NaN ignored; (−∞, 0) when
+/// empty or all NaN), in one pass over four independent lanes so that it vectorises:
+/// within a lane a strict `>` keeps the earliest position, across lanes the smallest
+/// position among equal values wins.
+#[inline(always)]
+fn lane_argmax(values: &[f64]) -> (f64, usize) {
     const L: usize = 4;
-    let mut acc = [f64::NEG_INFINITY; L];
+    let mut best = [f64::NEG_INFINITY; L];
+    let mut at = [0.0_f64; L];
+    let mut here: [f64; L] = std::array::from_fn(|l| l as f64);
     let mut chunks = values.chunks_exact(L);
     for c in &mut chunks {
         for l in 0..L {
-            acc[l] = if c[l] > acc[l] { c[l] } else { acc[l] };
+            let better = c[l] > best[l];
+            best[l] = if better { c[l] } else { best[l] };
+            at[l] = if better { here[l] } else { at[l] };
+            here[l] += L as f64;
         }
     }
-    let mut m = f64::NEG_INFINITY;
-    for v in acc.iter().chain(chunks.remainder()) {
-        m = if *v > m { *v } else { m };
+    let (mut value, mut pos) = (f64::NEG_INFINITY, f64::INFINITY);
+    for l in 0..L {
+        if best[l] > value || (best[l] == value && at[l] < pos) {
+            value = best[l];
+            pos = at[l];
+        }
     }
-    m
+    let tail = values.len() - chunks.remainder().len();
+    for (i, v) in chunks.remainder().iter().enumerate() {
+        if *v > value {
+            value = *v;
+            pos = (tail + i) as f64;
+        }
+    }
+    if value == f64::NEG_INFINITY {
+        return (value, 0);
+    }
+    (value, pos as usize)
 }
 
 /// A contiguous run of slots [start, start + len) of the ring against the table entries
@@ -971,9 +1116,10 @@ struct SteadyRun {
 }
 
 /// The stationary measurement step over a run, m = M and p = P known at compile time:
-/// one pass, four slots at a time (loaded into registers, so the lanes vectorise), then
+/// one pass, L slots at a time (loaded into registers, so the lanes vectorise), then
 /// the remainder one slot at a time with the same operations.
-fn steady_fused<const M: usize, const P: usize>(
+#[inline(always)]
+fn steady_fused<const M: usize, const P: usize, const L: usize>(
     run: SteadyRun,
     score: &mut [f64],
     stat: &mut [f64],
@@ -982,9 +1128,9 @@ fn steady_fused<const M: usize, const P: usize>(
     eps: &[f64; P],
 ) {
     let mut s = 0;
-    while s + 4 <= run.len {
-        steady_lanes::<M, P, 4>(run, s, score, stat, signature, inverse, eps);
-        s += 4;
+    while s + L <= run.len {
+        steady_lanes::<M, P, L>(run, s, score, stat, signature, inverse, eps);
+        s += L;
     }
     while s < run.len {
         steady_lanes::<M, P, 1>(run, s, score, stat, signature, inverse, eps);
@@ -1016,15 +1162,19 @@ fn steady_lanes<const M: usize, const P: usize, const L: usize>(
         }
         score[a * w + at_slot..a * w + at_slot + L].copy_from_slice(da);
     }
+    // dᵀC⁻d = Σ_a d_a Σ_{b≤a} G_ab d_b with G_ab = 2·C⁻_ab off the diagonal.
     let mut st = [0.0; L];
     for a in 0..M {
-        for b in 0..=a {
+        let mut t = [0.0; L];
+        for (b, db) in d.iter().enumerate().take(a + 1) {
             let c = tri(a, b) * w + at_table;
             let g = &inverse[c..c + L];
-            let f = if a == b { 1.0 } else { 2.0 };
             for l in 0..L {
-                st[l] += f * g[l] * d[a][l] * d[b][l];
+                t[l] += g[l] * db[l];
             }
+        }
+        for l in 0..L {
+            st[l] += d[a][l] * t[l];
         }
     }
     stat[at_slot..at_slot + L].copy_from_slice(&st);
@@ -1032,6 +1182,7 @@ fn steady_lanes<const M: usize, const P: usize, const L: usize>(
 
 /// The stationary measurement step over a run for any m, p: one pass per component.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn steady_passes(
     run: SteadyRun,
     m: usize,
@@ -1054,21 +1205,22 @@ fn steady_passes(
     }
     let stat = &mut stat[start..start + len];
     stat.fill(0.0);
-    for a in 0..m {
-        let da = &score[a * w + start..a * w + start + len];
-        for b in 0..=a {
-            let db = &score[b * w + start..b * w + start + len];
-            let c = tri(a, b) * w + idx;
-            let f = if a == b { 1.0 } else { 2.0 };
-            for (((st, x), y), g) in stat.iter_mut().zip(da).zip(db).zip(&inverse[c..c + len]) {
-                *st += f * g * x * y;
+    for s in 0..len {
+        let mut st = 0.0;
+        for a in 0..m {
+            let mut t = 0.0;
+            for b in 0..=a {
+                t += inverse[tri(a, b) * w + idx + s] * score[b * w + start + s];
             }
+            st += score[a * w + start + s] * t;
         }
+        stat[s] = st;
     }
 }
 
 /// Column j of eq. (46) for every slot, n known at compile time: one fused pass.
 /// `src`/`dst` hold the n rows of Γ(:, j) as n consecutive arrays over the slots.
+#[inline(always)]
 fn gamma_column<const N: usize>(
     a: &[f64],
     psi: &[f64],
@@ -1101,6 +1253,7 @@ fn gamma_column<const N: usize>(
 
 /// Column j of eq. (46) for any n, in the same operation order as [`gamma_column`].
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn gamma_column_generic(
     n: usize,
     a: &[f64],
@@ -1161,6 +1314,38 @@ mod tests {
             }
         }
         b
+    }
+
+    /// The lane scan finds what a plain strict-`>` scan finds: the largest value and
+    /// its earliest position, NaN ignored, ties to the earliest.
+    #[test]
+    fn lane_argmax_equals_the_earliest_strict_maximum() {
+        let mut x = 5_u64;
+        let mut rnd = || {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (x >> 33) % 7
+        };
+        for len in 0..40 {
+            for _ in 0..50 {
+                let v: Vec<f64> = (0..len)
+                    .map(|_| match rnd() {
+                        0 => f64::NAN,
+                        r => r as f64,
+                    })
+                    .collect();
+                let (mut value, mut pos) = (f64::NEG_INFINITY, 0);
+                for (i, x) in v.iter().enumerate() {
+                    if *x > value {
+                        value = *x;
+                        pos = i;
+                    }
+                }
+                let (got_value, got_pos) = lane_argmax(&v);
+                assert_eq!((got_value, got_pos), (value, pos), "{v:?}");
+            }
+        }
     }
 
     #[test]

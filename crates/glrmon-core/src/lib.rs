@@ -13,6 +13,8 @@ pub mod isolability;
 pub mod isolation;
 pub mod kitanidis;
 mod linalg;
+mod simd;
+pub use simd::VectorLevel;
 pub mod model;
 pub mod sparse;
 pub mod threshold;

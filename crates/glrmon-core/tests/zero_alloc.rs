@@ -5,7 +5,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use glrmon_core::{Sample, StepOutput};
+use glrmon_core::{Sample, StateSpace, StepOutput};
 use glrmon_sim::{SimSample, scenarios};
 
 struct Counting;
@@ -40,6 +40,7 @@ fn step_performs_zero_heap_allocations_after_warmup() {
         scenarios::bench_a(),
         scenarios::paper2014_unstable(),
         scenarios::lpv_n3_p2_m4(),
+        scenarios::lti_n3_p2_m3(),
     ] {
         let data = samples(&sc, 12_000);
         let mut det = sc.detector().unwrap();
@@ -60,7 +61,9 @@ fn step_performs_zero_heap_allocations_after_warmup() {
         let before = ALLOCATIONS.load(Ordering::Relaxed);
         for (k, x) in data.iter().enumerate().skip(warmup) {
             let k = k as u64;
-            if k % 97 == 0 {
+            // Gaps, then none: an LTI channel leaves the fast path at each gap and
+            // enters it again (tables built) in the measured span.
+            if k % 97 == 0 && k < 7_000 {
                 det.predict_only(k).unwrap();
             } else {
                 det.step(
@@ -77,6 +80,7 @@ fn step_performs_zero_heap_allocations_after_warmup() {
         }
         let after = ALLOCATIONS.load(Ordering::Relaxed);
         assert_eq!(after - before, 0, "allocations over 10⁴ steps");
+        assert_eq!(det.is_stationary(), sc.model.is_constant());
         assert!(out.glr.is_some());
     }
 }
