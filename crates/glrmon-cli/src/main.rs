@@ -17,6 +17,7 @@ mod replay;
 mod report;
 mod run;
 mod simulate;
+mod status;
 mod validate;
 mod watch;
 
@@ -66,6 +67,9 @@ enum Command {
     Run(run::RunArgs),
     /// Subscribe to alarms and diagnoses and print them.
     Watch(watch::WatchArgs),
+    /// Ask every running instance for its status and print a table (instance, shard,
+    /// channels, samples/s, alarms, errors, drops, reconnections, uptime).
+    Status(status::StatusArgs),
 }
 
 /// Where `run` listens and `watch`/`simulate --publish` connect when nothing is given.
@@ -108,6 +112,7 @@ fn main() -> ExitCode {
         Command::Diagnose(args) => diagnose::run(args),
         Command::Run(args) => run::run(args),
         Command::Watch(args) => watch::run(args),
+        Command::Status(args) => status::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

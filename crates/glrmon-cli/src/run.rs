@@ -11,7 +11,7 @@ use clap::Args;
 use glrmon_monitor::Monitor;
 use glrmon_runtime::{Output, Runtime, RuntimeEvents, RuntimeSettings, Sink, SinkError};
 use glrmon_wire::{DecodeLimits, Record};
-use glrmon_zenoh::{Presence, StatusSource, ZenohSink, ZenohSource};
+use glrmon_zenoh::{ConnectivityWatch, Ownership, Presence, StatusSource, ZenohSink, ZenohSource};
 
 use glrmon_record::Recorder;
 
@@ -28,6 +28,10 @@ pub(crate) struct RunArgs {
     /// Instance name (default: the config's `daemon.instance`, else `glrmon-<pid>`).
     #[arg(long)]
     instance: Option<String>,
+    /// Monitor only shard I of N of the configured channels (`I/N`, 0 ≤ I < N; a stable
+    /// hash of the channel name), overriding `daemon.shard`.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<glrmon_spec::Shard>,
 }
 
 /// Logs sink failures (data lost: ERROR).
@@ -118,6 +122,20 @@ pub(crate) fn run(args: &RunArgs) -> anyhow::Result<()> {
 }
 
 async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> {
+    let shard = match (args.shard, &cfg.daemon.shard) {
+        (Some(s), _) => Some(s),
+        // Checked when the configuration was loaded.
+        (None, Some(text)) => text.parse().ok(),
+        (None, None) => None,
+    };
+    let configured = cfg.channels.len();
+    let cfg = cfg.into_shard(shard);
+    if let Some(s) = shard {
+        tracing::info!(shard = %s, channels = cfg.channels.len(), of = configured, "Monitoring one shard of the configured channels.");
+        if cfg.channels.is_empty() {
+            tracing::warn!(shard = %s, "No configured channel falls in this shard.");
+        }
+    }
     let instance = args
         .instance
         .clone()
@@ -127,7 +145,43 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     if settings.config_file.is_none() && settings.listen.is_empty() && settings.connect.is_empty() {
         settings.listen = vec![crate::DEFAULT_ENDPOINT.to_owned()];
     }
-    let session = glrmon_zenoh::open(&settings).await?;
+    let session = open_session(&settings).await?;
+    let status_overlaps = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let names: Vec<String> = cfg.channels.iter().map(|c| c.name.clone()).collect();
+    let overlaps = Arc::clone(&status_overlaps);
+    let ownership = Ownership::claim(
+        &session,
+        &instance,
+        &names,
+        Duration::from_secs(3),
+        move |channel, other| {
+            overlaps.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            tracing::error!(channel, other, "Another instance claims a channel this one monitors: both publish its results. Give each instance a disjoint set of channels (daemon.shard).");
+        },
+    )
+    .await
+    .map_err(|e| match e {
+        glrmon_zenoh::ZenohError::Overlap(m) => anyhow::Error::new(crate::InvalidInput(m)),
+        other => other.into(),
+    })?;
+    let connectivity = ConnectivityWatch::start(
+        session.clone(),
+        Duration::from_millis(100),
+        |connected, state| {
+            let reconnections = state
+                .reconnections
+                .load(std::sync::atomic::Ordering::Relaxed);
+            if !connected {
+                tracing::warn!(
+                    "Lost every Zenoh connection (router or peers); retrying. Channels keep their state."
+                );
+            } else if reconnections > 0 {
+                tracing::info!(reconnections, "Reconnected to the Zenoh network.");
+            } else {
+                tracing::info!("Connected to the Zenoh network.");
+            }
+        },
+    )?;
     let monitors = cfg
         .channels
         .iter()
@@ -162,15 +216,17 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     );
     let keys: Vec<String> = cfg.channels.iter().map(|c| c.key.clone()).collect();
     let source = ZenohSource::declare(&session, &keys, &runtime.intake()).await?;
-    let presence = Presence::declare(
-        &session,
-        StatusSource {
-            instance: instance.clone(),
-            channels: runtime.channel_names().to_vec(),
-            stats: runtime.stats(),
-            started: Instant::now(),
-        },
-    )
+    let presence = Presence::declare(&session, {
+        let mut status = StatusSource::new(
+            instance.clone(),
+            runtime.channel_names().to_vec(),
+            runtime.stats(),
+        );
+        status.connectivity = Some(connectivity.state());
+        status.shard = shard.map(|s| s.to_string());
+        status.overlaps = status_overlaps;
+        status
+    })
     .await?;
     tracing::info!(
         instance = %instance,
@@ -180,8 +236,9 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     );
     // Lets tests and supervisors know intake is open.
     println!(
-        "glrmon run: instance {instance} monitoring {} channel(s)",
-        cfg.channels.len()
+        "glrmon run: instance {instance} monitoring {} channel(s){}",
+        cfg.channels.len(),
+        shard.map_or(String::new(), |s| format!(" (shard {s} of {configured})"))
     );
     wait_for_signal().await;
     let started = Instant::now();
@@ -209,6 +266,8 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         );
     }
     drop(presence);
+    drop(ownership);
+    drop(connectivity);
     if let Err(e) = tokio::time::timeout(Duration::from_secs(2), session.close()).await {
         tracing::warn!(error = %e, "The Zenoh session did not close in time.");
     }
@@ -222,6 +281,27 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         Err(anyhow::anyhow!(
             "the drain did not finish within {timeout:?}: pending results were lost"
         ))
+    }
+}
+
+/// Opens the session; in client mode, retries until a router answers (the daemon may
+/// start before its router), logging each failure, until SIGINT/SIGTERM.
+async fn open_session(settings: &glrmon_zenoh::SessionSettings) -> anyhow::Result<zenoh::Session> {
+    let client = settings.mode.as_deref() == Some("client");
+    let mut delay = Duration::from_millis(250);
+    loop {
+        match glrmon_zenoh::open(settings).await {
+            Ok(s) => return Ok(s),
+            Err(e) if client => {
+                tracing::warn!(error = %e, retry_in_ms = delay.as_millis() as u64, connect = ?settings.connect, "No Zenoh router reachable yet; retrying.");
+                tokio::select! {
+                    () = tokio::time::sleep(delay) => {}
+                    () = wait_for_signal() => anyhow::bail!("stopped before a Zenoh router was reachable"),
+                }
+                delay = (delay * 2).min(Duration::from_secs(2));
+            }
+            Err(e) => return Err(e.into()),
+        }
     }
 }
 

@@ -68,6 +68,10 @@ pub struct DaemonSpec {
     pub shutdown_timeout: f64,
     /// Instance name for the status queryable and liveliness token (default: host-pid).
     pub instance: Option<String>,
+    /// `"i/N"`: this instance monitors only the channels whose name hashes to shard i
+    /// of N (0 ≤ i < N; a stable FNV-1a hash), so that N instances started from one
+    /// configuration split its channels between them (docs/OPERATIONS.md).
+    pub shard: Option<String>,
 }
 
 impl Default for DaemonSpec {
@@ -80,6 +84,7 @@ impl Default for DaemonSpec {
             max_payload_bytes: default_max_payload(),
             shutdown_timeout: default_shutdown(),
             instance: None,
+            shard: None,
         }
     }
 }

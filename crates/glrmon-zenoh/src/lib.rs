@@ -3,16 +3,18 @@
 //!
 //! Key expressions (docs/WIRE.md): inputs on each channel's key (default
 //! `plant/<channel>`); results on `glrmon/<channel>/<type>`; status at
-//! `glrmon/@status/<instance>`; liveliness tokens at `glrmon/@instances/<instance>`.
+//! `glrmon/@status/<instance>`; liveliness tokens at `glrmon/@instances/<instance>` and,
+//! one per monitored channel, `glrmon/@owners/<channel>/<instance>` (so that two
+//! instances never monitor the same channel, [`Ownership`]).
 //! (`@` chunks are verbatim in Zenoh: `glrmon/**` does not match them, so watchers of
 //! results never see status traffic.)
 #![warn(missing_docs)]
 
 use std::collections::HashMap;
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::Ordering;
-use std::time::Instant;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use glrmon_runtime::{ChannelStats, Intake, Output, Payload, Sink, SinkError};
 use glrmon_wire::Record;
@@ -20,7 +22,8 @@ use zenoh::bytes::Encoding;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
 use zenoh::qos::{CongestionControl, Priority};
-use zenoh::query::Queryable;
+use zenoh::query::{QueryTarget, Queryable};
+use zenoh::sample::SampleKind;
 use zenoh::{Config, Session, Wait};
 
 /// Where a session comes from: a JSON5 file passed through untouched, and/or the
@@ -54,6 +57,9 @@ pub enum ZenohError {
         /// Zenoh's message.
         message: String,
     },
+    /// Another live instance already monitors a channel of this one, or has its name.
+    #[error("{0}")]
+    Overlap(String),
 }
 
 fn session_err(what: &'static str) -> impl Fn(zenoh::Error) -> ZenohError {
@@ -114,6 +120,14 @@ pub fn build_config(s: &SessionSettings) -> Result<Config, ZenohError> {
     if !from_file {
         c.insert_json5("timestamping/enabled", "true")
             .map_err(cfg_err)?;
+        // A client that loses its router retries the connection: quickly at first, then
+        // at most every 2 s (Zenoh's default reaches 4 s), so a restarted router is
+        // back in use within about a second of listening again.
+        c.insert_json5(
+            "connect/retry",
+            "{period_init_ms: 250, period_max_ms: 2000, period_increase_factor: 2}",
+        )
+        .map_err(cfg_err)?;
     }
     Ok(c)
 }
@@ -271,6 +285,53 @@ pub struct StatusSource {
     pub stats: Arc<Vec<Arc<ChannelStats>>>,
     /// Start time.
     pub started: Instant,
+    /// The session's connections, if watched.
+    pub connectivity: Option<Arc<Connectivity>>,
+    /// The shard this instance monitors (`"i/N"`), if any.
+    pub shard: Option<String>,
+    /// Other instances seen declaring a channel of this one since start.
+    pub overlaps: Arc<AtomicU64>,
+    /// (time, total samples) at the last rate estimate.
+    rate: Arc<Mutex<(Instant, u64, f64)>>,
+}
+
+impl StatusSource {
+    /// The status of `instance` with these channels and counters, started now.
+    #[must_use]
+    pub fn new(
+        instance: String,
+        channels: Vec<String>,
+        stats: Arc<Vec<Arc<ChannelStats>>>,
+    ) -> Self {
+        let now = Instant::now();
+        Self {
+            instance,
+            channels,
+            stats,
+            started: now,
+            connectivity: None,
+            shard: None,
+            overlaps: Arc::new(AtomicU64::new(0)),
+            rate: Arc::new(Mutex::new((now, 0, 0.0))),
+        }
+    }
+
+    /// Samples per second over the time since the last estimate that is at least one
+    /// second old (the mean since start before that).
+    fn samples_per_second(&self, total: u64) -> f64 {
+        let Ok(mut r) = self.rate.lock() else {
+            return 0.0;
+        };
+        let now = Instant::now();
+        let dt = now.duration_since(r.0).as_secs_f64();
+        if dt >= 1.0 {
+            r.2 = total.saturating_sub(r.1) as f64 / dt;
+            *r = (now, total, r.2);
+        } else if r.1 == 0 && dt > 0.0 {
+            return total as f64 / dt.max(1e-3);
+        }
+        r.2
+    }
 }
 
 impl StatusSource {
@@ -299,10 +360,26 @@ impl StatusSource {
                 errs.join(",")
             ));
         }
+        let total: u64 = self
+            .stats
+            .iter()
+            .map(|s| s.samples.load(Ordering::Relaxed))
+            .sum();
+        let (connected, reconnections) = self.connectivity.as_ref().map_or((true, 0), |c| {
+            (
+                c.connected.load(Ordering::Relaxed),
+                c.reconnections.load(Ordering::Relaxed),
+            )
+        });
         format!(
-            "{{\"instance\":{},\"uptime\":{:.3},\"channels\":[{}]}}",
+            "{{\"instance\":{},\"uptime\":{:.3},\"shard\":{},\"connected\":{},\"reconnections\":{},\"overlaps\":{},\"samples_per_second\":{:.1},\"channels\":[{}]}}",
             json_string(&self.instance),
             self.started.elapsed().as_secs_f64(),
+            self.shard.as_deref().map_or("null".to_owned(), json_string),
+            connected,
+            reconnections,
+            self.overlaps.load(Ordering::Relaxed),
+            self.samples_per_second(total),
             channels.join(",")
         )
     }
@@ -372,6 +449,251 @@ impl Presence {
     }
 }
 
+/// Key of the token by which `instance` claims `channel`.
+#[must_use]
+pub fn owner_key(channel: &str, instance: &str) -> String {
+    format!("glrmon/@owners/{channel}/{instance}")
+}
+
+/// The channels an instance claims: one liveliness token per channel, and a watch that
+/// reports any other instance claiming one of them later.
+#[derive(Debug)]
+pub struct Ownership {
+    _tokens: Vec<LivelinessToken>,
+    _watch: Subscriber<()>,
+}
+
+impl Ownership {
+    /// Refuses, with a message naming the channel and the other instance, when a live
+    /// instance already has this instance's name or claims one of `channels`; otherwise
+    /// claims them. Then calls `on_overlap(channel, other_instance)` whenever another
+    /// instance claims one of them (two instances started at the same moment: both are
+    /// told, and so is the operator through the status). `wait` bounds the query for
+    /// existing claims (it ends as soon as every reachable node has answered).
+    ///
+    /// # Errors
+    /// [`ZenohError::Overlap`] as above; [`ZenohError::Session`] when a query or
+    /// declaration fails.
+    pub async fn claim(
+        session: &Session,
+        instance: &str,
+        channels: &[String],
+        wait: Duration,
+        on_overlap: impl Fn(&str, &str) + Send + Sync + 'static,
+    ) -> Result<Self, ZenohError> {
+        let replies = session
+            .liveliness()
+            .get(liveliness_key(instance))
+            .timeout(wait)
+            .await
+            .map_err(session_err("liveliness query"))?;
+        if let Ok(reply) = replies.recv_async().await {
+            if reply.result().is_ok() {
+                return Err(ZenohError::Overlap(format!(
+                    "an instance named \"{instance}\" is already running (liveliness token {}): give each instance its own name (--instance or daemon.instance)",
+                    liveliness_key(instance)
+                )));
+            }
+        }
+        let replies = session
+            .liveliness()
+            .get("glrmon/@owners/**")
+            .timeout(wait)
+            .await
+            .map_err(session_err("liveliness query"))?;
+        let mut clashes = Vec::new();
+        while let Ok(reply) = replies.recv_async().await {
+            if let Ok(sample) = reply.result() {
+                if let Some((channel, other)) = parse_owner(sample.key_expr().as_str()) {
+                    if other != instance && channels.iter().any(|c| c == channel) {
+                        clashes.push(format!("\"{channel}\" (instance \"{other}\")"));
+                    }
+                }
+            }
+        }
+        if !clashes.is_empty() {
+            clashes.sort();
+            return Err(ZenohError::Overlap(format!(
+                "{} channel(s) of this instance are already monitored elsewhere: {}; give each instance a disjoint set of channels (daemon.shard = \"i/N\" or --shard)",
+                clashes.len(),
+                clashes.join(", ")
+            )));
+        }
+        let mut tokens = Vec::with_capacity(channels.len());
+        for c in channels {
+            tokens.push(
+                session
+                    .liveliness()
+                    .declare_token(owner_key(c, instance))
+                    .await
+                    .map_err(session_err("declare liveliness token"))?,
+            );
+        }
+        let mine: Vec<String> = channels.to_vec();
+        let me = instance.to_owned();
+        let watch = session
+            .liveliness()
+            .declare_subscriber("glrmon/@owners/**")
+            .history(true)
+            .callback(move |sample| {
+                if sample.kind() != SampleKind::Put {
+                    return;
+                }
+                if let Some((channel, other)) = parse_owner(sample.key_expr().as_str()) {
+                    if other != me && mine.iter().any(|c| c == channel) {
+                        on_overlap(channel, other);
+                    }
+                }
+            })
+            .await
+            .map_err(session_err("declare liveliness subscriber"))?;
+        Ok(Self {
+            _tokens: tokens,
+            _watch: watch,
+        })
+    }
+}
+
+/// (channel, instance) of an owner token's key.
+fn parse_owner(key: &str) -> Option<(&str, &str)> {
+    let rest = key.strip_prefix("glrmon/@owners/")?;
+    rest.rsplit_once('/')
+}
+
+/// Whether the session has a router or peer to talk to, and how often it got one back.
+#[derive(Debug, Default)]
+pub struct Connectivity {
+    /// At least one router or peer is connected.
+    pub connected: AtomicBool,
+    /// Times the session went from no connection to a connection after the first.
+    pub reconnections: AtomicU64,
+    /// Times it lost its last connection.
+    pub losses: AtomicU64,
+    stop: AtomicBool,
+}
+
+/// Polls the session's routers and peers every `period` on a thread of its own and
+/// calls `on_change(connected, connectivity)` at each change (the first connection
+/// included); stops when the returned handle is dropped.
+#[derive(Debug)]
+pub struct ConnectivityWatch {
+    state: Arc<Connectivity>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl ConnectivityWatch {
+    /// Starts the watch.
+    ///
+    /// # Errors
+    /// [`ZenohError::Session`] when the thread cannot be started.
+    pub fn start(
+        session: Session,
+        period: Duration,
+        on_change: impl Fn(bool, &Connectivity) + Send + 'static,
+    ) -> Result<Self, ZenohError> {
+        let state = Arc::new(Connectivity::default());
+        let st = Arc::clone(&state);
+        let thread = std::thread::Builder::new()
+            .name("glrmon-connectivity".into())
+            .spawn(move || {
+                let mut ever = false;
+                let mut was = false;
+                let mut routers: Vec<zenoh::session::ZenohId> = Vec::new();
+                while !st.stop.load(Ordering::Relaxed) {
+                    let info = session.info();
+                    let mut now_routers: Vec<_> = info.routers_zid().wait().collect();
+                    now_routers.sort_unstable();
+                    let now = !now_routers.is_empty() || info.peers_zid().wait().next().is_some();
+                    // A router that restarted between two polls comes back with a new
+                    // identity: a loss and a reconnection the polls did not see apart.
+                    let replaced = was
+                        && now
+                        && !routers.is_empty()
+                        && !now_routers.is_empty()
+                        && !now_routers.iter().any(|z| routers.contains(z));
+                    if replaced {
+                        st.losses.fetch_add(1, Ordering::Relaxed);
+                        st.connected.store(false, Ordering::Relaxed);
+                        on_change(false, &st);
+                        was = false;
+                    }
+                    if now != was {
+                        if now && ever {
+                            st.reconnections.fetch_add(1, Ordering::Relaxed);
+                        }
+                        if !now {
+                            st.losses.fetch_add(1, Ordering::Relaxed);
+                        }
+                        ever |= now;
+                        st.connected.store(now, Ordering::Relaxed);
+                        on_change(now, &st);
+                        was = now;
+                    }
+                    routers = now_routers;
+                    std::thread::park_timeout(period);
+                }
+            })
+            .map_err(|e| ZenohError::Session {
+                what: "start the connectivity watch",
+                message: e.to_string(),
+            })?;
+        Ok(Self {
+            state,
+            thread: Some(thread),
+        })
+    }
+
+    /// The shared state (for the status).
+    #[must_use]
+    pub fn state(&self) -> Arc<Connectivity> {
+        Arc::clone(&self.state)
+    }
+}
+
+impl Drop for ConnectivityWatch {
+    fn drop(&mut self) {
+        self.state.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            t.thread().unpark();
+            let _ = t.join();
+        }
+    }
+}
+
+/// Queries the status of every instance matching `instances` (a key expression over
+/// instance names, `*` for all): (instance, status JSON) pairs, in name order. Waits at
+/// most `timeout`, less when every instance has answered.
+///
+/// # Errors
+/// [`ZenohError::Session`] when the query cannot be sent.
+pub async fn query_status(
+    session: &Session,
+    instances: &str,
+    timeout: Duration,
+) -> Result<Vec<(String, String)>, ZenohError> {
+    let replies = session
+        .get(status_key(instances))
+        .target(QueryTarget::All)
+        .timeout(timeout)
+        .await
+        .map_err(session_err("status query"))?;
+    let mut out = Vec::new();
+    while let Ok(reply) = replies.recv_async().await {
+        if let Ok(sample) = reply.result() {
+            let name = sample
+                .key_expr()
+                .as_str()
+                .trim_start_matches("glrmon/@status/")
+                .to_owned();
+            let json = String::from_utf8_lossy(&sample.payload().to_bytes()).into_owned();
+            out.push((name, json));
+        }
+    }
+    out.sort();
+    out.dedup_by(|a, b| a.0 == b.0);
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -412,12 +734,11 @@ mod tests {
 
     #[test]
     fn status_json_escapes_names() {
-        let st = StatusSource {
-            instance: "a\"b".into(),
-            channels: vec!["c1".into()],
-            stats: Arc::new(vec![Arc::new(ChannelStats::default())]),
-            started: Instant::now(),
-        };
+        let st = StatusSource::new(
+            "a\"b".into(),
+            vec!["c1".into()],
+            Arc::new(vec![Arc::new(ChannelStats::default())]),
+        );
         let j = st.to_json();
         assert!(j.starts_with("{\"instance\":\"a\\\"b\""), "{j}");
         assert!(j.contains("\"last_k\":null"), "{j}");

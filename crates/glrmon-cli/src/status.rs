@@ -1,0 +1,191 @@
+//! `glrmon status [INSTANCES]`: asks every live instance (the status queryables,
+//! QueryTarget All) and prints one line each: its shard and channels, its recent
+//! throughput, active alarms, rejected and dropped input, reconnections and uptime.
+
+use std::time::Duration;
+
+use clap::Args;
+use serde_json::Value;
+
+use crate::InvalidInput;
+use crate::net::ZenohArgs;
+use crate::watch::client_settings;
+
+#[derive(Debug, Args)]
+pub(crate) struct StatusArgs {
+    /// Instances to ask: a key expression over instance names (`*` for all).
+    #[arg(default_value = "*")]
+    instances: String,
+    /// Print each instance's status JSON on a line of its own instead of the table.
+    #[arg(long)]
+    json: bool,
+    /// Seconds to wait for the instances' answers.
+    #[arg(long, default_value_t = 3.0)]
+    timeout: f64,
+    #[command(flatten)]
+    zenoh: ZenohArgs,
+}
+
+pub(crate) fn run(args: &StatusArgs) -> anyhow::Result<()> {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?;
+    rt.block_on(status(args))
+}
+
+async fn status(args: &StatusArgs) -> anyhow::Result<()> {
+    if !(args.timeout.is_finite() && args.timeout > 0.0) {
+        return Err(InvalidInput(format!("--timeout {} must be positive", args.timeout)).into());
+    }
+    let session = glrmon_zenoh::open(&client_settings(&args.zenoh)).await?;
+    let replies = glrmon_zenoh::query_status(
+        &session,
+        &args.instances,
+        Duration::from_secs_f64(args.timeout),
+    )
+    .await?;
+    let _ = session.close().await;
+    if replies.is_empty() {
+        return Err(InvalidInput(format!(
+            "no glrmon instance matching \"{}\" answered within {} s",
+            args.instances, args.timeout
+        ))
+        .into());
+    }
+    if args.json {
+        for (_, json) in &replies {
+            println!("{json}");
+        }
+        return Ok(());
+    }
+    print!("{}", table(&replies));
+    Ok(())
+}
+
+/// The status table: a header and one line per instance, then a total line.
+fn table(replies: &[(String, String)]) -> String {
+    let mut rows = vec![
+        [
+            "INSTANCE",
+            "SHARD",
+            "CHANNELS",
+            "SAMPLES/S",
+            "ACTIVE",
+            "ALARMS",
+            "ERRORS",
+            "DROPPED",
+            "RECONNECT",
+            "UPTIME",
+        ]
+        .map(str::to_owned),
+    ];
+    let (mut channels, mut rate) = (0u64, 0.0);
+    for (name, json) in replies {
+        let Ok(v) = serde_json::from_str::<Value>(json) else {
+            rows.push([
+                name.clone(),
+                "(unreadable status)".into(),
+                String::new(),
+                String::new(),
+                String::new(),
+                String::new(),
+                String::new(),
+                String::new(),
+                String::new(),
+                String::new(),
+            ]);
+            continue;
+        };
+        let ch = v["channels"].as_array().cloned().unwrap_or_default();
+        let sum = |f: &dyn Fn(&Value) -> u64| ch.iter().map(f).sum::<u64>();
+        let active = sum(&|c| u64::from(c["alarm_active"].as_bool().unwrap_or(false)));
+        let alarms = sum(&|c| c["alarms"].as_u64().unwrap_or(0));
+        let errors = sum(&|c| {
+            c["errors"]
+                .as_object()
+                .map_or(0, |e| e.values().filter_map(Value::as_u64).sum())
+        });
+        let dropped = sum(&|c| c["dropped"].as_u64().unwrap_or(0));
+        let sps = v["samples_per_second"].as_f64().unwrap_or(0.0);
+        channels += ch.len() as u64;
+        rate += sps;
+        let connected = v["connected"].as_bool().unwrap_or(true);
+        rows.push([
+            name.clone(),
+            v["shard"].as_str().unwrap_or("-").to_owned(),
+            ch.len().to_string(),
+            format!("{sps:.0}"),
+            active.to_string(),
+            alarms.to_string(),
+            errors.to_string(),
+            dropped.to_string(),
+            format!(
+                "{}{}",
+                v["reconnections"].as_u64().unwrap_or(0),
+                if connected { "" } else { " (down)" }
+            ),
+            uptime(v["uptime"].as_f64().unwrap_or(0.0)),
+        ]);
+    }
+    let mut widths = [0usize; 10];
+    for r in &rows {
+        for (w, c) in widths.iter_mut().zip(r) {
+            *w = (*w).max(c.chars().count());
+        }
+    }
+    let mut out = String::new();
+    for r in &rows {
+        let cells: Vec<String> = r
+            .iter()
+            .zip(widths)
+            .enumerate()
+            .map(|(i, (c, w))| {
+                if i < 2 {
+                    format!("{c:<w$}")
+                } else {
+                    format!("{c:>w$}")
+                }
+            })
+            .collect();
+        out.push_str(cells.join("  ").trim_end());
+        out.push('\n');
+    }
+    out.push_str(&format!(
+        "{} instance(s), {channels} channel(s), {rate:.0} samples/s\n",
+        replies.len()
+    ));
+    out
+}
+
+fn uptime(s: f64) -> String {
+    let s = s.max(0.0) as u64;
+    match s {
+        0..60 => format!("{s}s"),
+        60..3600 => format!("{}m{:02}s", s / 60, s % 60),
+        3600..86400 => format!("{}h{:02}m", s / 3600, s % 3600 / 60),
+        _ => format!("{}d{:02}h", s / 86400, s % 86400 / 3600),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table_sums_channels_and_marks_lost_connections() {
+        let a = r#"{"instance":"a","uptime":3725.2,"shard":"0/2","connected":true,"reconnections":1,"overlaps":0,"samples_per_second":1500.0,"channels":[{"channel":"c1","samples":10,"alarms":2,"alarm_active":true,"dropped":3,"last_k":9,"errors":{"non_finite":4}}]}"#;
+        let b = r#"{"instance":"b","uptime":5,"shard":null,"connected":false,"reconnections":0,"overlaps":0,"samples_per_second":0.0,"channels":[]}"#;
+        let t = table(&[("a".into(), a.into()), ("b".into(), b.into())]);
+        let lines: Vec<&str> = t.lines().collect();
+        assert_eq!(lines.len(), 4, "{t}");
+        assert!(lines[0].starts_with("INSTANCE"), "{t}");
+        let a: Vec<&str> = lines[1].split_whitespace().collect();
+        assert_eq!(
+            a,
+            ["a", "0/2", "1", "1500", "1", "2", "4", "3", "1", "1h02m"],
+            "{t}"
+        );
+        assert!(lines[2].contains("0 (down)"), "{t}");
+        assert_eq!(lines[3], "2 instance(s), 1 channel(s), 1500 samples/s");
+    }
+}
