@@ -4,15 +4,21 @@ CARGO ?= cargo
 
 .DEFAULT_GOAL := help
 
-.PHONY: help deps build test fmt fmt-check lint unit doc check-deps check-config demo bench bench-e2e bench-replay
+.PHONY: help deps deps-zenohd build test fmt fmt-check lint unit doc check-deps check-config demo bench bench-e2e bench-replay
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-11s %s\n", $$1, $$2}'
 
-deps: ## check the toolchain (rustfmt, clippy); nothing else needs installing
+deps: deps-zenohd ## the toolchain (rustfmt, clippy) and zenohd for the router-mesh test
 	@command -v $(CARGO) >/dev/null || { echo "cargo not found: install Rust (rustup)"; exit 1; }
 	@$(CARGO) fmt --version >/dev/null 2>&1 || rustup component add rustfmt
 	@$(CARGO) clippy --version >/dev/null 2>&1 || rustup component add clippy
+
+ZENOHD_VERSION := 1.10.2
+ZENOHD := $(or $(CARGO_HOME),$(HOME)/.cargo)/bin/zenohd
+deps-zenohd: ## zenohd (the Zenoh router) from crates.io, built once (~7 min on 2 cores), then kept
+	@if $(ZENOHD) --version 2>/dev/null | grep -q "v$(ZENOHD_VERSION)"; then echo "zenohd $(ZENOHD_VERSION): $(ZENOHD)"; \
+	else echo "building zenohd $(ZENOHD_VERSION) (once)"; $(CARGO) install zenohd --version $(ZENOHD_VERSION) --locked; fi
 
 build: deps ## build everything (release)
 	$(CARGO) build --release --workspace
@@ -30,6 +36,8 @@ lint:
 
 unit:
 	$(CARGO) test --workspace
+	# The router-mesh test again on an in-process router session (the first run used zenohd).
+	GLRMON_TEST_ROUTER=session $(CARGO) test -p glrmon-cli --test mesh
 
 doc:
 	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --workspace --no-deps

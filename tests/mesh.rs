@@ -1,7 +1,7 @@
 //! Issue 8: several glrmon instances behind a Zenoh router, as users deploy them. One
-//! router on loopback (`zenohd` when it is installed — `make deps` builds it from
-//! crates.io; otherwise a router-mode Zenoh session in this process, the same routing
-//! code), two `glrmon run` instances in client mode with disjoint shards of 20
+//! router on loopback (`zenohd` with deploy/zenohd.json5 when it is installed — `make
+//! deps` builds it from crates.io; otherwise, or with GLRMON_TEST_ROUTER=session, a
+//! router-mode Zenoh session in this process, the same routing code), two `glrmon run` instances in client mode with disjoint shards of 20
 //! channels, started before the router is up. Asserts: each instance monitors its
 //! shard only and a third instance claiming the same channels is refused; every
 //! faulty channel gives exactly one alarm, from the instance that owns it;
@@ -70,7 +70,12 @@ impl Router {
         loop {
             let r = match zenohd_binary() {
                 Some(bin) => {
+                    // The shipped router configuration, on this test's port.
+                    let cfg =
+                        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/zenohd.json5");
                     let child = Command::new(bin)
+                        .arg("--config")
+                        .arg(cfg)
                         .args(["--listen", endpoint, "--no-multicast-scouting"])
                         .stdout(Stdio::null())
                         .stderr(Stdio::null())
@@ -138,12 +143,16 @@ struct Instance {
 }
 
 impl Instance {
-    fn spawn(cfg: &Path, shard: &str, name: &str, endpoint: &str) -> Self {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_glrmon"))
-            .args(["run", "--config"])
+    fn spawn(cfg: &Path, shard: &str, name: &str, endpoint: &str, metrics: Option<&str>) -> Self {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_glrmon"));
+        cmd.args(["run", "--config"])
             .arg(cfg)
             .args(["--shard", shard, "--instance", name, "--mode", "client"])
-            .args(["--connect", endpoint])
+            .args(["--connect", endpoint]);
+        if let Some(m) = metrics {
+            cmd.args(["--metrics", m]);
+        }
+        let mut child = cmd
             .env("GLRMON_LOG", "info")
             .env("NO_COLOR", "1")
             .stdout(Stdio::piped())
@@ -188,6 +197,22 @@ impl Drop for Instance {
     }
 }
 
+/// GET `path` from the metrics endpoint: (status code, body).
+fn http_get(addr: &str, path: &str) -> (u16, String) {
+    use std::io::Write as _;
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    write!(s, "GET {path} HTTP/1.1\r\nHost: glrmon\r\n\r\n").unwrap();
+    let mut reply = String::new();
+    s.read_to_string(&mut reply).unwrap();
+    let code = reply.split_whitespace().nth(1).unwrap().parse().unwrap();
+    let body = reply
+        .split_once("\r\n\r\n")
+        .map(|x| x.1.to_owned())
+        .unwrap_or_default();
+    (code, body)
+}
+
 fn glrmon(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_glrmon"))
         .args(args)
@@ -195,8 +220,11 @@ fn glrmon(args: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
-/// Rows of a simulated DC motor run (u, y) from `glrmon simulate`.
-fn simulate(dir: &Path, fault: Option<u64>, n: u64) -> Vec<(Vec<f64>, Vec<f64>)> {
+/// (u, y) of each sample of a run.
+type Rows = Vec<(Vec<f64>, Vec<f64>)>;
+
+/// Rows of a simulated DC motor run from `glrmon simulate`.
+fn simulate(dir: &Path, fault: Option<u64>, n: u64) -> Rows {
     let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/examples/dc-motor.toml");
     let csv = dir.join(format!("sim-{fault:?}.csv"));
     let mut args = vec![
@@ -252,7 +280,7 @@ fn simulate(dir: &Path, fault: Option<u64>, n: u64) -> Vec<(Vec<f64>, Vec<f64>)>
 /// Publishes rows k ∈ range of each channel's data on plant/<channel>, round-robin.
 async fn publish(
     session: &zenoh::Session,
-    data: &BTreeMap<String, Vec<(Vec<f64>, Vec<f64>)>>,
+    data: &BTreeMap<String, Rows>,
     range: std::ops::Range<usize>,
 ) {
     let mut pubs = Vec::new();
@@ -360,8 +388,9 @@ async fn two_sharded_instances_behind_a_router_survive_its_restart() {
     std::fs::write(&cfg, text).unwrap();
 
     // Both instances start before the router exists.
-    let mut a = Instance::spawn(&cfg, "0/2", "mesh-a", &endpoint);
-    let mut b = Instance::spawn(&cfg, "1/2", "mesh-b", &endpoint);
+    let metrics = format!("127.0.0.1:{}", free_port());
+    let mut a = Instance::spawn(&cfg, "0/2", "mesh-a", &endpoint, Some(&metrics));
+    let mut b = Instance::spawn(&cfg, "1/2", "mesh-b", &endpoint, None);
     let t = Instant::now();
     while !(a.log().contains("No Zenoh router reachable yet")
         && b.log().contains("No Zenoh router reachable yet"))
@@ -481,6 +510,29 @@ async fn two_sharded_instances_behind_a_router_survive_its_restart() {
         );
     }
 
+    // mesh-a's Prometheus endpoint agrees with its status; it is healthy and ready.
+    let (code, body) = http_get(&metrics, "/metrics");
+    assert_eq!(code, 200, "{body}");
+    for (ch, v) in owners.iter().filter(|(_, v)| v[0].0 == "mesh-a") {
+        let line = format!(
+            "glrmon_alarms_total{{instance=\"mesh-a\",channel=\"{ch}\"}} {}",
+            v[0].2
+        );
+        assert!(body.contains(&line), "{line} not in\n{body}");
+        let line = format!("glrmon_samples_total{{instance=\"mesh-a\",channel=\"{ch}\"}} 400");
+        assert!(body.contains(&line), "{line} not in\n{body}");
+    }
+    assert!(
+        body.contains("glrmon_processing_seconds_count{instance=\"mesh-a\"}"),
+        "{body}"
+    );
+    assert!(
+        body.contains("glrmon_zenoh_connected{instance=\"mesh-a\"} 1"),
+        "{body}"
+    );
+    assert_eq!(http_get(&metrics, "/healthz").0, 200);
+    assert_eq!(http_get(&metrics, "/readyz").0, 200);
+
     // `glrmon status` lists both instances.
     let out = glrmon(&["status", "--connect", &endpoint]);
     let table = String::from_utf8_lossy(&out.stdout);
@@ -500,6 +552,16 @@ async fn two_sharded_instances_behind_a_router_survive_its_restart() {
     // Restart the router; both instances reconnect and say so.
     router.stop().await;
     let down = Instant::now();
+    // Not ready without a router (still healthy); checked while the router is down.
+    let t = Instant::now();
+    while http_get(&metrics, "/readyz").0 != 503 {
+        assert!(
+            t.elapsed() < Duration::from_secs(10),
+            "still ready without a router"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert_eq!(http_get(&metrics, "/healthz").0, 200);
     let router = Router::start(&endpoint).await;
     let up = Instant::now();
     let s = wait_status(
@@ -519,6 +581,7 @@ async fn two_sharded_instances_behind_a_router_survive_its_restart() {
     for v in s.values() {
         assert_eq!(v["connected"].as_bool(), Some(true));
     }
+    assert_eq!(http_get(&metrics, "/readyz").0, 200);
     for inst in [&a, &b] {
         let log = inst.log();
         assert!(log.contains("Lost every Zenoh connection"), "{log}");

@@ -9,6 +9,7 @@ mod demo;
 mod diagnose;
 mod evaluate;
 mod mcapin;
+mod metrics;
 mod net;
 mod print;
 mod recording;

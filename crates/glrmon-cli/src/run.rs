@@ -32,6 +32,10 @@ pub(crate) struct RunArgs {
     /// hash of the channel name), overriding `daemon.shard`.
     #[arg(long, value_name = "I/N")]
     shard: Option<glrmon_spec::Shard>,
+    /// Serve Prometheus `/metrics`, `/healthz` and `/readyz` on this local address
+    /// (e.g. 127.0.0.1:9464), overriding `daemon.metrics`.
+    #[arg(long, value_name = "ADDR")]
+    metrics: Option<String>,
 }
 
 /// Logs sink failures (data lost: ERROR).
@@ -214,6 +218,27 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         &runtime_settings(&cfg),
         Arc::new(LogEvents),
     );
+    let ready = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let metrics_server = match args.metrics.as_ref().or(cfg.daemon.metrics.as_ref()) {
+        Some(addr) => {
+            let runtime_metrics = runtime.metrics();
+            let source = crate::metrics::MetricsSource {
+                instance: instance.clone(),
+                channels: runtime.channel_names().to_vec(),
+                stats: runtime.stats(),
+                workers: runtime_metrics
+                    .workers_alive
+                    .load(std::sync::atomic::Ordering::Relaxed),
+                runtime: runtime_metrics,
+                connectivity: connectivity.state(),
+                recorder: recorder_stats.clone(),
+                started: Instant::now(),
+                ready: Arc::clone(&ready),
+            };
+            Some(crate::metrics::serve(addr, Arc::new(source)).await?)
+        }
+        None => None,
+    };
     let keys: Vec<String> = cfg.channels.iter().map(|c| c.key.clone()).collect();
     let source = ZenohSource::declare(&session, &keys, &runtime.intake()).await?;
     let presence = Presence::declare(&session, {
@@ -228,6 +253,7 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         status
     })
     .await?;
+    ready.store(true, std::sync::atomic::Ordering::Relaxed);
     tracing::info!(
         instance = %instance,
         channels = cfg.channels.len(),
@@ -244,6 +270,7 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     let started = Instant::now();
     tracing::info!("Stopping: intake closed, draining.");
     drop(source);
+    ready.store(false, std::sync::atomic::Ordering::Relaxed);
     let timeout = Duration::from_secs_f64(cfg.daemon.shutdown_timeout);
     let runtime = Mutex::new(Some(runtime));
     let (in_time, sinks) = tokio::task::spawn_blocking(move || {
@@ -266,6 +293,9 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         );
     }
     drop(presence);
+    if let Some(server) = metrics_server {
+        server.abort();
+    }
     drop(ownership);
     drop(connectivity);
     if let Err(e) = tokio::time::timeout(Duration::from_secs(2), session.close()).await {

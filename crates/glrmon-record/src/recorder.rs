@@ -88,6 +88,9 @@ pub struct RecorderStats {
     pub deleted: AtomicU64,
     /// Write failures (each also logged by the runtime).
     pub errors: AtomicU64,
+    /// Bytes on disk of the finished files (including those the cap deleted since) and
+    /// of the current file at its last flush.
+    pub bytes: AtomicU64,
     /// The file being written.
     pub current: Mutex<Option<PathBuf>>,
     /// The files finished so far, oldest first (less those deleted by the cap).
@@ -139,6 +142,7 @@ impl Recorder {
             current: None,
             opened: Instant::now(),
             finished: Vec::new(),
+            finished_bytes: 0,
             stats: stats.clone(),
         };
         files.open()?;
@@ -269,6 +273,8 @@ struct Files {
     current: Option<McapFile>,
     opened: Instant,
     finished: Vec<PathBuf>,
+    /// Bytes of the files finished so far.
+    finished_bytes: u64,
     stats: Arc<RecorderStats>,
 }
 
@@ -309,6 +315,10 @@ impl Files {
             source,
         })?;
         self.stats.files.fetch_add(1, Ordering::Relaxed);
+        self.finished_bytes += std::fs::metadata(&done).map_or(0, |m| m.len());
+        self.stats
+            .bytes
+            .store(self.finished_bytes, Ordering::Relaxed);
         self.finished.push(done);
         self.enforce_cap();
         self.stats
@@ -341,6 +351,9 @@ impl Files {
         };
         f.flush()?;
         let size = std::fs::metadata(f.path()).map_or(0, |m| m.len());
+        self.stats
+            .bytes
+            .store(self.finished_bytes + size, Ordering::Relaxed);
         let too_big = self.settings.max_file_bytes.is_some_and(|max| size >= max);
         let too_old = self
             .settings

@@ -18,7 +18,7 @@
 #![warn(missing_docs)]
 
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -246,6 +246,60 @@ pub struct Intake {
     stats: Arc<Vec<Arc<ChannelStats>>>,
     open: Arc<AtomicBool>,
     limits: DecodeLimits,
+    metrics: Arc<RuntimeMetrics>,
+}
+
+/// Upper bounds (seconds) of the latency histograms' buckets (the last is +∞).
+pub const LATENCY_BUCKETS: [f64; 14] = [
+    1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 2.5e-2, 5e-2, 0.1, 0.25, 0.5, 1.0, 2.5,
+];
+
+/// A latency histogram with fixed buckets ([`LATENCY_BUCKETS`]), lock-free.
+#[derive(Debug, Default)]
+pub struct LatencyHistogram {
+    /// Observations per bucket (not cumulative); the last is above every bound.
+    pub counts: [AtomicU64; LATENCY_BUCKETS.len() + 1],
+    /// Sum of the observations in nanoseconds.
+    pub sum_ns: AtomicU64,
+}
+
+impl LatencyHistogram {
+    /// Counts one observation.
+    pub fn observe(&self, d: Duration) {
+        let s = d.as_secs_f64();
+        let i = LATENCY_BUCKETS
+            .iter()
+            .position(|b| s <= *b)
+            .unwrap_or(LATENCY_BUCKETS.len());
+        self.counts[i].fetch_add(1, Ordering::Relaxed);
+        self.sum_ns.fetch_add(
+            u64::try_from(d.as_nanos()).unwrap_or(u64::MAX),
+            Ordering::Relaxed,
+        );
+    }
+}
+
+/// Counters of the whole runtime, for metrics and health checks.
+#[derive(Debug, Default)]
+pub struct RuntimeMetrics {
+    /// Payloads accepted by intake and not yet taken by a worker.
+    pub queued_payloads: AtomicI64,
+    /// Worker threads running (a worker that ends or panics leaves this count).
+    pub workers_alive: AtomicU64,
+    /// From a payload's receipt to its records handed to the output stage.
+    pub processing: LatencyHistogram,
+    /// From a payload's receipt to its alarm, end, diagnosis or error record written
+    /// by every sink.
+    pub delivery: LatencyHistogram,
+}
+
+/// Leaves [`RuntimeMetrics::workers_alive`] when its worker ends, panicking or not.
+struct AliveGuard(Arc<RuntimeMetrics>);
+
+impl Drop for AliveGuard {
+    fn drop(&mut self) {
+        self.0.workers_alive.fetch_sub(1, Ordering::Relaxed);
+    }
 }
 
 impl std::fmt::Debug for Intake {
@@ -307,7 +361,10 @@ impl Intake {
         };
         let before = stats.pending_drops.swap(0, Ordering::AcqRel);
         match queue.try_send(Job::Payload(channel, payload, before)) {
-            Ok(()) => Offer::Accepted,
+            Ok(()) => {
+                self.metrics.queued_payloads.fetch_add(1, Ordering::Relaxed);
+                Offer::Accepted
+            }
             Err(TrySendError::Full(_)) => {
                 stats.pending_drops.fetch_add(before + 1, Ordering::AcqRel);
                 stats.dropped.fetch_add(1, Ordering::Relaxed);
@@ -330,6 +387,7 @@ pub struct Runtime {
     stats: Arc<Vec<Arc<ChannelStats>>>,
     names: Vec<String>,
     stat_drops: Arc<AtomicU64>,
+    metrics: Arc<RuntimeMetrics>,
 }
 
 impl std::fmt::Debug for Runtime {
@@ -368,6 +426,7 @@ impl Runtime {
         );
         let (out_tx, out_rx) = mpsc::sync_channel::<OutMsg>(settings.output_queue.max(16));
         let stat_drops = Arc::new(AtomicU64::new(0));
+        let metrics = Arc::new(RuntimeMetrics::default());
         let interests: Vec<Interest> = sinks.iter().map(|s| s.interest()).collect();
         let forwarding = Forwarding {
             inputs: interests.iter().any(|i| i.inputs),
@@ -380,9 +439,18 @@ impl Runtime {
             clock: Clock::now(),
         };
         let default_stat_every = settings.stat_every;
+        let out_metrics = metrics.clone();
         let output = std::thread::Builder::new()
             .name("glrmon-output".into())
-            .spawn(move || output_stage(out_rx, sinks, default_stat_every, events.as_ref()))
+            .spawn(move || {
+                output_stage(
+                    out_rx,
+                    sinks,
+                    default_stat_every,
+                    events.as_ref(),
+                    &out_metrics,
+                )
+            })
             .ok();
         let mut shards: Vec<Vec<(ChannelIndex, WorkerChannel)>> =
             (0..workers_n).map(|_| Vec::new()).collect();
@@ -406,11 +474,19 @@ impl Runtime {
             let out = out_tx.clone();
             let limits = settings.limits;
             let drops = stat_drops.clone();
-            if let Ok(h) = std::thread::Builder::new()
+            let m = metrics.clone();
+            m.workers_alive.fetch_add(1, Ordering::Relaxed);
+            let spawned = std::thread::Builder::new()
                 .name(format!("glrmon-worker-{w}"))
-                .spawn(move || worker(rx, shard, out, limits, forwarding, drops))
-            {
-                workers.push(h);
+                .spawn(move || {
+                    let _alive = AliveGuard(m.clone());
+                    worker(rx, shard, out, limits, forwarding, drops, &m);
+                });
+            match spawned {
+                Ok(h) => workers.push(h),
+                Err(_) => {
+                    metrics.workers_alive.fetch_sub(1, Ordering::Relaxed);
+                }
             }
         }
         Self {
@@ -419,6 +495,7 @@ impl Runtime {
                 stats: stats.clone(),
                 open: Arc::new(AtomicBool::new(true)),
                 limits: settings.limits,
+                metrics: metrics.clone(),
             },
             workers,
             output,
@@ -426,7 +503,14 @@ impl Runtime {
             stats,
             names,
             stat_drops,
+            metrics,
         }
+    }
+
+    /// The runtime's queue, worker and latency metrics.
+    #[must_use]
+    pub fn metrics(&self) -> Arc<RuntimeMetrics> {
+        self.metrics.clone()
     }
 
     /// The handle for sources.
@@ -510,6 +594,7 @@ fn worker(
     limits: DecodeLimits,
     fwd: Forwarding,
     stat_drops: Arc<AtomicU64>,
+    metrics: &RuntimeMetrics,
 ) {
     let mut samples = Vec::new();
     let mut records = Vec::new();
@@ -521,7 +606,10 @@ fn worker(
             Ok(job) => job,
         };
         let (channel, received) = match &job {
-            Job::Payload(c, p, _) => (*c, p.received),
+            Job::Payload(c, p, _) => {
+                metrics.queued_payloads.fetch_sub(1, Ordering::Relaxed);
+                (*c, p.received)
+            }
             Job::Reject(c, _, _, at) => (*c, *at),
             Job::Stop => return,
         };
@@ -592,6 +680,7 @@ fn worker(
         }
         send_inputs(&out, ch, &mut inputs, log_time_ns);
         forward_records(&out, ch, &mut records, fwd, log_time_ns, &stat_drops);
+        metrics.processing.observe(received.elapsed());
         let c = ch.monitor.counters();
         ch.stats.samples.store(c.samples, Ordering::Relaxed);
         ch.stats.alarms.store(c.alarms, Ordering::Relaxed);
@@ -686,6 +775,7 @@ fn output_stage(
     mut sinks: Vec<Box<dyn Sink>>,
     default_stat_every: u64,
     events: &dyn RuntimeEvents,
+    metrics: &RuntimeMetrics,
 ) -> Vec<Box<dyn Sink>> {
     let interests: Vec<Interest> = sinks.iter().map(|s| s.interest()).collect();
     let flush_all = |sinks: &mut Vec<Box<dyn Sink>>| {
@@ -714,6 +804,14 @@ fn output_stage(
                     if let Err(e) = s.write(&o) {
                         events.sink_error(&e);
                     }
+                }
+                if o.stat_index.is_none() {
+                    let now = SystemTime::now()
+                        .duration_since(UNIX_EPOCH)
+                        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
+                    metrics
+                        .delivery
+                        .observe(Duration::from_nanos(now.saturating_sub(o.log_time_ns)));
                 }
             }
             Ok(OutMsg::Input(i)) => {

@@ -72,6 +72,9 @@ pub struct DaemonSpec {
     /// of N (0 ≤ i < N; a stable FNV-1a hash), so that N instances started from one
     /// configuration split its channels between them (docs/OPERATIONS.md).
     pub shard: Option<String>,
+    /// Local address (`host:port`) of the Prometheus `/metrics`, `/healthz` and
+    /// `/readyz` endpoints; none by default.
+    pub metrics: Option<String>,
 }
 
 impl Default for DaemonSpec {
@@ -85,6 +88,7 @@ impl Default for DaemonSpec {
             shutdown_timeout: default_shutdown(),
             instance: None,
             shard: None,
+            metrics: None,
         }
     }
 }

@@ -1,0 +1,306 @@
+//! `/metrics` (Prometheus text format 0.0.4), `/healthz` and `/readyz` of `glrmon run`
+//! on a local address (`--metrics ADDR` or `[daemon] metrics`; off unless set, and off
+//! in `demo`). A minimal HTTP/1.1 responder: one GET per connection, no keep-alive,
+//! bounded request size; it reads only the daemon's counters.
+
+use std::fmt::Write as _;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use glrmon_record::RecorderStats;
+use glrmon_runtime::{ChannelStats, LATENCY_BUCKETS, LatencyHistogram, RuntimeMetrics};
+use glrmon_zenoh::Connectivity;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpListener;
+
+/// Reads one counter of a channel.
+type ChannelCounter = fn(&ChannelStats) -> u64;
+
+/// What the endpoints report.
+pub(crate) struct MetricsSource {
+    pub(crate) instance: String,
+    pub(crate) channels: Vec<String>,
+    pub(crate) stats: Arc<Vec<Arc<ChannelStats>>>,
+    pub(crate) runtime: Arc<RuntimeMetrics>,
+    pub(crate) workers: u64,
+    pub(crate) connectivity: Arc<Connectivity>,
+    pub(crate) recorder: Option<Arc<RecorderStats>>,
+    pub(crate) started: Instant,
+    /// Set once intake is open (subscribers declared, channels claimed).
+    pub(crate) ready: Arc<AtomicBool>,
+}
+
+impl MetricsSource {
+    /// Alive: every worker thread runs.
+    fn healthy(&self) -> bool {
+        self.runtime.workers_alive.load(Ordering::Relaxed) == self.workers
+    }
+
+    /// Ready: healthy, intake open, and connected to a router or peer.
+    fn ready(&self) -> bool {
+        self.healthy()
+            && self.ready.load(Ordering::Relaxed)
+            && self.connectivity.connected.load(Ordering::Relaxed)
+    }
+
+    /// The Prometheus exposition.
+    pub(crate) fn render(&self) -> String {
+        let mut o = String::new();
+        let inst = label(&self.instance);
+        let family = |o: &mut String, name: &str, kind: &str, help: &str| {
+            let _ = writeln!(o, "# HELP {name} {help}\n# TYPE {name} {kind}");
+            name.to_owned()
+        };
+        let mut lines = Vec::new();
+        let per_channel: [(&str, &str, &str, ChannelCounter); 4] = [
+            (
+                "glrmon_samples_total",
+                "counter",
+                "Samples processed.",
+                |s| s.samples.load(Ordering::Relaxed),
+            ),
+            (
+                "glrmon_dropped_payloads_total",
+                "counter",
+                "Payloads dropped at intake (worker queue full); the gap is filled by predict-only steps.",
+                |s| s.dropped.load(Ordering::Relaxed),
+            ),
+            (
+                "glrmon_alarms_total",
+                "counter",
+                "Alarm episodes started.",
+                |s| s.alarms.load(Ordering::Relaxed),
+            ),
+            (
+                "glrmon_alarm_active",
+                "gauge",
+                "1 while an alarm episode is going on.",
+                |s| s.alarm_active.load(Ordering::Relaxed),
+            ),
+        ];
+        for (name, kind, help, get) in per_channel {
+            let n = family(&mut o, name, kind, help);
+            for (ch, st) in self.channels.iter().zip(self.stats.iter()) {
+                lines.push(format!(
+                    "{n}{{instance={inst},channel={}}} {}",
+                    label(ch),
+                    get(st)
+                ));
+            }
+            o.push_str(&lines.join("\n"));
+            o.push('\n');
+            lines.clear();
+        }
+        let n = family(
+            &mut o,
+            "glrmon_rejected_total",
+            "counter",
+            "Rejected input by error code (docs/WIRE.md).",
+        );
+        for (ch, st) in self.channels.iter().zip(self.stats.iter()) {
+            let errors = st.errors.lock().map(|e| e.clone()).unwrap_or_default();
+            for (code, count) in errors {
+                let _ = writeln!(
+                    o,
+                    "{n}{{instance={inst},channel={},code={}}} {count}",
+                    label(ch),
+                    label(code)
+                );
+            }
+        }
+        let r = &self.runtime;
+        let mut gauge = |name: &str, help: &str, kind: &str, v: String| {
+            let _ = writeln!(
+                o,
+                "# HELP {name} {help}\n# TYPE {name} {kind}\n{name}{{instance={inst}}} {v}"
+            );
+        };
+        gauge(
+            "glrmon_queued_payloads",
+            "Payloads accepted and waiting for a worker.",
+            "gauge",
+            r.queued_payloads.load(Ordering::Relaxed).max(0).to_string(),
+        );
+        gauge(
+            "glrmon_workers_alive",
+            "Worker threads running.",
+            "gauge",
+            r.workers_alive.load(Ordering::Relaxed).to_string(),
+        );
+        gauge(
+            "glrmon_zenoh_connected",
+            "1 while a router or peer is connected.",
+            "gauge",
+            u8::from(self.connectivity.connected.load(Ordering::Relaxed)).to_string(),
+        );
+        gauge(
+            "glrmon_zenoh_reconnections_total",
+            "Connections regained after a loss.",
+            "counter",
+            self.connectivity
+                .reconnections
+                .load(Ordering::Relaxed)
+                .to_string(),
+        );
+        gauge(
+            "glrmon_uptime_seconds",
+            "Seconds since start.",
+            "gauge",
+            format!("{:.3}", self.started.elapsed().as_secs_f64()),
+        );
+        if let Some(rec) = &self.recorder {
+            gauge(
+                "glrmon_recording_messages_total",
+                "MCAP messages written.",
+                "counter",
+                rec.messages.load(Ordering::Relaxed).to_string(),
+            );
+            gauge(
+                "glrmon_recording_bytes_total",
+                "Bytes of finished and current MCAP files written.",
+                "counter",
+                rec.bytes.load(Ordering::Relaxed).to_string(),
+            );
+            gauge(
+                "glrmon_recording_errors_total",
+                "MCAP write failures.",
+                "counter",
+                rec.errors.load(Ordering::Relaxed).to_string(),
+            );
+        }
+        histogram(
+            &mut o,
+            "glrmon_processing_seconds",
+            "From a payload's receipt to its records handed to the output stage.",
+            &inst,
+            &r.processing,
+        );
+        histogram(
+            &mut o,
+            "glrmon_delivery_seconds",
+            "From a payload's receipt to its alarm, end, diagnosis or error record written by every sink.",
+            &inst,
+            &r.delivery,
+        );
+        o
+    }
+}
+
+fn histogram(o: &mut String, name: &str, help: &str, inst: &str, h: &LatencyHistogram) {
+    let _ = writeln!(o, "# HELP {name} {help}\n# TYPE {name} histogram");
+    let mut cumulative = 0;
+    for (i, c) in h.counts.iter().enumerate() {
+        cumulative += c.load(Ordering::Relaxed);
+        let le = LATENCY_BUCKETS
+            .get(i)
+            .map_or_else(|| "+Inf".to_owned(), |b| format!("{b}"));
+        let _ = writeln!(
+            o,
+            "{name}_bucket{{instance={inst},le=\"{le}\"}} {cumulative}"
+        );
+    }
+    let sum = h.sum_ns.load(Ordering::Relaxed) as f64 * 1e-9;
+    let _ = writeln!(o, "{name}_sum{{instance={inst}}} {sum}");
+    let _ = writeln!(o, "{name}_count{{instance={inst}}} {cumulative}");
+}
+
+/// A label value, quoted and escaped (Prometheus text format).
+fn label(s: &str) -> String {
+    let mut out = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '\\' => out.push_str("\\\\"),
+            '"' => out.push_str("\\\""),
+            '\n' => out.push_str("\\n"),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+/// Binds `addr` and serves until the task is aborted.
+pub(crate) async fn serve(
+    addr: &str,
+    source: Arc<MetricsSource>,
+) -> anyhow::Result<tokio::task::JoinHandle<()>> {
+    let listener = TcpListener::bind(addr)
+        .await
+        .map_err(|e| anyhow::anyhow!("metrics endpoint {addr}: {e}"))?;
+    tracing::info!(address = %listener.local_addr()?, "Serving /metrics, /healthz and /readyz.");
+    Ok(tokio::spawn(async move {
+        loop {
+            let Ok((mut stream, _)) = listener.accept().await else {
+                continue;
+            };
+            let source = source.clone();
+            tokio::spawn(async move {
+                let mut buf = vec![0u8; 4096];
+                let mut len = 0;
+                // Read up to the end of the request head (or 4 KiB, or 2 s).
+                let read = tokio::time::timeout(std::time::Duration::from_secs(2), async {
+                    while len < buf.len() {
+                        match stream.read(&mut buf[len..]).await {
+                            Ok(0) | Err(_) => break,
+                            Ok(n) => len += n,
+                        }
+                        if buf[..len].windows(4).any(|w| w == b"\r\n\r\n") {
+                            break;
+                        }
+                    }
+                })
+                .await;
+                if read.is_err() {
+                    return;
+                }
+                let head = String::from_utf8_lossy(&buf[..len]);
+                let (status, ctype, body) = respond(&head, &source);
+                let reply = format!(
+                    "HTTP/1.1 {status}\r\nContent-Type: {ctype}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+                    body.len()
+                );
+                let _ = stream.write_all(reply.as_bytes()).await;
+                let _ = stream.shutdown().await;
+            });
+        }
+    }))
+}
+
+/// (status line, content type, body) for a request head.
+fn respond(head: &str, s: &MetricsSource) -> (&'static str, &'static str, String) {
+    let mut parts = head.split_whitespace();
+    let (method, path) = (parts.next().unwrap_or(""), parts.next().unwrap_or(""));
+    let text = "text/plain; charset=utf-8";
+    if method != "GET" {
+        return ("405 Method Not Allowed", text, "only GET\n".into());
+    }
+    match path {
+        "/metrics" => (
+            "200 OK",
+            "text/plain; version=0.0.4; charset=utf-8",
+            s.render(),
+        ),
+        "/healthz" if s.healthy() => ("200 OK", text, "ok\n".into()),
+        "/healthz" => (
+            "503 Service Unavailable",
+            text,
+            "a worker thread has stopped\n".into(),
+        ),
+        "/readyz" if s.ready() => ("200 OK", text, "ready\n".into()),
+        "/readyz" => (
+            "503 Service Unavailable",
+            text,
+            if s.ready.load(Ordering::Relaxed) {
+                "not connected to any Zenoh router or peer\n".into()
+            } else {
+                "starting\n".into()
+            },
+        ),
+        _ => (
+            "404 Not Found",
+            text,
+            "try /metrics, /healthz or /readyz\n".into(),
+        ),
+    }
+}
