@@ -7,7 +7,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::error::{ModelError, StepError};
 use crate::fault::FaultDictionary;
-use crate::glr::{DEFAULT_RANK_TOLERANCE, WindowBank};
+use crate::glr::{DEFAULT_RANK_TOLERANCE, StepInputs, WindowBank};
 use crate::innovation::InnovationFilter;
 use crate::isolation::FisherStatistics;
 use crate::linalg::{gemm, solve_lower_in_place};
@@ -283,7 +283,7 @@ impl Detector {
         let (n, p, m) = (self.dims.states, self.dims.outputs, self.faults.len());
         self.filter = InnovationFilter::new(self.x0.clone(), self.p0.clone(), p)?;
         let kinds = self.faults.faults().iter().map(|f| f.onset).collect();
-        let level = self.bank.level();
+        let (level, fused) = (self.bank.level(), self.bank.fused());
         self.bank = WindowBank::new(
             n,
             m,
@@ -294,6 +294,7 @@ impl Detector {
             self.settings.rank_tolerance,
         );
         self.bank.set_level(level);
+        self.bank.set_fused(fused);
         self.held_u.fill(0.0);
         self.held_p.fill(0.0);
         self.next_k = None;
@@ -360,16 +361,8 @@ impl Detector {
             self.phi.as_mut_slice(),
             m,
         );
-        self.bank.accumulate(
-            k,
-            self.filter.whitened_output_matrix().as_slice(),
-            self.phi.as_slice(),
-            self.filter.whitened_innovation().as_slice(),
-        );
-        let best = self.bank.maximize(k);
-
-        self.write_output(k, best, out);
-
+        // The filter's time update (A_k, F_kK_k) goes first so that one pass over the
+        // window does the signatures, the statistics and Γ's time update (eq. (46)).
         self.cov_before.copy_from(self.filter.covariance());
         self.filter.time_update(&self.system, sample.u);
         gemm(
@@ -383,13 +376,18 @@ impl Detector {
             0.0,
             self.fk_phi.as_mut_slice(),
         );
-        self.bank.time_update(
+        let best = self.bank.step(
             k,
-            self.filter.closed_loop().as_slice(),
-            self.psi.as_slice(),
-            self.fk_phi.as_slice(),
-            false,
+            &StepInputs {
+                h_white: self.filter.whitened_output_matrix().as_slice(),
+                phi_white: self.phi.as_slice(),
+                eps_white: self.filter.whitened_innovation().as_slice(),
+                closed_loop: self.filter.closed_loop().as_slice(),
+                psi: self.psi.as_slice(),
+                fk_phi: self.fk_phi.as_slice(),
+            },
         );
+        self.write_output(k, best, out);
         self.track_stationarity(k);
         self.finish_measured(sample);
         Ok(())
@@ -527,6 +525,15 @@ impl Detector {
         }
         self.bank.set_level(level);
         true
+    }
+
+    /// Runs the measured steps of the window as one fused pass over the onsets (the
+    /// default, where the dimensions have one) or as separate passes. Both give the same
+    /// bits (tests/fused_general.rs compares them); this exists for that test and for
+    /// measurements.
+    #[doc(hidden)]
+    pub fn set_fused_window(&mut self, enabled: bool) {
+        self.bank.set_fused(enabled);
     }
 
     /// Whether the stationary regime (the LTI fast path) is in force.

@@ -23,7 +23,9 @@
 //! (an entry of Γ, of the whitened signature L⁻¹S, of C or d) is a contiguous array over
 //! the slots, so every per-sample loop runs over slots innermost with no branches and
 //! vectorises. Advancing k retires the oldest onset and starts the newest in its slot;
-//! nothing is allocated per sample.
+//! nothing is allocated per sample. For small n, m, p a measured step is one fused pass
+//! over the slots ([`WindowBank::step`]) that keeps each register of onsets' Γ, S, C,
+//! d and LDLᵀ factors in vector registers from eq. (45) to eq. (46).
 //!
 //! # Rank-deficient C
 //! Until the signatures are persistently exciting (eq. (22)), C_k(r) is singular (for a
@@ -87,6 +89,38 @@ macro_rules! wide_call {
     };
 }
 
+/// Calls `$mac!` with the (n, m, p) for which [`WindowBank::step`] has a fused pass:
+/// n ≤ 4 states, m ≤ 4 faults, p ≤ 2 outputs. Each triple is compiled twice (AVX2 and
+/// AVX-512F), about 0.25 s of release build per kernel, so the list is bounded by the
+/// build time (32 triples: glrmon-core's release build 21 s → 36 s).
+macro_rules! for_fused_dims {
+    ($mac:ident $(, $arg:ident)*) => {
+        $mac!($($arg),*;
+            (1, 1, 1), (1, 2, 1), (1, 3, 1), (1, 4, 1),
+            (2, 1, 1), (2, 2, 1), (2, 3, 1), (2, 4, 1),
+            (3, 1, 1), (3, 2, 1), (3, 3, 1), (3, 4, 1),
+            (4, 1, 1), (4, 2, 1), (4, 3, 1), (4, 4, 1),
+            (1, 1, 2), (1, 2, 2), (1, 3, 2), (1, 4, 2),
+            (2, 1, 2), (2, 2, 2), (2, 3, 2), (2, 4, 2),
+            (3, 1, 2), (3, 2, 2), (3, 3, 2), (3, 4, 2),
+            (4, 1, 2), (4, 2, 2), (4, 3, 2), (4, 4, 2)
+        )
+    };
+}
+
+/// Whether [`WindowBank::step`] has a fused pass for these dimensions (x86-64 only).
+fn fused_dims(n: usize, m: usize, p: usize) -> bool {
+    if cfg!(not(target_arch = "x86_64")) {
+        return false;
+    }
+    macro_rules! listed {
+        ($n:ident, $m:ident, $p:ident; $(($nn:literal, $mm:literal, $pp:literal)),*) => {
+            matches!(($n, $m, $p), $(($nn, $mm, $pp))|*)
+        };
+    }
+    for_fused_dims!(listed, n, m, p)
+}
+
 /// Default relative tolerance τ for the rank decision on C_k(r).
 pub const DEFAULT_RANK_TOLERANCE: f64 = 1e-9;
 
@@ -128,6 +162,11 @@ pub(crate) struct WindowBank {
     // Per-step scratch over slots.
     state_factor: Vec<f64>,
     output_factor: Vec<f64>,
+    /// The impulse output factor of the fused pass: 0 except at the slot of onset k.
+    impulse: Vec<f64>,
+    /// The last w mod L slots of every component for the fused pass, zero-padded to a
+    /// register of L ≤ 8 onsets.
+    tail: Vec<f64>,
     ldl: Vec<f64>,
     inv_pivot: Vec<f64>,
     solved: Vec<f64>,
@@ -150,6 +189,30 @@ pub(crate) struct WindowBank {
     tables: LagTables,
     /// Vector width of the window loops (same bits at every width).
     level: Level,
+    /// Whether a measured step runs the fused single pass ([`WindowBank::step`]); set
+    /// when (n, m, p) is one of the fused dimensions, cleared only to compare with the
+    /// passes.
+    fused: bool,
+    /// Whether `ldl`, `inv_pivot` and `solved` hold the last step's factorisation of
+    /// every slot (the passes) or of none (the fused pass keeps it in registers).
+    factored: bool,
+}
+
+/// The matrices of measured step k that the window needs, all column-major.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct StepInputs<'a> {
+    /// L_k⁻¹H_k (p×n).
+    pub(crate) h_white: &'a [f64],
+    /// L_k⁻¹Φ̃_k (p×m).
+    pub(crate) phi_white: &'a [f64],
+    /// L_k⁻¹ε_k (p).
+    pub(crate) eps_white: &'a [f64],
+    /// A_k = F_k(I − K_kH_k) (n×n).
+    pub(crate) closed_loop: &'a [f64],
+    /// Ψ̃_k (n×m).
+    pub(crate) psi: &'a [f64],
+    /// F_kK_kΦ̃_k (n×m).
+    pub(crate) fk_phi: &'a [f64],
 }
 
 /// Per-lag tables of the stationary regime, lag-reversed: the entry for lag ℓ of
@@ -219,6 +282,8 @@ impl WindowBank {
             score: z(m * slots),
             state_factor: z(m * slots),
             output_factor: z(m * slots),
+            impulse: z(slots),
+            tail: z((6 + n * m + p * m + t + m) * 8),
             ldl: z(t * slots),
             inv_pivot: z(m * slots),
             solved: z(m * slots),
@@ -233,6 +298,8 @@ impl WindowBank {
             current: 0,
             steady: false,
             level: Level::detect(),
+            fused: fused_dims(n, m, p),
+            factored: false,
             tables: LagTables {
                 signature: z(p * m * slots),
                 info: z(t * slots),
@@ -404,6 +471,7 @@ impl WindowBank {
 
     #[inline(always)]
     fn maximize_body(&mut self, k: u64) -> Option<WindowMax> {
+        self.factored = true;
         match self.m {
             1 => self.statistic_m1(),
             2 => self.statistic_m2(),
@@ -596,6 +664,265 @@ impl WindowBank {
         })
     }
 
+    /// Measured step k of the whole window (eqs. (45), (32)-(36), (46)): the signatures,
+    /// C and d, the statistic and rank of every onset, the maximum, and the time update
+    /// of Γ to k + 1 with the onset k + 1 announced. For the fused dimensions at the
+    /// AVX2 and AVX-512F levels one pass over the slots does it all, four or eight
+    /// onsets at a time in registers ([`fused_lanes`]): no intermediate arrays, and C,
+    /// d and Γ are read and written once. Otherwise (and at the baseline level, where
+    /// 2-lane registers spill and the passes measured as fast)
+    /// [`WindowBank::accumulate`], [`WindowBank::maximize`] and
+    /// [`WindowBank::time_update`] run as passes. Both do the same operations per onset
+    /// in the same order, so they give the same bits.
+    pub(crate) fn step(&mut self, k: u64, inputs: &StepInputs<'_>) -> Option<WindowMax> {
+        if !self.fused || self.level == Level::Baseline {
+            self.accumulate(k, inputs.h_white, inputs.phi_white, inputs.eps_white);
+            let best = self.maximize(k);
+            self.time_update(k, inputs.closed_loop, inputs.psi, inputs.fk_phi, false);
+            return best;
+        }
+        match self.level {
+            // SAFETY: as in `wide_call!`: the level is Avx2 or Avx512 only when the
+            // processor has the feature.
+            #[cfg(target_arch = "x86_64")]
+            Level::Avx2 => unsafe { self.fused_avx2(k, inputs) },
+            #[cfg(target_arch = "x86_64")]
+            Level::Avx512 => unsafe { self.fused_avx512(k, inputs) },
+            _ => unreachable!("the baseline level runs the passes"),
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn fused_avx2(&mut self, k: u64, inputs: &StepInputs<'_>) -> Option<WindowMax> {
+        macro_rules! dispatch {
+            ($b:ident, $i:ident; $(($nn:literal, $mm:literal, $pp:literal)),*) => {
+                match ($b.n, $b.m, $b.p) {
+                    // SAFETY: this function runs only with AVX2 (see `step`).
+                    $(($nn, $mm, $pp) => unsafe { $b.fused_run_avx2::<$nn, $mm, $pp>($i) },)*
+                    _ => {}
+                }
+            };
+        }
+        self.fused_body(k, inputs, |bank, inputs| {
+            for_fused_dims!(dispatch, bank, inputs)
+        })
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn fused_avx512(&mut self, k: u64, inputs: &StepInputs<'_>) -> Option<WindowMax> {
+        macro_rules! dispatch {
+            ($b:ident, $i:ident; $(($nn:literal, $mm:literal, $pp:literal)),*) => {
+                match ($b.n, $b.m, $b.p) {
+                    // SAFETY: this function runs only with AVX-512F (see `step`).
+                    $(($nn, $mm, $pp) => unsafe { $b.fused_run_avx512::<$nn, $mm, $pp>($i) },)*
+                    _ => {}
+                }
+            };
+        }
+        self.fused_body(k, inputs, |bank, inputs| {
+            for_fused_dims!(dispatch, bank, inputs)
+        })
+    }
+
+    /// The fused pass for one (n, m, p) at one width, a function of its own (not inlined
+    /// into the dispatch, which keeps each function small for the compiler).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline(never)]
+    unsafe fn fused_run_avx2<const N: usize, const M: usize, const P: usize>(
+        &mut self,
+        inputs: &StepInputs<'_>,
+    ) {
+        self.fused_run::<N, M, P, Avx2Lanes>(inputs);
+    }
+
+    /// As [`WindowBank::fused_run_avx2`] with AVX-512F and eight onsets per register.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    #[inline(never)]
+    unsafe fn fused_run_avx512<const N: usize, const M: usize, const P: usize>(
+        &mut self,
+        inputs: &StepInputs<'_>,
+    ) {
+        self.fused_run::<N, M, P, Lanes8>(inputs);
+    }
+
+    /// [`WindowBank::step`] in one pass: the bookkeeping around `run`, the fused pass of
+    /// the bank's dimensions.
+    #[inline(always)]
+    fn fused_body(
+        &mut self,
+        k: u64,
+        inputs: &StepInputs<'_>,
+        run: impl FnOnce(&mut Self, &StepInputs<'_>),
+    ) -> Option<WindowMax> {
+        self.current = k;
+        self.factored = false;
+        // The slot whose impulse output factor is 1 at k (as in `compute_factors`).
+        let impulse_slot = match self.first {
+            Some(_) if self.onset[self.slot_of(k)] == k => Some(self.slot_of(k)),
+            _ => None,
+        };
+        if let Some(s) = impulse_slot {
+            self.impulse[s] = self.active[s];
+        }
+        run(self, inputs);
+        if let Some(s) = impulse_slot {
+            self.impulse[s] = 0.0;
+        }
+        self.announce(k, inputs.psi);
+        self.best(k)
+    }
+
+    /// The fused pass over every slot with n = N, m = M, p = P: whole registers over
+    /// the ring, then the last w mod L slots through a zero-padded copy (one kernel
+    /// per width keeps the build time down; padding lanes are computed and dropped).
+    #[inline(always)]
+    fn fused_run<const N: usize, const M: usize, const P: usize, S: Lanes>(
+        &mut self,
+        inputs: &StepInputs<'_>,
+    ) {
+        let coefs = Coefs::<N, M, P>::new(inputs, &self.kinds, self.tolerance);
+        let w = self.slots;
+        let mut slots = SlotArrays {
+            w,
+            active: &self.active,
+            impulse: &self.impulse,
+            lag: &mut self.lag,
+            gamma: &mut self.gamma,
+            signature: &mut self.signature,
+            info: &mut self.info,
+            score: &mut self.score,
+            stat: &mut self.stat,
+            rank: &mut self.rank,
+        };
+        let mut s = 0;
+        while s + S::L <= w {
+            fused_lanes::<N, M, P, S>(&coefs, &mut slots, s);
+            s += S::L;
+        }
+        if s == w {
+            return;
+        }
+        let (l, rest) = (S::L, w - s);
+        let t = M * (M + 1) / 2;
+        let sizes = [1, 1, 1, N * M, P * M, t, M, 1, 1];
+        let mut parts: [&mut [f64]; 9] = Default::default();
+        let mut buf = &mut self.tail[..];
+        for (part, size) in parts.iter_mut().zip(sizes) {
+            let (head, tail) = buf.split_at_mut(size * l);
+            *part = head;
+            buf = tail;
+        }
+        let [
+            active,
+            impulse,
+            lag,
+            gamma,
+            signature,
+            info,
+            score,
+            stat,
+            rank,
+        ] = parts;
+        let ring: [&[f64]; 7] = [
+            &self.active,
+            &self.impulse,
+            &self.lag,
+            &self.gamma,
+            &self.signature,
+            &self.info,
+            &self.score,
+        ];
+        for (src, dst) in ring.into_iter().zip([
+            &mut *active,
+            &mut *impulse,
+            &mut *lag,
+            &mut *gamma,
+            &mut *signature,
+            &mut *info,
+            &mut *score,
+        ]) {
+            for (c, d) in dst.chunks_exact_mut(l).enumerate() {
+                d[..rest].copy_from_slice(&src[c * w + s..c * w + w]);
+                d[rest..].fill(0.0);
+            }
+        }
+        let mut padded = SlotArrays {
+            w: l,
+            active,
+            impulse,
+            lag,
+            gamma,
+            signature,
+            info,
+            score,
+            stat,
+            rank,
+        };
+        fused_lanes::<N, M, P, S>(&coefs, &mut padded, 0);
+        let ring: [&mut [f64]; 7] = [
+            &mut self.lag,
+            &mut self.gamma,
+            &mut self.signature,
+            &mut self.info,
+            &mut self.score,
+            &mut self.stat,
+            &mut self.rank,
+        ];
+        for (dst, src) in ring.into_iter().zip([
+            &*padded.lag,
+            &*padded.gamma,
+            &*padded.signature,
+            &*padded.info,
+            &*padded.score,
+            &*padded.stat,
+            &*padded.rank,
+        ]) {
+            for (c, x) in src.chunks_exact(l).enumerate() {
+                dst[c * w + s..c * w + w].copy_from_slice(&x[..rest]);
+            }
+        }
+    }
+
+    /// The dropped-pivot LDLᵀ of C_k(r) and z = L⁻¹d_k(r) for slot s alone, into `ldl`,
+    /// `inv_pivot` and `solved`, with the operations of the statistic passes: after the
+    /// fused pass, which keeps them in registers, [`WindowBank::magnitude`] needs them
+    /// at r̂ only.
+    fn factor_slot(&mut self, s: usize) {
+        let (m, w) = (self.m, self.slots);
+        let cut = pivot_cutoff(m, |a| self.info[tri(a, a) * w + s], self.tolerance);
+        for j in 0..m {
+            let mut d = self.info[tri(j, j) * w + s];
+            for q in 0..j {
+                let l = self.ldl[tri(j, q) * w + s];
+                d -= l * l * self.ldl[tri(q, q) * w + s];
+            }
+            self.ldl[tri(j, j) * w + s] = d;
+            let keep = d > cut && d > 0.0;
+            let inv = if keep { 1.0 / d } else { 0.0 };
+            self.inv_pivot[j * w + s] = inv;
+            for i in (j + 1)..m {
+                let mut x = self.info[tri(i, j) * w + s];
+                for q in 0..j {
+                    x -= self.ldl[tri(i, q) * w + s]
+                        * self.ldl[tri(j, q) * w + s]
+                        * self.ldl[tri(q, q) * w + s];
+                }
+                self.ldl[tri(i, j) * w + s] = x * inv;
+            }
+        }
+        for j in 0..m {
+            let mut z = self.score[j * w + s];
+            for q in 0..j {
+                z -= self.ldl[tri(j, q) * w + s] * self.solved[q * w + s];
+            }
+            self.solved[j * w + s] = z;
+        }
+    }
+
     /// θ̂ = C_k(r)⁺d_k(r) for the slot holding onset r (eq. (34)); false when r is not in
     /// the window.
     pub(crate) fn magnitude(&mut self, onset: u64, out: &mut [f64]) -> bool {
@@ -623,6 +950,9 @@ impl WindowBank {
             }
             (&self.tables.info, t)
         } else if self.rank[s] as usize == m {
+            if !self.factored {
+                self.factor_slot(s);
+            }
             // Back-substitution on the slot's LDLᵀ: θ = L⁻ᵀ D⁻¹ z.
             for (j, o) in out.iter_mut().enumerate().take(m) {
                 *o = self.solved[j * w + s] * self.inv_pivot[j * w + s];
@@ -718,9 +1048,17 @@ impl WindowBank {
         }
         std::mem::swap(&mut self.gamma, &mut self.gamma_next);
         self.lag.iter_mut().for_each(|l| *l += 1.0);
+        self.announce(k, psi);
+    }
+
+    /// After the time update at k: Γ_{k+1}(k+1) = a(0)Ψ̃_k for the onset k + 1, which
+    /// [`WindowBank::begin`] enters at the next step.
+    #[inline(always)]
+    fn announce(&mut self, k: u64, psi: &[f64]) {
         if self.known {
             return;
         }
+        let n = self.n;
         for (j, kind) in self.kinds.iter().enumerate() {
             let factor = kind.entry_factor();
             for i in 0..n {
@@ -829,6 +1167,17 @@ impl WindowBank {
     /// Sets the vector width; the caller has checked that the processor supports it.
     pub(crate) fn set_level(&mut self, level: Level) {
         self.level = level;
+    }
+
+    /// Whether measured steps run the fused pass.
+    pub(crate) fn fused(&self) -> bool {
+        self.fused
+    }
+
+    /// Runs measured steps as the fused pass (where the dimensions have one) or as the
+    /// three passes; the two give the same bits, so this only serves to compare them.
+    pub(crate) fn set_fused(&mut self, enabled: bool) {
+        self.fused = enabled && fused_dims(self.n, self.m, self.p);
     }
 
     /// Whether the stationary tables are in force.
@@ -1067,42 +1416,30 @@ impl WindowBank {
 }
 
 /// The largest value of `values` and its first position (NaN ignored; (−∞, 0) when
-/// empty or all NaN), in one pass over four independent lanes so that it vectorises:
-/// within a lane a strict `>` keeps the earliest position, across lanes the smallest
-/// position among equal values wins.
+/// empty or all NaN), i.e. what a strict `>` scan finds: first the largest value over
+/// eight independent lanes (no chain of compare-and-select through every value, so it
+/// vectorises and pipelines), then the first position holding it.
 #[inline(always)]
 fn lane_argmax(values: &[f64]) -> (f64, usize) {
-    const L: usize = 4;
+    const L: usize = 8;
     let mut best = [f64::NEG_INFINITY; L];
-    let mut at = [0.0_f64; L];
-    let mut here: [f64; L] = std::array::from_fn(|l| l as f64);
     let mut chunks = values.chunks_exact(L);
     for c in &mut chunks {
         for l in 0..L {
-            let better = c[l] > best[l];
-            best[l] = if better { c[l] } else { best[l] };
-            at[l] = if better { here[l] } else { at[l] };
-            here[l] += L as f64;
+            best[l] = if c[l] > best[l] { c[l] } else { best[l] };
         }
     }
-    let (mut value, mut pos) = (f64::NEG_INFINITY, f64::INFINITY);
-    for l in 0..L {
-        if best[l] > value || (best[l] == value && at[l] < pos) {
-            value = best[l];
-            pos = at[l];
-        }
-    }
-    let tail = values.len() - chunks.remainder().len();
-    for (i, v) in chunks.remainder().iter().enumerate() {
+    let mut value = f64::NEG_INFINITY;
+    for v in best.iter().chain(chunks.remainder()) {
         if *v > value {
             value = *v;
-            pos = (tail + i) as f64;
         }
     }
     if value == f64::NEG_INFINITY {
         return (value, 0);
     }
-    (value, pos as usize)
+    let pos = values.iter().position(|v| *v == value).unwrap_or(0);
+    (value, pos)
 }
 
 /// A contiguous run of slots [start, start + len) of the ring against the table entries
@@ -1277,6 +1614,454 @@ fn gamma_column_generic(
             }
         }
     }
+}
+
+/// The rank cut-off τ·max_a C_aa of the dropped-pivot LDLᵀ, in the operation order of
+/// the statistic passes ([`WindowBank::statistic_m2`] for m = 2, else
+/// [`WindowBank::statistic_generic`]; the m = 1 pass compares C > τ·C, which decides
+/// the same for every C).
+#[inline(always)]
+fn pivot_cutoff(m: usize, diag: impl Fn(usize) -> f64, tol: f64) -> f64 {
+    if m == 2 {
+        diag(0).max(diag(1)) * tol
+    } else {
+        (0..m).fold(0.0_f64, |c, a| c.max(diag(a))) * tol
+    }
+}
+
+/// The coefficients of measured step k for the fused pass, with n = N, m = M, p = P
+/// known at compile time, copied out of the column-major matrices once per step.
+#[derive(Debug, Clone, Copy)]
+struct Coefs<const N: usize, const M: usize, const P: usize> {
+    /// (L⁻¹H)_il at [i][l].
+    h: [[f64; N]; P],
+    /// (L⁻¹Φ̃)_ij at [i][j].
+    phi: [[f64; M]; P],
+    /// L⁻¹ε.
+    eps: [f64; P],
+    /// A_il at [i][l].
+    a: [[f64; N]; N],
+    /// Ψ̃_ij and (FKΦ̃)_ij at [j][i].
+    psi: [[f64; N]; M],
+    fk_phi: [[f64; N]; M],
+    kinds: [Onset; M],
+    tol: f64,
+}
+
+impl<const N: usize, const M: usize, const P: usize> Coefs<N, M, P> {
+    #[inline(always)]
+    fn new(inputs: &StepInputs<'_>, kinds: &[Onset], tol: f64) -> Self {
+        let mut c = Self {
+            h: [[0.0; N]; P],
+            phi: [[0.0; M]; P],
+            eps: [0.0; P],
+            a: [[0.0; N]; N],
+            psi: [[0.0; N]; M],
+            fk_phi: [[0.0; N]; M],
+            kinds: [Onset::Step; M],
+            tol,
+        };
+        for i in 0..P {
+            for l in 0..N {
+                c.h[i][l] = inputs.h_white[at(P, i, l)];
+            }
+            for j in 0..M {
+                c.phi[i][j] = inputs.phi_white[at(P, i, j)];
+            }
+            c.eps[i] = inputs.eps_white[i];
+        }
+        for i in 0..N {
+            for l in 0..N {
+                c.a[i][l] = inputs.closed_loop[at(N, i, l)];
+            }
+            for j in 0..M {
+                c.psi[j][i] = inputs.psi[at(N, i, j)];
+                c.fk_phi[j][i] = inputs.fk_phi[at(N, i, j)];
+            }
+        }
+        c.kinds.copy_from_slice(&kinds[..M]);
+        c
+    }
+}
+
+/// The per-slot arrays the fused pass reads and writes (components w apart).
+struct SlotArrays<'a> {
+    w: usize,
+    active: &'a [f64],
+    /// b(k − r) of the impulse faults: 1 at the onset k (if active), 0 elsewhere.
+    impulse: &'a [f64],
+    lag: &'a mut [f64],
+    gamma: &'a mut [f64],
+    signature: &'a mut [f64],
+    info: &'a mut [f64],
+    score: &'a mut [f64],
+    stat: &'a mut [f64],
+    rank: &'a mut [f64],
+}
+
+/// One vector register of onsets for the fused pass: the f64 operations it needs, each
+/// lane rounded as the scalar operation (no FMA), so every width gives the same bits.
+trait Lanes: Copy {
+    /// A per-lane condition.
+    type Mask: Copy;
+    /// Onsets per register.
+    const L: usize;
+    fn splat(x: f64) -> Self;
+    /// The first L values of `x`.
+    fn load(x: &[f64]) -> Self;
+    /// Writes the first L values of `x`.
+    fn store(self, x: &mut [f64]);
+    fn add(self, o: Self) -> Self;
+    fn sub(self, o: Self) -> Self;
+    fn mul(self, o: Self) -> Self;
+    fn div(self, o: Self) -> Self;
+    /// self > o (false for NaN).
+    fn gt(self, o: Self) -> Self::Mask;
+    /// self is NaN.
+    fn nan(self) -> Self::Mask;
+    fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask;
+    fn or(a: Self::Mask, b: Self::Mask) -> Self::Mask;
+    /// m ? a : b per lane.
+    fn select(m: Self::Mask, a: Self, b: Self) -> Self;
+
+    /// `f64::max` per lane (the other operand when one is NaN); on equal operands
+    /// either, which is the same value up to the sign of zero, and the cut-off it feeds
+    /// decides the same for ±0.
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        Self::select(Self::or(o.gt(self), self.nan()), o, self)
+    }
+}
+
+/// Eight onsets as a plain array, for the AVX-512F level: each operation is a loop
+/// over the lanes that the compiler turns into one 512-bit instruction (written
+/// without the 512-bit intrinsics, which need Rust 1.89, above the workspace's MSRV).
+#[derive(Clone, Copy)]
+struct Lanes8([f64; 8]);
+
+impl Lanes8 {
+    #[allow(clippy::needless_range_loop)]
+    #[inline(always)]
+    fn zip(self, o: Self, f: impl Fn(f64, f64) -> f64) -> Self {
+        let mut r = [0.0; 8];
+        for l in 0..8 {
+            r[l] = f(self.0[l], o.0[l]);
+        }
+        Lanes8(r)
+    }
+}
+
+#[allow(clippy::needless_range_loop)]
+impl Lanes for Lanes8 {
+    type Mask = [bool; 8];
+    const L: usize = 8;
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        Lanes8([x; 8])
+    }
+    #[inline(always)]
+    fn load(x: &[f64]) -> Self {
+        let mut r = [0.0; 8];
+        r.copy_from_slice(&x[..8]);
+        Lanes8(r)
+    }
+    #[inline(always)]
+    fn store(self, x: &mut [f64]) {
+        x[..8].copy_from_slice(&self.0);
+    }
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        self.zip(o, |a, b| a + b)
+    }
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        self.zip(o, |a, b| a - b)
+    }
+    #[inline(always)]
+    fn mul(self, o: Self) -> Self {
+        self.zip(o, |a, b| a * b)
+    }
+    #[inline(always)]
+    fn div(self, o: Self) -> Self {
+        self.zip(o, |a, b| a / b)
+    }
+    #[inline(always)]
+    fn gt(self, o: Self) -> [bool; 8] {
+        let mut r = [false; 8];
+        for l in 0..8 {
+            r[l] = self.0[l] > o.0[l];
+        }
+        r
+    }
+    #[inline(always)]
+    fn nan(self) -> [bool; 8] {
+        let mut r = [false; 8];
+        for l in 0..8 {
+            r[l] = self.0[l].is_nan();
+        }
+        r
+    }
+    #[inline(always)]
+    fn and(a: [bool; 8], b: [bool; 8]) -> [bool; 8] {
+        let mut r = [false; 8];
+        for l in 0..8 {
+            r[l] = a[l] & b[l];
+        }
+        r
+    }
+    #[inline(always)]
+    fn or(a: [bool; 8], b: [bool; 8]) -> [bool; 8] {
+        let mut r = [false; 8];
+        for l in 0..8 {
+            r[l] = a[l] | b[l];
+        }
+        r
+    }
+    #[inline(always)]
+    fn select(m: [bool; 8], a: Self, b: Self) -> Self {
+        let mut r = [0.0; 8];
+        for l in 0..8 {
+            r[l] = if m[l] { a.0[l] } else { b.0[l] };
+        }
+        Lanes8(r)
+    }
+}
+
+/// Implements [`Lanes`] for an x86-64 register type whose intrinsics are only ever
+/// inlined into the `#[target_feature]` functions of the fused pass.
+#[cfg(target_arch = "x86_64")]
+macro_rules! x86_lanes {
+    ($ty:ident, $mask:ty, $l:literal, $set1:ident, $loadu:ident, $storeu:ident,
+     $add:ident, $sub:ident, $mul:ident, $div:ident,
+     gt: |$ga:ident, $gb:ident| $gt:expr, nan: |$na:ident| $nan:expr,
+     and: |$aa:ident, $ab:ident| $and:expr, or: |$oa:ident, $ob:ident| $or:expr,
+     select: |$sm:ident, $sa:ident, $sb:ident| $sel:expr) => {
+        // SAFETY (every method): the intrinsics need the register type's feature, which
+        // its only callers enable: `Avx2Lanes` is used only inside
+        // `WindowBank::fused_run_avx2` and `fused_run_avx512`, which run only on a
+        // processor with AVX2, resp. AVX-512F, which implies it (see `WindowBank::step`). Loads and stores go through a
+        // slice of exactly L values.
+        impl Lanes for $ty {
+            type Mask = $mask;
+            const L: usize = $l;
+            #[inline(always)]
+            fn splat(x: f64) -> Self {
+                $ty(unsafe { arch::$set1(x) })
+            }
+            #[inline(always)]
+            fn load(x: &[f64]) -> Self {
+                let x = &x[..$l];
+                $ty(unsafe { arch::$loadu(x.as_ptr()) })
+            }
+            #[inline(always)]
+            fn store(self, x: &mut [f64]) {
+                let x = &mut x[..$l];
+                unsafe { arch::$storeu(x.as_mut_ptr(), self.0) }
+            }
+            #[inline(always)]
+            fn add(self, o: Self) -> Self {
+                $ty(unsafe { arch::$add(self.0, o.0) })
+            }
+            #[inline(always)]
+            fn sub(self, o: Self) -> Self {
+                $ty(unsafe { arch::$sub(self.0, o.0) })
+            }
+            #[inline(always)]
+            fn mul(self, o: Self) -> Self {
+                $ty(unsafe { arch::$mul(self.0, o.0) })
+            }
+            #[inline(always)]
+            fn div(self, o: Self) -> Self {
+                $ty(unsafe { arch::$div(self.0, o.0) })
+            }
+            #[inline(always)]
+            fn gt(self, o: Self) -> $mask {
+                let ($ga, $gb) = (self.0, o.0);
+                unsafe { $gt }
+            }
+            #[inline(always)]
+            fn nan(self) -> $mask {
+                let $na = self.0;
+                unsafe { $nan }
+            }
+            #[inline(always)]
+            #[allow(unused_unsafe)]
+            fn and($aa: $mask, $ab: $mask) -> $mask {
+                unsafe { $and }
+            }
+            #[inline(always)]
+            #[allow(unused_unsafe)]
+            fn or($oa: $mask, $ob: $mask) -> $mask {
+                unsafe { $or }
+            }
+            #[inline(always)]
+            fn select($sm: $mask, a: Self, b: Self) -> Self {
+                let ($sa, $sb) = (a.0, b.0);
+                $ty(unsafe { $sel })
+            }
+        }
+    };
+}
+
+#[cfg(target_arch = "x86_64")]
+use std::arch::x86_64 as arch;
+
+/// Four onsets in an AVX register (used only in the AVX2 and AVX-512F variants).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct Avx2Lanes(arch::__m256d);
+
+#[cfg(target_arch = "x86_64")]
+x86_lanes!(Avx2Lanes, arch::__m256d, 4, _mm256_set1_pd, _mm256_loadu_pd, _mm256_storeu_pd,
+    _mm256_add_pd, _mm256_sub_pd, _mm256_mul_pd, _mm256_div_pd,
+    gt: |a, b| arch::_mm256_cmp_pd::<{ arch::_CMP_GT_OQ }>(a, b),
+    nan: |a| arch::_mm256_cmp_pd::<{ arch::_CMP_UNORD_Q }>(a, a),
+    and: |a, b| arch::_mm256_and_pd(a, b),
+    or: |a, b| arch::_mm256_or_pd(a, b),
+    select: |m, a, b| arch::_mm256_blendv_pd(b, a, m));
+
+/// Slots s0 … s0 + L − 1 of measured step k in registers: the profile factors
+/// (`compute_factors`), L⁻¹S = (L⁻¹H)Γ + b·L⁻¹Φ̃ (eq. (45)), C += SᵀS and d += SᵀL⁻¹ε
+/// (eqs. (32)-(33)), the dropped-pivot LDLᵀ statistic dᵀC⁻d and rank (eq. (35)), and
+/// Γ ← AΓ + a·Ψ̃ − b·FKΦ̃ (eq. (46)); each onset gets the operations of the passes in
+/// their order, so the results are the same bits.
+// Index loops over the (i, j, q) of the equations, written as in the passes.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
+    c: &Coefs<N, M, P>,
+    v: &mut SlotArrays<'_>,
+    s0: usize,
+) {
+    let w = v.w;
+    let zero = S::splat(0.0);
+    let one = S::splat(1.0);
+    let active = S::load(&v.active[s0..]);
+    let lag = S::load(&v.lag[s0..]);
+    let mut sf = [zero; M];
+    let mut of = [zero; M];
+    for j in 0..M {
+        match c.kinds[j] {
+            Onset::Step | Onset::Known => {
+                sf[j] = active;
+                of[j] = active;
+            }
+            Onset::Ramp => {
+                sf[j] = active.mul(lag.add(one));
+                of[j] = sf[j];
+            }
+            Onset::Impulse => of[j] = S::load(&v.impulse[s0..]),
+        }
+    }
+    let mut gamma = [[zero; N]; M];
+    for (j, g) in gamma.iter_mut().enumerate() {
+        for (q, g) in g.iter_mut().enumerate() {
+            *g = S::load(&v.gamma[(q + N * j) * w + s0..]);
+        }
+    }
+    // L⁻¹S (eq. (45)), sig[j][i].
+    let mut sig = [[zero; P]; M];
+    for j in 0..M {
+        for i in 0..P {
+            let mut x = S::splat(c.phi[i][j]).mul(of[j]);
+            for q in 0..N {
+                x = x.add(S::splat(c.h[i][q]).mul(gamma[j][q]));
+            }
+            x.store(&mut v.signature[(i + P * j) * w + s0..]);
+            sig[j][i] = x;
+        }
+    }
+    // C += SᵀS, d += SᵀL⁻¹ε (eqs. (32)-(33)); info[a][b] for b ≤ a.
+    let mut info = [[zero; M]; M];
+    let mut score = [zero; M];
+    for a in 0..M {
+        for b in 0..M {
+            if b > a {
+                continue;
+            }
+            let at = tri(a, b) * w + s0;
+            let mut x = S::load(&v.info[at..]);
+            for i in 0..P {
+                x = x.add(sig[a][i].mul(sig[b][i]));
+            }
+            x.store(&mut v.info[at..]);
+            info[a][b] = x;
+        }
+        let mut x = S::load(&v.score[a * w + s0..]);
+        for i in 0..P {
+            x = x.add(sig[a][i].mul(S::splat(c.eps[i])));
+        }
+        x.store(&mut v.score[a * w + s0..]);
+        score[a] = x;
+    }
+    // Dropped-pivot LDLᵀ (as `statistic_generic`): pivots dd, multipliers low[i][j].
+    let tol = S::splat(c.tol);
+    let cut = if M == 2 {
+        info[0][0].max(info[1][1]).mul(tol)
+    } else {
+        let mut x = zero;
+        for (a, row) in info.iter().enumerate() {
+            x = x.max(row[a]);
+        }
+        x.mul(tol)
+    };
+    let mut dd = [zero; M];
+    let mut inv = [zero; M];
+    let mut low = [[zero; M]; M];
+    let mut rank = zero;
+    // Loops of constant length with the triangle as conditions, so that the compiler
+    // unrolls them completely and keeps every entry in a register.
+    for j in 0..M {
+        let mut d = info[j][j];
+        for q in 0..M {
+            if q < j {
+                d = d.sub(low[j][q].mul(low[j][q]).mul(dd[q]));
+            }
+        }
+        dd[j] = d;
+        let keep = S::and(d.gt(cut), d.gt(zero));
+        inv[j] = S::select(keep, one.div(d), zero);
+        rank = rank.add(S::select(keep, one, zero));
+        for i in 0..M {
+            if i > j {
+                let mut x = info[i][j];
+                for q in 0..M {
+                    if q < j {
+                        x = x.sub(low[i][q].mul(low[j][q]).mul(dd[q]));
+                    }
+                }
+                low[i][j] = x.mul(inv[j]);
+            }
+        }
+    }
+    // z = L⁻¹d, statistic Σ_j z_j²/D_j over kept pivots.
+    let mut z = [zero; M];
+    let mut stat = zero;
+    for j in 0..M {
+        let mut x = score[j];
+        for q in 0..M {
+            if q < j {
+                x = x.sub(low[j][q].mul(z[q]));
+            }
+        }
+        z[j] = x;
+        stat = stat.add(x.mul(x).mul(inv[j]));
+    }
+    stat.store(&mut v.stat[s0..]);
+    rank.store(&mut v.rank[s0..]);
+    // Γ ← AΓ + a·Ψ̃ − b·FKΦ̃ (eq. (46)), in place (Γ_k is held above).
+    for j in 0..M {
+        for i in 0..N {
+            let mut x = S::splat(c.psi[j][i])
+                .mul(sf[j])
+                .sub(S::splat(c.fk_phi[j][i]).mul(of[j]));
+            for q in 0..N {
+                x = x.add(S::splat(c.a[i][q]).mul(gamma[j][q]));
+            }
+            x.store(&mut v.gamma[(i + N * j) * w + s0..]);
+        }
+    }
+    lag.add(one).store(&mut v.lag[s0..]);
 }
 
 #[cfg(test)]
