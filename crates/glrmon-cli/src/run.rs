@@ -266,12 +266,32 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         cfg.channels.len(),
         shard.map_or(String::new(), |s| format!(" (shard {s} of {configured})"))
     );
+    let timeout = Duration::from_secs_f64(cfg.daemon.shutdown_timeout);
+    let mut applied = cfg;
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        match signal(SignalKind::hangup()) {
+            Ok(mut hup) => loop {
+                tokio::select! {
+                    () = wait_for_signal() => break,
+                    _ = hup.recv() => {
+                        applied = tokio::task::block_in_place(|| {
+                            reload(&args.config, applied, shard, &runtime)
+                        });
+                    }
+                }
+            },
+            Err(_) => wait_for_signal().await,
+        }
+    }
+    #[cfg(not(unix))]
     wait_for_signal().await;
+    drop(applied);
     let started = Instant::now();
     tracing::info!("Stopping: intake closed, draining.");
     drop(source);
     ready.store(false, std::sync::atomic::Ordering::Relaxed);
-    let timeout = Duration::from_secs_f64(cfg.daemon.shutdown_timeout);
     let runtime = Mutex::new(Some(runtime));
     let (in_time, sinks) = tokio::task::spawn_blocking(move || {
         runtime
@@ -312,6 +332,49 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
             "the drain did not finish within {timeout:?}: pending results were lost"
         ))
     }
+}
+
+/// SIGHUP: reads the configuration file again and applies each channel's new
+/// thresholds and alarm settings to its running monitor; refuses (logging why, changing
+/// nothing) an invalid file or any change that needs a restart. Returns the
+/// configuration in force.
+fn reload(
+    path: &std::path::Path,
+    current: glrmon_spec::Config,
+    shard: Option<glrmon_spec::Shard>,
+    runtime: &Runtime,
+) -> glrmon_spec::Config {
+    let new = match load_config(path) {
+        Ok(c) => c,
+        Err(e) => {
+            tracing::error!(config = %path.display(), "Reload refused, nothing changed: {e}");
+            return current;
+        }
+    };
+    let blockers = current.restart_needed(&new);
+    if !blockers.is_empty() {
+        tracing::error!(
+            config = %path.display(),
+            "Reload refused, nothing changed: {}. Restart glrmon to apply these.",
+            blockers.join("; ")
+        );
+        return current;
+    }
+    let new = new.into_shard(shard);
+    let mut retuned = 0;
+    for (index, name) in runtime.channel_names().iter().enumerate() {
+        if let Some(ch) = new.channel(name) {
+            if runtime.retune(index, glrmon_monitor::Tuning::from_channel(ch)) {
+                retuned += 1;
+            }
+        }
+    }
+    tracing::info!(
+        config = %path.display(),
+        channels = retuned,
+        "Configuration reloaded: thresholds and alarm settings applied; the filters go on."
+    );
+    new
 }
 
 /// Opens the session; in client mode, retries until a router answers (the daemon may

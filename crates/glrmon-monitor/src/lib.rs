@@ -79,6 +79,33 @@ pub struct MonitorSettings {
     pub max_gap: u64,
 }
 
+/// The settings a configuration reload changes in a running monitor (the part of
+/// [`MonitorSettings`] that does not shape the filter).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tuning {
+    /// Detection threshold and episode hysteresis.
+    pub alarm: AlarmSettings,
+    /// Samples between the crossing and the isolation tests.
+    pub isolation_delay: u32,
+    /// Type-I probability of each isolation test.
+    pub isolation_alpha: f64,
+    /// Calibrated isolation thresholds by test name.
+    pub isolation_thresholds: Vec<(String, f64)>,
+}
+
+impl Tuning {
+    /// The tuning of a validated channel of the configuration.
+    #[must_use]
+    pub fn from_channel(channel: &glrmon_spec::Channel) -> Self {
+        Self {
+            alarm: channel.alarm,
+            isolation_delay: channel.isolation_delay,
+            isolation_alpha: channel.isolation_alpha,
+            isolation_thresholds: channel.isolation_thresholds.clone(),
+        }
+    }
+}
+
 /// Counters of a channel.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct MonitorCounters {
@@ -230,6 +257,20 @@ impl Monitor {
             }
         })?;
         Ok(monitor.with_diagnosis(engine))
+    }
+
+    /// Applies new thresholds and alarm settings (a configuration reload) without
+    /// touching the filter: the detection threshold and episode hysteresis take effect
+    /// at the next sample (an episode going on continues under them), the isolation
+    /// delay, level and calibrated thresholds at the next alarm.
+    pub fn retune(&mut self, tuning: &Tuning) {
+        self.settings.alarm = tuning.alarm;
+        self.alarm.set_settings(tuning.alarm);
+        self.settings.isolation_delay = tuning.isolation_delay;
+        self.settings.isolation_alpha = tuning.isolation_alpha;
+        self.settings
+            .isolation_thresholds
+            .clone_from(&tuning.isolation_thresholds);
     }
 
     /// The channel's name.

@@ -191,6 +191,8 @@ enum Job {
     Payload(ChannelIndex, Payload, u64),
     /// A payload refused at intake, reported as an `error` record by its worker.
     Reject(ChannelIndex, ErrorCode, String, Instant),
+    /// New thresholds and alarm settings for a channel (a configuration reload).
+    Retune(ChannelIndex, Box<glrmon_monitor::Tuning>),
     /// Queued behind every accepted payload at shutdown.
     Stop,
 }
@@ -507,6 +509,19 @@ impl Runtime {
         }
     }
 
+    /// Hands new thresholds and alarm settings to the worker of channel `index`, behind
+    /// the payloads already queued (waits for room in that queue). False when there is
+    /// no such channel or the runtime is stopping.
+    pub fn retune(&self, index: ChannelIndex, tuning: glrmon_monitor::Tuning) -> bool {
+        if index >= self.names.len() || !self.intake.open.load(Ordering::Acquire) {
+            return false;
+        }
+        self.intake
+            .queues
+            .get(index % self.intake.queues.len().max(1))
+            .is_some_and(|q| q.send(Job::Retune(index, Box::new(tuning))).is_ok())
+    }
+
     /// The runtime's queue, worker and latency metrics.
     #[must_use]
     pub fn metrics(&self) -> Arc<RuntimeMetrics> {
@@ -611,6 +626,12 @@ fn worker(
                 (*c, p.received)
             }
             Job::Reject(c, _, _, at) => (*c, *at),
+            Job::Retune(c, tuning) => {
+                if let Some((_, ch)) = shard.iter_mut().find(|(i, _)| i == c) {
+                    ch.monitor.retune(tuning);
+                }
+                continue;
+            }
             Job::Stop => return,
         };
         let Some((_, ch)) = shard.iter_mut().find(|(i, _)| *i == channel) else {
@@ -676,7 +697,7 @@ fn worker(
                     stage: Stage::Receiving,
                 }));
             }
-            Job::Stop => return,
+            Job::Retune(..) | Job::Stop => return,
         }
         send_inputs(&out, ch, &mut inputs, log_time_ns);
         forward_records(&out, ch, &mut records, fwd, log_time_ns, &stat_drops);

@@ -99,6 +99,21 @@ pub struct Config {
     pub source: String,
 }
 
+/// The keys of a channel's `[channels.glr]` table that a reload (SIGHUP) applies to the
+/// running monitor: the detection threshold and how it is set, the alarm episode
+/// settings, and the isolation tests' delay, level and thresholds. Everything else
+/// shapes the filters and needs a restart.
+pub const RELOADABLE_GLR_KEYS: [&str; 8] = [
+    "threshold",
+    "false_alarm",
+    "threshold_mode",
+    "calibrated",
+    "hysteresis",
+    "clear_samples",
+    "isolation_delay",
+    "isolation_alpha",
+];
+
 /// A shard of the channels of a configuration: the channels whose name hashes to
 /// `index` modulo `count` (FNV-1a, 64 bits, over the name's UTF-8 bytes: the same on
 /// every machine and in every release, so a fleet started from one configuration
@@ -167,6 +182,70 @@ impl Config {
             self.channels.retain(|c| s.owns(&c.name));
         }
         self
+    }
+
+    /// What stands between this configuration and `new` for a reload without a
+    /// restart (SIGHUP): every changed setting other than a channel's thresholds and
+    /// alarm settings ([`RELOADABLE_GLR_KEYS`]), as a path with the reason, e.g.
+    /// `channels "pump3".model: changed (needs a restart: the filters depend on it)`.
+    /// Empty when `new` can be applied by retuning the running monitors.
+    #[must_use]
+    pub fn restart_needed(&self, new: &Config) -> Vec<String> {
+        let parse = |text: &str| text.parse::<toml::Table>().unwrap_or_default();
+        let (old, new) = (parse(&self.source), parse(&new.source));
+        let mut out = Vec::new();
+        let keys: std::collections::BTreeSet<&String> = old.keys().chain(new.keys()).collect();
+        for key in keys.into_iter().filter(|k| *k != "channels") {
+            if old.get(key) != new.get(key) {
+                out.push(format!("[{key}]: changed (needs a restart)"));
+            }
+        }
+        let channels = |t: &toml::Table| -> Vec<(String, toml::Table)> {
+            t.get("channels")
+                .and_then(toml::Value::as_array)
+                .map(|a| {
+                    a.iter()
+                        .filter_map(toml::Value::as_table)
+                        .map(|c| {
+                            let name = c.get("name").and_then(toml::Value::as_str).unwrap_or("");
+                            (name.to_owned(), c.clone())
+                        })
+                        .collect()
+                })
+                .unwrap_or_default()
+        };
+        let (before, after) = (channels(&old), channels(&new));
+        for (name, _) in &before {
+            if !after.iter().any(|(n, _)| n == name) {
+                out.push(format!("channels \"{name}\": removed (needs a restart)"));
+            }
+        }
+        for (name, table) in &after {
+            let Some((_, was)) = before.iter().find(|(n, _)| n == name) else {
+                out.push(format!("channels \"{name}\": added (needs a restart)"));
+                continue;
+            };
+            let strip = |t: &toml::Table| {
+                let mut t = t.clone();
+                if let Some(toml::Value::Table(glr)) = t.get_mut("glr") {
+                    for k in RELOADABLE_GLR_KEYS {
+                        glr.remove(k);
+                    }
+                }
+                t
+            };
+            let (a, b) = (strip(was), strip(table));
+            let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+            for key in keys {
+                if a.get(key) != b.get(key) {
+                    out.push(format!(
+                        "channels \"{name}\".{key}: changed (needs a restart: only glr.{} are reloaded)",
+                        RELOADABLE_GLR_KEYS.join(", glr.")
+                    ));
+                }
+            }
+        }
+        out
     }
 
     /// The channel named `name`.

@@ -1,0 +1,238 @@
+//! Issue 8: SIGHUP reloads a running daemon's thresholds and alarm settings without
+//! restarting its filters, and refuses (logging why, changing nothing) an invalid file
+//! or a change that needs a restart. Real binary, a real Zenoh session on loopback.
+
+use std::io::{BufRead, BufReader, Read};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use glrmon_wire::{Sample, encode_sample};
+use glrmon_zenoh::SessionSettings;
+use zenoh::Wait as _;
+
+fn free_port() -> u16 {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    l.local_addr().unwrap().port()
+}
+
+struct Daemon {
+    child: Child,
+    stderr: Arc<Mutex<String>>,
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Daemon {
+    fn signal(&self, sig: &str) {
+        let ok = Command::new("kill")
+            .args([sig, &self.child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(ok.success());
+    }
+
+    /// Waits (bounded) until the log contains `text` `times` times.
+    fn wait_log(&self, text: &str, times: usize) -> String {
+        let t = Instant::now();
+        loop {
+            let log = self.stderr.lock().unwrap().clone();
+            if log.matches(text).count() >= times {
+                return log;
+            }
+            assert!(
+                t.elapsed() < Duration::from_secs(20),
+                "no {text:?} in\n{log}"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}
+
+/// (samples, alarms, alarm active) of the channel from the status queryable.
+async fn counters(session: &zenoh::Session) -> (u64, u64, bool) {
+    let replies = glrmon_zenoh::query_status(session, "*", Duration::from_secs(2))
+        .await
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_str(&replies[0].1).unwrap();
+    let c = &v["channels"][0];
+    (
+        c["samples"].as_u64().unwrap(),
+        c["alarms"].as_u64().unwrap(),
+        c["alarm_active"].as_bool().unwrap(),
+    )
+}
+
+async fn wait_samples(session: &zenoh::Session, n: u64) -> (u64, u64, bool) {
+    let t = Instant::now();
+    loop {
+        let c = counters(session).await;
+        if c.0 == n {
+            return c;
+        }
+        assert!(t.elapsed() < Duration::from_secs(30), "stuck at {c:?}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sighup_applies_thresholds_and_refuses_what_needs_a_restart() {
+    let dir = std::env::temp_dir().join(format!("glrmon-reload-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let motor = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/examples/dc-motor.toml"),
+    )
+    .unwrap();
+    assert!(motor.contains("false_alarm = 1e-4") && motor.contains("R = 0.0025"));
+    let head = format!(
+        "[zenoh]\nmode = \"peer\"\nlisten = [\"{endpoint}\"]\n\n[daemon]\nstat_every = 0\ninstance = \"reload\"\n\n"
+    );
+    let cfg = dir.join("plant.toml");
+    std::fs::write(&cfg, format!("{head}{motor}")).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_glrmon"))
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .env("GLRMON_LOG", "info")
+        .env("NO_COLOR", "1")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stderr = Arc::new(Mutex::new(String::new()));
+    let sink = stderr.clone();
+    let mut pipe = child.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        let mut buf = [0u8; 4096];
+        while let Ok(n) = pipe.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            sink.lock()
+                .unwrap()
+                .push_str(&String::from_utf8_lossy(&buf[..n]));
+        }
+    });
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    assert!(line.contains("monitoring 1 channel(s)"), "{line}");
+    let daemon = Daemon { child, stderr };
+
+    // Clean samples of the DC motor.
+    let csv = dir.join("clean.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_glrmon"))
+        .args(["simulate", "--config"])
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/examples/dc-motor.toml"))
+        .args(["--samples", "600", "--seed", "5", "--output"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    // Columns: k, t, u0, y0, y1 (as `glrmon simulate` writes them).
+    assert!(text.starts_with("k,t,u0,y0,y1"), "{}", &text[..40]);
+    let session = glrmon_zenoh::open(&SessionSettings {
+        mode: Some("client".into()),
+        connect: vec![endpoint.clone()],
+        multicast_scouting: Some(false),
+        ..SessionSettings::default()
+    })
+    .await
+    .unwrap();
+    let publisher = session
+        .declare_publisher("plant/dc_motor")
+        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .await
+        .unwrap();
+    let publish = |range: std::ops::Range<usize>| {
+        for r in &rows[range] {
+            let s = Sample {
+                k: Some(r[0] as u64),
+                t: None,
+                u: vec![r[2]],
+                y: vec![r[3], r[4]],
+                p: Vec::new(),
+            };
+            let mut b = Vec::new();
+            encode_sample("dc_motor", &s, &mut b).unwrap();
+            publisher.put(b).wait().unwrap();
+        }
+    };
+    let t = Instant::now();
+    while !publisher.matching_status().await.unwrap().matching() {
+        assert!(t.elapsed() < Duration::from_secs(10));
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    publish(0..300);
+    assert_eq!(
+        wait_samples(&session, 300).await,
+        (300, 0, false),
+        "clean data, no alarm"
+    );
+
+    // A far lower threshold, applied by SIGHUP: clean data now alarms, and the filter
+    // goes on (the sample count continues from 300).
+    let low = motor.replace("false_alarm = 1e-4", "threshold = 0.5");
+    std::fs::write(&cfg, format!("{head}{low}")).unwrap();
+    daemon.signal("-HUP");
+    daemon.wait_log("Configuration reloaded", 1);
+    publish(300..450);
+    let (samples, alarms, active) = wait_samples(&session, 450).await;
+    assert_eq!(samples, 450);
+    assert!(
+        alarms >= 1 && active,
+        "the reloaded threshold 0.5 raised no alarm"
+    );
+
+    // A model change needs a restart: refused, and the threshold stays 0.5.
+    let model = low.replace("R = 0.0025", "R = 0.003");
+    std::fs::write(&cfg, format!("{head}{model}")).unwrap();
+    daemon.signal("-HUP");
+    let log = daemon.wait_log("Reload refused", 1);
+    assert!(
+        log.contains("channels \"dc_motor\".model: changed (needs a restart"),
+        "{log}"
+    );
+    // An invalid file is refused too, naming the problem.
+    std::fs::write(&cfg, format!("{head}{low}\n[[channels]]\nname = 3\n")).unwrap();
+    daemon.signal("-HUP");
+    daemon.wait_log("Reload refused", 2);
+    publish(450..600);
+    // Under the original threshold (27.6) clean data would have ended the episode.
+    let (samples, _, active) = wait_samples(&session, 600).await;
+    assert_eq!(samples, 600);
+    assert!(
+        active,
+        "threshold 0.5 no longer in force after the refusals"
+    );
+
+    daemon.signal("-TERM");
+    let mut daemon = daemon;
+    let t = Instant::now();
+    let code = loop {
+        if let Some(s) = daemon.child.try_wait().unwrap() {
+            break s.code();
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(10),
+            "no exit after SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    assert_eq!(code, Some(0));
+    let _ = session.close().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
