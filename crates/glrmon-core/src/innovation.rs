@@ -121,7 +121,7 @@ impl InnovationFilter {
     /// [`StepError::Numerical`] when Σ_k is not positive definite; nothing observable
     /// is changed then.
     pub fn measure(&mut self, sys: &SystemMatrices, u: &[f64], y: &[f64]) -> Result<(), StepError> {
-        let (n, p, l) = (self.n, self.p, sys.g.ncols());
+        let (n, p) = (self.n, self.p);
         // P Hᵀ (n×p) and Σ = H P Hᵀ + R (p×p), factorised in scratch first so that a
         // failure leaves the last step's outputs intact.
         gemm(
@@ -156,34 +156,7 @@ impl InnovationFilter {
         }
         std::mem::swap(&mut self.chol, &mut self.chol_scratch);
         self.innovation_cov.copy_from(&self.tmp_pp);
-        // ε = y − J u − H x̂
-        self.innovation.as_mut_slice().copy_from_slice(y);
-        gemv(
-            -1.0,
-            sys.j.as_slice(),
-            p,
-            l,
-            u,
-            1.0,
-            self.innovation.as_mut_slice(),
-        );
-        gemv(
-            -1.0,
-            sys.h.as_slice(),
-            p,
-            n,
-            self.state.as_slice(),
-            1.0,
-            self.innovation.as_mut_slice(),
-        );
-        // Whitened innovation and output matrix.
-        self.innovation_white.copy_from(&self.innovation);
-        solve_lower_in_place(
-            self.chol.as_slice(),
-            p,
-            self.innovation_white.as_mut_slice(),
-            1,
-        );
+        self.innovation_from(sys, u, y);
         self.h_white.copy_from(&sys.h);
         solve_lower_in_place(self.chol.as_slice(), p, self.h_white.as_mut_slice(), n);
         // K = P Hᵀ Σ⁻¹ = (P Hᵀ L⁻ᵀ) L⁻¹: solve X Lᵀ = P Hᵀ, then K L = X.
@@ -298,6 +271,11 @@ impl InnovationFilter {
     /// L of the last full [`InnovationFilter::measure`] held (the Riccati recursion has
     /// converged: eqs. (7)-(8) would give them again). Cannot fail.
     pub fn measure_steady(&mut self, sys: &SystemMatrices, u: &[f64], y: &[f64]) {
+        self.innovation_from(sys, u, y);
+    }
+
+    /// ε = y − Ju − HX̂ (eq. (10)) and L⁻¹ε with the current L.
+    fn innovation_from(&mut self, sys: &SystemMatrices, u: &[f64], y: &[f64]) {
         let (n, p, l) = (self.n, self.p, sys.g.ncols());
         self.innovation.as_mut_slice().copy_from_slice(y);
         gemv(
@@ -330,7 +308,7 @@ impl InnovationFilter {
     /// Time update of the stationary filter: X̂_{k+1} = F_k(X̂_k + Kε_k) + G_kU_k
     /// (eq. (6)) with the held gain; P, A and FK are unchanged.
     pub fn time_update_steady(&mut self, sys: &SystemMatrices, u: &[f64]) {
-        let (n, p, l) = (self.n, self.p, sys.g.ncols());
+        let (n, p) = (self.n, self.p);
         self.tmp_n.copy_from(&self.state);
         gemv(
             1.0,
@@ -341,24 +319,7 @@ impl InnovationFilter {
             1.0,
             self.tmp_n.as_mut_slice(),
         );
-        gemv(
-            1.0,
-            sys.f.as_slice(),
-            n,
-            n,
-            self.tmp_n.as_slice(),
-            0.0,
-            self.state.as_mut_slice(),
-        );
-        gemv(
-            1.0,
-            sys.g.as_slice(),
-            n,
-            l,
-            u,
-            1.0,
-            self.state.as_mut_slice(),
-        );
+        self.propagate_state(sys, u);
     }
 
     /// Predict-only step for a missing sample: X̂_{k+1} = F_kX̂_k + G_kU_k,
@@ -387,25 +348,8 @@ impl InnovationFilter {
 
     /// X̂_{k+1} = F tmp_n + G u, P_{k+1} = F tmp_nn Fᵀ + Q.
     fn propagate(&mut self, sys: &SystemMatrices, u: &[f64]) {
-        let (n, l) = (self.n, sys.g.ncols());
-        gemv(
-            1.0,
-            sys.f.as_slice(),
-            n,
-            n,
-            self.tmp_n.as_slice(),
-            0.0,
-            self.state.as_mut_slice(),
-        );
-        gemv(
-            1.0,
-            sys.g.as_slice(),
-            n,
-            l,
-            u,
-            1.0,
-            self.state.as_mut_slice(),
-        );
+        self.propagate_state(sys, u);
+        let n = self.n;
         gemm(
             1.0,
             sys.f.as_slice(),
@@ -430,6 +374,29 @@ impl InnovationFilter {
             self.cov.as_mut_slice(),
         );
         symmetrize(self.cov.as_mut_slice(), n);
+    }
+
+    /// X̂_{k+1} = F tmp_n + G u.
+    fn propagate_state(&mut self, sys: &SystemMatrices, u: &[f64]) {
+        let (n, l) = (self.n, sys.g.ncols());
+        gemv(
+            1.0,
+            sys.f.as_slice(),
+            n,
+            n,
+            self.tmp_n.as_slice(),
+            0.0,
+            self.state.as_mut_slice(),
+        );
+        gemv(
+            1.0,
+            sys.g.as_slice(),
+            n,
+            l,
+            u,
+            1.0,
+            self.state.as_mut_slice(),
+        );
     }
 
     /// X̂_k: the predicted state for the next sample.
