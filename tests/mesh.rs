@@ -450,6 +450,30 @@ async fn two_sharded_instances_behind_a_router_survive_its_restart() {
         msg.contains("(instance \"mesh-a\")") && msg.contains("(instance \"mesh-b\")"),
         "{msg}"
     );
+    // Selected by key expression (ch10 … ch19), then refused for those ten only.
+    let fourth = glrmon(&[
+        "run",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--instance",
+        "mesh-d",
+        "--mode",
+        "client",
+        "--connect",
+        &endpoint,
+        "--channels",
+        "plant/ch1$*",
+    ]);
+    let msg = String::from_utf8_lossy(&fourth.stderr);
+    assert_eq!(fourth.status.code(), Some(1), "{msg}");
+    assert!(
+        msg.contains("10 channel(s) of this instance are already monitored elsewhere"),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("\"ch19\"") && !msg.contains("\"ch09\""),
+        "{msg}"
+    );
 
     let publisher = glrmon_zenoh::open(&SessionSettings {
         mode: Some("client".into()),

@@ -32,6 +32,10 @@ pub(crate) struct RunArgs {
     /// hash of the channel name), overriding `daemon.shard`.
     #[arg(long, value_name = "I/N")]
     shard: Option<glrmon_spec::Shard>,
+    /// Monitor only the channels whose input key intersects this key expression
+    /// (e.g. `plant/line2/**`); applied before `--shard`.
+    #[arg(long, value_name = "KEYEXPR")]
+    channels: Option<String>,
     /// Serve Prometheus `/metrics`, `/healthz` and `/readyz` on this local address
     /// (e.g. 127.0.0.1:9464), overriding `daemon.metrics`.
     #[arg(long, value_name = "ADDR")]
@@ -133,6 +137,21 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         (None, None) => None,
     };
     let configured = cfg.channels.len();
+    let mut cfg = cfg;
+    if let Some(expr) = &args.channels {
+        let selector = zenoh::key_expr::KeyExpr::new(expr.as_str()).map_err(|e| {
+            crate::InvalidInput(format!(
+                "--channels \"{expr}\" is not a key expression: {e}"
+            ))
+        })?;
+        cfg.channels.retain(|c| {
+            zenoh::key_expr::KeyExpr::new(c.key.as_str()).is_ok_and(|k| k.intersects(&selector))
+        });
+        tracing::info!(keyexpr = %expr, channels = cfg.channels.len(), of = configured, "Monitoring the channels whose key intersects the selection.");
+        if cfg.channels.is_empty() {
+            tracing::warn!(keyexpr = %expr, "No configured channel's key intersects the selection.");
+        }
+    }
     let cfg = cfg.into_shard(shard);
     if let Some(s) = shard {
         tracing::info!(shard = %s, channels = cfg.channels.len(), of = configured, "Monitoring one shard of the configured channels.");
