@@ -10,6 +10,9 @@
 //! all arrive. Real binary, real sessions, explicit tcp/127.0.0.1 endpoints,
 //! multicast scouting off.
 
+#[path = "support.rs"]
+mod support;
+
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
@@ -22,11 +25,6 @@ use glrmon_zenoh::SessionSettings;
 use zenoh::Wait as _;
 
 const CHANNELS: usize = 20;
-
-fn free_port() -> u16 {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    l.local_addr().unwrap().port()
-}
 
 struct TempDir(PathBuf);
 impl Drop for TempDir {
@@ -152,27 +150,7 @@ impl Instance {
         if let Some(m) = metrics {
             cmd.args(["--metrics", m]);
         }
-        let mut child = cmd
-            .env("GLRMON_LOG", "info")
-            .env("NO_COLOR", "1")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let stderr = Arc::new(Mutex::new(String::new()));
-        let sink = stderr.clone();
-        let mut pipe = child.stderr.take().unwrap();
-        std::thread::spawn(move || {
-            let mut buf = [0u8; 4096];
-            while let Ok(n) = pipe.read(&mut buf) {
-                if n == 0 {
-                    break;
-                }
-                sink.lock()
-                    .unwrap()
-                    .push_str(&String::from_utf8_lossy(&buf[..n]));
-            }
-        });
+        let (child, stderr) = support::spawn_logged(&mut cmd);
         Self { child, stderr }
     }
 
@@ -372,7 +350,7 @@ async fn two_sharded_instances_behind_a_router_survive_its_restart() {
     let dir = std::env::temp_dir().join(format!("glrmon-mesh-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let _cleanup = TempDir(dir.clone());
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
 
     // 20 copies of the DC motor, ch00 … ch19.
     let motor = std::fs::read_to_string(
@@ -388,7 +366,7 @@ async fn two_sharded_instances_behind_a_router_survive_its_restart() {
     std::fs::write(&cfg, text).unwrap();
 
     // Both instances start before the router exists.
-    let metrics = format!("127.0.0.1:{}", free_port());
+    let metrics = format!("127.0.0.1:{}", support::free_port());
     let mut a = Instance::spawn(&cfg, "0/2", "mesh-a", &endpoint, Some(&metrics));
     let mut b = Instance::spawn(&cfg, "1/2", "mesh-b", &endpoint, None);
     let t = Instant::now();

@@ -2,20 +2,18 @@
 //! restarting its filters, and refuses (logging why, changing nothing) an invalid file
 //! or a change that needs a restart. Real binary, a real Zenoh session on loopback.
 
-use std::io::{BufRead, BufReader, Read};
+#[path = "support.rs"]
+mod support;
+
+use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use glrmon_wire::{Sample, encode_sample};
 use glrmon_zenoh::SessionSettings;
 use zenoh::Wait as _;
-
-fn free_port() -> u16 {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    l.local_addr().unwrap().port()
-}
 
 struct Daemon {
     child: Child,
@@ -85,7 +83,7 @@ async fn wait_samples(session: &zenoh::Session, n: u64) -> (u64, u64, bool) {
 async fn sighup_applies_thresholds_and_refuses_what_needs_a_restart() {
     let dir = std::env::temp_dir().join(format!("glrmon-reload-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
     let motor = std::fs::read_to_string(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/examples/dc-motor.toml"),
     )
@@ -96,29 +94,11 @@ async fn sighup_applies_thresholds_and_refuses_what_needs_a_restart() {
     );
     let cfg = dir.join("plant.toml");
     std::fs::write(&cfg, format!("{head}{motor}")).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_glrmon"))
-        .args(["run", "--config"])
-        .arg(&cfg)
-        .env("GLRMON_LOG", "info")
-        .env("NO_COLOR", "1")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let stderr = Arc::new(Mutex::new(String::new()));
-    let sink = stderr.clone();
-    let mut pipe = child.stderr.take().unwrap();
-    std::thread::spawn(move || {
-        let mut buf = [0u8; 4096];
-        while let Ok(n) = pipe.read(&mut buf) {
-            if n == 0 {
-                break;
-            }
-            sink.lock()
-                .unwrap()
-                .push_str(&String::from_utf8_lossy(&buf[..n]));
-        }
-    });
+    let (mut child, stderr) = support::spawn_logged(
+        Command::new(env!("CARGO_BIN_EXE_glrmon"))
+            .args(["run", "--config"])
+            .arg(&cfg),
+    );
     let mut line = String::new();
     BufReader::new(child.stdout.take().unwrap())
         .read_line(&mut line)

@@ -230,17 +230,7 @@ impl InnovationFilter {
             1.0,
             self.tmp_nn.as_mut_slice(),
         );
-        // Updated state X̂_{k|k} = X̂_k + K ε, into tmp_n.
-        self.tmp_n.copy_from(&self.state);
-        gemv(
-            1.0,
-            self.gain.as_slice(),
-            n,
-            p,
-            self.innovation.as_slice(),
-            1.0,
-            self.tmp_n.as_mut_slice(),
-        );
+        self.updated_state();
         // A = F (I − K H), F K.
         gemm(
             1.0,
@@ -308,6 +298,12 @@ impl InnovationFilter {
     /// Time update of the stationary filter: X̂_{k+1} = F_k(X̂_k + Kε_k) + G_kU_k
     /// (eq. (6)) with the held gain; P, A and FK are unchanged.
     pub fn time_update_steady(&mut self, sys: &SystemMatrices, u: &[f64]) {
+        self.updated_state();
+        self.propagate_state(sys, u);
+    }
+
+    /// The updated state X̂_{k|k} = X̂_k + Kε_k, into tmp_n.
+    fn updated_state(&mut self) {
         let (n, p) = (self.n, self.p);
         self.tmp_n.copy_from(&self.state);
         gemv(
@@ -319,7 +315,6 @@ impl InnovationFilter {
             1.0,
             self.tmp_n.as_mut_slice(),
         );
-        self.propagate_state(sys, u);
     }
 
     /// Predict-only step for a missing sample: X̂_{k+1} = F_kX̂_k + G_kU_k,

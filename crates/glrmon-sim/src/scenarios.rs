@@ -299,17 +299,12 @@ pub fn lpv_n3_p2_m4() -> Scenario {
 /// [`lpv_n3_p2_m4`] at p = 0), w = 160.
 #[must_use]
 pub fn lti_n3_p2_m3() -> Scenario {
-    let c = LpvMatrix::constant;
-    let model = Lpv::new(
-        c(m(3, 3, &[0.7, 0.1, 0.0, -0.1, 0.8, 0.1, 0.0, -0.1, 0.6])),
-        c(m(3, 2, &[1.0, 0.0, 0.0, 1.0, 0.5, 0.5])),
-        c(m(2, 3, &[1.0, 0.0, 0.0, 0.0, 1.0, 1.0])),
-        c(DMatrix::zeros(2, 2)),
-        c(DMatrix::identity(3, 3) * 0.01),
-        c(DMatrix::identity(2, 2) * 0.04),
-        0,
-    )
-    .expect("static model is valid");
+    let lpv = lpv_n3_p2_m4();
+    let [f, g, h, j, q, r] = lpv
+        .model
+        .matrices()
+        .map(|m| LpvMatrix::constant(m.base().clone()));
+    let model = Lpv::new(f, g, h, j, q, r, 0).expect("static model is valid");
     let e2 = |i: usize| DVector::from_fn(2, |r, _| if r == i { 1.0 } else { 0.0 });
     Scenario {
         model,
@@ -323,18 +318,7 @@ pub fn lti_n3_p2_m3() -> Scenario {
             ("sensor0_drift".into(), Onset::Ramp, None, Some(e2(0))),
             ("sensor1_bias".into(), Onset::Step, None, Some(e2(1))),
         ],
-        x0: DVector::zeros(3),
-        p0: DMatrix::identity(3, 3),
-        window: WindowSettings {
-            window: 160,
-            min_lag: 1,
-            ..WindowSettings::default()
-        },
-        controller: None,
-        input: Some(|k, u| {
-            u[0] = (0.05 * k as f64).sin();
-            u[1] = (0.031 * k as f64).cos();
-        }),
         signals: None,
+        ..lpv
     }
 }
