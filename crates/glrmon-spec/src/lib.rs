@@ -617,6 +617,14 @@ pub fn parse(text: &str) -> Result<Config, SpecErrors> {
             v.error("daemon.shard".into(), e);
         }
     }
+    if let Some(addr) = &d.metrics {
+        if addr.parse::<std::net::SocketAddr>().is_err() {
+            v.error(
+                "daemon.metrics".into(),
+                format!("\"{addr}\" is not a local address of the form 127.0.0.1:9464"),
+            );
+        }
+    }
     validate_recording(&mut v, &file.recording);
     let mut channels = Vec::new();
     for (i, spec) in file.channels.iter().enumerate() {
