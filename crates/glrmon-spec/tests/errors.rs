@@ -360,6 +360,12 @@ fn diagnosis_table_is_strict_and_checked() {
 #[test]
 fn bad_shard_and_metrics_address_name_the_daemon_keys() {
     let text = format!("[daemon]\nshard = \"2/2\"\nmetrics = \"localhost\"\n{BASE}");
-    assert_error(&text, "daemon.shard: \"2/2\": the index must be below the count");
-    assert_error(&text, "daemon.metrics: \"localhost\" is not a local address");
+    assert_error(
+        &text,
+        "daemon.shard: \"2/2\": the index must be below the count",
+    );
+    assert_error(
+        &text,
+        "daemon.metrics: \"localhost\" is not a local address",
+    );
 }
