@@ -2,7 +2,9 @@
 //! several rounds (robust to a shared machine's noise; criterion's `make bench` gives
 //! the confidence intervals).
 //!
-//! `cargo run --release -p glrmon-core --example step_rate [-- ROUNDS STEPS]`
+//! `cargo run --release -p glrmon-core --example step_rate [-- ROUNDS STEPS [FILTER]]`
+//! (FILTER keeps the runs whose case name and level contain it, e.g. `bench-A` or
+//! `fast path) Avx512`).
 
 use std::time::Instant;
 
@@ -14,6 +16,10 @@ fn main() {
         .skip(1)
         .filter_map(|a| a.parse().ok())
         .collect();
+    let filter = std::env::args()
+        .skip(1)
+        .find(|a| a.parse::<u64>().is_err())
+        .unwrap_or_default();
     let rounds = args.first().copied().unwrap_or(5);
     let steps = args.get(1).copied().unwrap_or(100_000) as usize;
     let lti = scenarios::lti_n3_p2_m3();
@@ -25,11 +31,21 @@ fn main() {
         ("LTI n3 p2 m3 w160 (fast path)", lti),
         ("LTI n3 p2 m3 w160 (general)", lti_general),
     ];
+    let selected = |name: &str, level: VectorLevel| format!("{name} {level:?}").contains(&filter);
     for (name, sc) in &cases {
+        if !VectorLevel::supported()
+            .into_iter()
+            .any(|l| selected(name, l))
+        {
+            continue;
+        }
         let mut sim = sc.simulator(42).expect("scenario simulates");
         let warm = 2_000;
         let data: Vec<SimSample> = (0..warm + steps).map(|_| sim.next_sample()).collect();
         for level in VectorLevel::supported() {
+            if !selected(name, level) {
+                continue;
+            }
             let mut best = f64::INFINITY;
             for _ in 0..rounds {
                 let mut det = sc.detector().expect("scenario builds");

@@ -22,8 +22,8 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::error::{ModelError, StepError};
 use crate::linalg::{
-    cholesky_in_place, gemm, gemv, solve_lower_in_place, solve_right_lower_transpose_in_place,
-    symmetrize,
+    Shape, cholesky_in_place, gemm, gemv, solve_lower_in_place,
+    solve_right_lower_transpose_in_place, symmetrize, with_shape,
 };
 use crate::model::SystemMatrices;
 
@@ -121,7 +121,18 @@ impl InnovationFilter {
     /// [`StepError::Numerical`] when Σ_k is not positive definite; nothing observable
     /// is changed then.
     pub fn measure(&mut self, sys: &SystemMatrices, u: &[f64], y: &[f64]) -> Result<(), StepError> {
-        let (n, p) = (self.n, self.p);
+        with_shape!(self.n, self.p, |s| self.measure_in(s, sys, u, y))
+    }
+
+    #[inline(always)]
+    fn measure_in(
+        &mut self,
+        s: impl Shape,
+        sys: &SystemMatrices,
+        u: &[f64],
+        y: &[f64],
+    ) -> Result<(), StepError> {
+        let (n, p) = (s.n(), s.p());
         // P Hᵀ (n×p) and Σ = H P Hᵀ + R (p×p), factorised in scratch first so that a
         // failure leaves the last step's outputs intact.
         gemm(
@@ -156,7 +167,7 @@ impl InnovationFilter {
         }
         std::mem::swap(&mut self.chol, &mut self.chol_scratch);
         self.innovation_cov.copy_from(&self.tmp_pp);
-        self.innovation_from(sys, u, y);
+        self.innovation_from(s, sys, u, y);
         self.h_white.copy_from(&sys.h);
         solve_lower_in_place(self.chol.as_slice(), p, self.h_white.as_mut_slice(), n);
         // K = P Hᵀ Σ⁻¹ = (P Hᵀ L⁻ᵀ) L⁻¹: solve X Lᵀ = P Hᵀ, then K L = X.
@@ -169,7 +180,12 @@ impl InnovationFilter {
     /// Time update after [`InnovationFilter::measure`] of the same sample: X̂_{k+1},
     /// P_{k+1} (Joseph form), A_k and F_kK_k.
     pub fn time_update(&mut self, sys: &SystemMatrices, u: &[f64]) {
-        let (n, p) = (self.n, self.p);
+        with_shape!(self.n, self.p, |s| self.time_update_in(s, sys, u));
+    }
+
+    #[inline(always)]
+    fn time_update_in(&mut self, s: impl Shape, sys: &SystemMatrices, u: &[f64]) {
+        let (n, p) = (s.n(), s.p());
         // I − K H
         gemm(
             -1.0,
@@ -230,7 +246,7 @@ impl InnovationFilter {
             1.0,
             self.tmp_nn.as_mut_slice(),
         );
-        self.updated_state();
+        self.updated_state(s);
         // A = F (I − K H), F K.
         gemm(
             1.0,
@@ -254,19 +270,20 @@ impl InnovationFilter {
             0.0,
             self.predictor_gain.as_mut_slice(),
         );
-        self.propagate(sys, u);
+        self.propagate(s, sys, u);
     }
 
     /// Measurement step of the stationary filter: ε_k and L⁻¹ε_k with the gain, Σ and
     /// L of the last full [`InnovationFilter::measure`] held (the Riccati recursion has
     /// converged: eqs. (7)-(8) would give them again). Cannot fail.
     pub fn measure_steady(&mut self, sys: &SystemMatrices, u: &[f64], y: &[f64]) {
-        self.innovation_from(sys, u, y);
+        with_shape!(self.n, self.p, |s| self.innovation_from(s, sys, u, y));
     }
 
     /// ε = y − Ju − HX̂ (eq. (10)) and L⁻¹ε with the current L.
-    fn innovation_from(&mut self, sys: &SystemMatrices, u: &[f64], y: &[f64]) {
-        let (n, p, l) = (self.n, self.p, sys.g.ncols());
+    #[inline(always)]
+    fn innovation_from(&mut self, s: impl Shape, sys: &SystemMatrices, u: &[f64], y: &[f64]) {
+        let (n, p, l) = (s.n(), s.p(), sys.g.ncols());
         self.innovation.as_mut_slice().copy_from_slice(y);
         gemv(
             -1.0,
@@ -298,13 +315,16 @@ impl InnovationFilter {
     /// Time update of the stationary filter: X̂_{k+1} = F_k(X̂_k + Kε_k) + G_kU_k
     /// (eq. (6)) with the held gain; P, A and FK are unchanged.
     pub fn time_update_steady(&mut self, sys: &SystemMatrices, u: &[f64]) {
-        self.updated_state();
-        self.propagate_state(sys, u);
+        with_shape!(self.n, self.p, |s| {
+            self.updated_state(s);
+            self.propagate_state(s, sys, u);
+        });
     }
 
     /// The updated state X̂_{k|k} = X̂_k + Kε_k, into tmp_n.
-    fn updated_state(&mut self) {
-        let (n, p) = (self.n, self.p);
+    #[inline(always)]
+    fn updated_state(&mut self, s: impl Shape) {
+        let (n, p) = (s.n(), s.p());
         self.tmp_n.copy_from(&self.state);
         gemv(
             1.0,
@@ -328,7 +348,14 @@ impl InnovationFilter {
         self.tmp_nn.copy_from(&self.cov);
         self.closed_loop.copy_from(&sys.f);
         self.predictor_gain.fill(0.0);
-        self.propagate(sys, u);
+        self.propagate(
+            crate::linalg::Dynamic {
+                n: self.n,
+                p: self.p,
+            },
+            sys,
+            u,
+        );
         let n = self.n;
         for (i, var) in input_variance.iter().enumerate().take(sys.g.ncols()) {
             if *var > 0.0 && var.is_finite() {
@@ -342,9 +369,10 @@ impl InnovationFilter {
     }
 
     /// X̂_{k+1} = F tmp_n + G u, P_{k+1} = F tmp_nn Fᵀ + Q.
-    fn propagate(&mut self, sys: &SystemMatrices, u: &[f64]) {
-        self.propagate_state(sys, u);
-        let n = self.n;
+    #[inline(always)]
+    fn propagate(&mut self, s: impl Shape, sys: &SystemMatrices, u: &[f64]) {
+        self.propagate_state(s, sys, u);
+        let n = s.n();
         gemm(
             1.0,
             sys.f.as_slice(),
@@ -372,8 +400,9 @@ impl InnovationFilter {
     }
 
     /// X̂_{k+1} = F tmp_n + G u.
-    fn propagate_state(&mut self, sys: &SystemMatrices, u: &[f64]) {
-        let (n, l) = (self.n, sys.g.ncols());
+    #[inline(always)]
+    fn propagate_state(&mut self, s: impl Shape, sys: &SystemMatrices, u: &[f64]) {
+        let (n, l) = (s.n(), sys.g.ncols());
         gemv(
             1.0,
             sys.f.as_slice(),
@@ -462,6 +491,7 @@ impl InnovationFilter {
 }
 
 /// Solves X·L = B in place for X (B is `rows`×`n`, L lower triangular).
+#[inline(always)]
 fn solve_right_lower_in_place(l: &[f64], n: usize, b: &mut [f64], rows: usize) {
     for r in 0..rows {
         for j in (0..n).rev() {
@@ -516,6 +546,61 @@ mod tests {
         assert!((f.covariance() - p1).amax() < 1e-14);
         let a = &s.f * (DMatrix::identity(2, 2) - &k * &s.h);
         assert!((f.closed_loop() - a).amax() < 1e-15);
+    }
+
+    /// The fixed-shape code (n, p known at compile time, loops unrolled) and the
+    /// run-time-shape code are the same operations: same bits over a long run of a
+    /// 3-state, 2-output plant, in the full and the held-gain steps.
+    #[test]
+    fn fixed_and_dynamic_shapes_give_the_same_bits() {
+        use crate::linalg::{Dynamic, Fixed};
+        let mut s = SystemMatrices::zeros(Dims {
+            states: 3,
+            inputs: 1,
+            outputs: 2,
+            signals: 0,
+        });
+        s.f = DMatrix::from_row_slice(3, 3, &[0.9, 0.2, 0.0, -0.1, 0.8, 0.3, 0.05, 0.0, 1.01]);
+        s.g = DMatrix::from_row_slice(3, 1, &[0.1, 0.0, 1.0]);
+        s.h = DMatrix::from_row_slice(2, 3, &[1.0, 0.0, 0.5, 0.0, 1.0, -0.2]);
+        s.j = DMatrix::from_row_slice(2, 1, &[0.0, 0.3]);
+        s.q = DMatrix::from_row_slice(3, 3, &[0.02, 0.001, 0.0, 0.001, 0.01, 0.0, 0.0, 0.0, 0.03]);
+        s.r = DMatrix::from_row_slice(2, 2, &[0.04, 0.01, 0.01, 0.05]);
+        let x0 = DVector::from_vec(vec![0.1, -0.2, 0.3]);
+        let p0 = DMatrix::identity(3, 3);
+        let mut fixed = InnovationFilter::new(x0.clone(), p0.clone(), 2).unwrap();
+        let mut dynamic = InnovationFilter::new(x0, p0, 2).unwrap();
+        let bits = |f: &InnovationFilter| -> Vec<u64> {
+            [f.state(), f.innovation(), f.whitened_innovation()]
+                .into_iter()
+                .flat_map(|v| v.iter().copied())
+                .chain(f.covariance().iter().copied())
+                .chain(f.gain().iter().copied())
+                .chain(f.closed_loop().iter().copied())
+                .map(f64::to_bits)
+                .collect()
+        };
+        let dynamic_shape = Dynamic { n: 3, p: 2 };
+        for k in 0..2000_u32 {
+            let t = f64::from(k);
+            let u = [(0.37 * t).sin()];
+            let y = [(0.11 * t).cos(), 0.5 * (0.23 * t).sin() + 0.01 * t.sqrt()];
+            if k < 1500 {
+                fixed.measure_in(Fixed::<3, 2>, &s, &u, &y).unwrap();
+                fixed.time_update_in(Fixed::<3, 2>, &s, &u);
+                dynamic.measure_in(dynamic_shape, &s, &u, &y).unwrap();
+                dynamic.time_update_in(dynamic_shape, &s, &u);
+            } else {
+                fixed.innovation_from(Fixed::<3, 2>, &s, &u, &y);
+                fixed.updated_state(Fixed::<3, 2>);
+                fixed.propagate_state(Fixed::<3, 2>, &s, &u);
+                dynamic.innovation_from(dynamic_shape, &s, &u, &y);
+                dynamic.updated_state(dynamic_shape);
+                dynamic.propagate_state(dynamic_shape, &s, &u);
+            }
+            assert_eq!(bits(&fixed), bits(&dynamic), "step {k}");
+        }
+        assert!(fixed.state().iter().all(|x| x.is_finite()));
     }
 
     #[test]

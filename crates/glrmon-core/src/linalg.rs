@@ -4,6 +4,132 @@
 //! these loops do the per-sample arithmetic without the per-call overhead and the
 //! allocations of the generic operators, which dominate for n, p ≤ 10.
 
+/// The state and output dimensions (n, p) of a computation: known at compile time for
+/// the common small channels ([`Fixed`]) or at run time ([`Dynamic`]).
+///
+/// The kernels below are inlined into code generic over a shape, so with a [`Fixed`]
+/// shape every loop bound is a constant and the compiler unrolls the small products
+/// completely. The operations and their order are the same for both shapes, so the
+/// results are the same bits.
+pub(crate) trait Shape: Copy {
+    /// n, the state dimension.
+    fn n(self) -> usize;
+    /// p, the output dimension.
+    fn p(self) -> usize;
+}
+
+/// n = N, p = P known at compile time.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Fixed<const N: usize, const P: usize>;
+
+impl<const N: usize, const P: usize> Shape for Fixed<N, P> {
+    #[inline(always)]
+    fn n(self) -> usize {
+        N
+    }
+    #[inline(always)]
+    fn p(self) -> usize {
+        P
+    }
+}
+
+/// n and p known at run time.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Dynamic {
+    pub(crate) n: usize,
+    pub(crate) p: usize,
+}
+
+impl Shape for Dynamic {
+    #[inline(always)]
+    fn n(self) -> usize {
+        self.n
+    }
+    #[inline(always)]
+    fn p(self) -> usize {
+        self.p
+    }
+}
+
+/// Runs `$body` with `$s` bound to the [`Shape`] of (n, p): [`Fixed`] for n, p ≤ 4,
+/// [`Dynamic`] otherwise.
+macro_rules! with_shape {
+    ($n:expr, $p:expr, |$s:ident| $body:expr) => {{
+        use $crate::linalg::{Dynamic, Fixed};
+        match ($n, $p) {
+            (1, 1) => {
+                let $s = Fixed::<1, 1>;
+                $body
+            }
+            (1, 2) => {
+                let $s = Fixed::<1, 2>;
+                $body
+            }
+            (1, 3) => {
+                let $s = Fixed::<1, 3>;
+                $body
+            }
+            (1, 4) => {
+                let $s = Fixed::<1, 4>;
+                $body
+            }
+            (2, 1) => {
+                let $s = Fixed::<2, 1>;
+                $body
+            }
+            (2, 2) => {
+                let $s = Fixed::<2, 2>;
+                $body
+            }
+            (2, 3) => {
+                let $s = Fixed::<2, 3>;
+                $body
+            }
+            (2, 4) => {
+                let $s = Fixed::<2, 4>;
+                $body
+            }
+            (3, 1) => {
+                let $s = Fixed::<3, 1>;
+                $body
+            }
+            (3, 2) => {
+                let $s = Fixed::<3, 2>;
+                $body
+            }
+            (3, 3) => {
+                let $s = Fixed::<3, 3>;
+                $body
+            }
+            (3, 4) => {
+                let $s = Fixed::<3, 4>;
+                $body
+            }
+            (4, 1) => {
+                let $s = Fixed::<4, 1>;
+                $body
+            }
+            (4, 2) => {
+                let $s = Fixed::<4, 2>;
+                $body
+            }
+            (4, 3) => {
+                let $s = Fixed::<4, 3>;
+                $body
+            }
+            (4, 4) => {
+                let $s = Fixed::<4, 4>;
+                $body
+            }
+            (n, p) => {
+                let $s = Dynamic { n, p };
+                $body
+            }
+        }
+    }};
+}
+pub(crate) use with_shape;
+
 /// Element (i, j) of a column-major matrix with `rows` rows.
 #[inline(always)]
 pub(crate) fn at(rows: usize, i: usize, j: usize) -> usize {
@@ -12,6 +138,7 @@ pub(crate) fn at(rows: usize, i: usize, j: usize) -> usize {
 
 /// C = α·op(A)·op(B) + β·C, with op(X) = X or Xᵀ. A is stored `ar`×`ac`, B `br`×`bc`.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 pub(crate) fn gemm(
     alpha: f64,
     a: &[f64],
@@ -46,6 +173,7 @@ pub(crate) fn gemm(
 }
 
 /// y = α·A·x + β·y for A `rows`×`cols`.
+#[inline(always)]
 pub(crate) fn gemv(
     alpha: f64,
     a: &[f64],
@@ -69,6 +197,7 @@ pub(crate) fn gemv(
 }
 
 /// Replaces the symmetric `n`×`n` matrix `a` by (A + Aᵀ)/2.
+#[inline(always)]
 pub(crate) fn symmetrize(a: &mut [f64], n: usize) {
     for j in 0..n {
         for i in (j + 1)..n {
@@ -84,6 +213,7 @@ pub(crate) fn symmetrize(a: &mut [f64], n: usize) {
 ///
 /// Returns `false` (leaving `a` partly overwritten) when A is not positive definite
 /// or holds a non-finite value.
+#[inline(always)]
 pub(crate) fn cholesky_in_place(a: &mut [f64], n: usize) -> bool {
     for j in 0..n {
         let mut d = a[at(n, j, j)];
@@ -110,6 +240,7 @@ pub(crate) fn cholesky_in_place(a: &mut [f64], n: usize) -> bool {
 }
 
 /// Solves L·X = B in place (B is `n`×`cols`, L lower triangular `n`×`n`).
+#[inline(always)]
 pub(crate) fn solve_lower_in_place(l: &[f64], n: usize, b: &mut [f64], cols: usize) {
     for c in 0..cols {
         for i in 0..n {
@@ -123,6 +254,7 @@ pub(crate) fn solve_lower_in_place(l: &[f64], n: usize, b: &mut [f64], cols: usi
 }
 
 /// Solves X·Lᵀ = B in place for X (B is `rows`×`n`): row by row, Lᵀ upper triangular.
+#[inline(always)]
 pub(crate) fn solve_right_lower_transpose_in_place(
     l: &[f64],
     n: usize,
