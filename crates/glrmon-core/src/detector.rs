@@ -353,7 +353,7 @@ impl Detector {
             Some(_) => self.bank.begin(k),
         }
         let (n, p, m) = (self.dims.states, self.dims.outputs, self.faults.len());
-        self.phi_last.copy_from(&self.phi);
+        (self.phi_last.as_mut_slice()).copy_from_slice(self.phi.as_slice());
         // Whiten Φ̃_k in place; F_kK_kΦ̃_k uses the unwhitened copy after the time update.
         solve_lower_in_place(
             self.filter.innovation_cholesky().as_slice(),
@@ -363,7 +363,7 @@ impl Detector {
         );
         // The filter's time update (A_k, F_kK_k) goes first so that one pass over the
         // window does the signatures, the statistics and Γ's time update (eq. (46)).
-        self.cov_before.copy_from(self.filter.covariance());
+        (self.cov_before.as_mut_slice()).copy_from_slice(self.filter.covariance().as_slice());
         self.filter.time_update(&self.system, sample.u);
         gemm(
             1.0,
@@ -411,7 +411,7 @@ impl Detector {
 
     fn write_output(&mut self, k: u64, best: Option<crate::glr::WindowMax>, out: &mut StepOutput) {
         out.k = k;
-        out.innovation.copy_from(self.filter.innovation());
+        (out.innovation.as_mut_slice()).copy_from_slice(self.filter.innovation().as_slice());
         out.normalized_innovation = self.filter.normalized_innovation_squared();
         match best {
             Some(b) => {
@@ -473,10 +473,10 @@ impl Detector {
                 (&mut r.q, &s.q),
                 (&mut r.r, &s.r),
             ] {
-                to.copy_from(from);
+                to.as_mut_slice().copy_from_slice(from.as_slice());
             }
-            self.reference_psi.copy_from(&self.psi);
-            self.reference_phi.copy_from(&self.phi_last);
+            (self.reference_psi.as_mut_slice()).copy_from_slice(self.psi.as_slice());
+            (self.reference_phi.as_mut_slice()).copy_from_slice(self.phi_last.as_slice());
             self.steady_samples = 0;
             return;
         }

@@ -1416,30 +1416,42 @@ impl WindowBank {
 }
 
 /// The largest value of `values` and its first position (NaN ignored; (−∞, 0) when
-/// empty or all NaN), i.e. what a strict `>` scan finds: first the largest value over
-/// eight independent lanes (no chain of compare-and-select through every value, so it
-/// vectorises and pipelines), then the first position holding it.
+/// empty or all NaN), i.e. what a strict `>` scan finds, in one branch-free pass: eight
+/// independent lanes each keep their largest value and where it was first seen (no
+/// chain of compare-and-select through every value, so it vectorises and pipelines),
+/// then the lanes are reduced with ties going to the earliest position.
 #[inline(always)]
 fn lane_argmax(values: &[f64]) -> (f64, usize) {
     const L: usize = 8;
     let mut best = [f64::NEG_INFINITY; L];
+    let mut at = [0_u64; L];
     let mut chunks = values.chunks_exact(L);
+    let mut base = 0_u64;
     for c in &mut chunks {
         for l in 0..L {
-            best[l] = if c[l] > best[l] { c[l] } else { best[l] };
+            let better = c[l] > best[l];
+            best[l] = if better { c[l] } else { best[l] };
+            at[l] = if better { base + l as u64 } else { at[l] };
+        }
+        base += L as u64;
+    }
+    let (mut value, mut pos) = (f64::NEG_INFINITY, u64::MAX);
+    for l in 0..L {
+        if best[l] > value || (best[l] == value && at[l] < pos) {
+            value = best[l];
+            pos = at[l];
         }
     }
-    let mut value = f64::NEG_INFINITY;
-    for v in best.iter().chain(chunks.remainder()) {
+    for (i, v) in chunks.remainder().iter().enumerate() {
         if *v > value {
             value = *v;
+            pos = base + i as u64;
         }
     }
     if value == f64::NEG_INFINITY {
         return (value, 0);
     }
-    let pos = values.iter().position(|v| *v == value).unwrap_or(0);
-    (value, pos)
+    (value, pos as usize)
 }
 
 /// A contiguous run of slots [start, start + len) of the ring against the table entries
@@ -2117,6 +2129,7 @@ mod tests {
                 let v: Vec<f64> = (0..len)
                     .map(|_| match rnd() {
                         0 => f64::NAN,
+                        6 => f64::NEG_INFINITY,
                         r => r as f64,
                     })
                     .collect();

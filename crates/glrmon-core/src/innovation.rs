@@ -22,7 +22,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::error::{ModelError, StepError};
 use crate::linalg::{
-    Shape, cholesky_in_place, gemm, gemv, solve_lower_in_place,
+    Shape, cholesky_in_place, copy_n, gemm, gemv, solve_lower_in_place,
     solve_right_lower_transpose_in_place, symmetrize, with_shape,
 };
 use crate::model::SystemMatrices;
@@ -146,7 +146,7 @@ impl InnovationFilter {
             0.0,
             self.pht.as_mut_slice(),
         );
-        self.tmp_pp.copy_from(&sys.r);
+        copy_n(self.tmp_pp.as_mut_slice(), sys.r.as_slice(), p * p);
         gemm(
             1.0,
             sys.h.as_slice(),
@@ -159,19 +159,27 @@ impl InnovationFilter {
             self.tmp_pp.as_mut_slice(),
         );
         symmetrize(self.tmp_pp.as_mut_slice(), p);
-        self.chol_scratch.copy_from(&self.tmp_pp);
+        copy_n(
+            self.chol_scratch.as_mut_slice(),
+            self.tmp_pp.as_slice(),
+            p * p,
+        );
         if !cholesky_in_place(self.chol_scratch.as_mut_slice(), p) {
             return Err(StepError::Numerical {
                 what: "innovation covariance Σ_k is not positive definite",
             });
         }
         std::mem::swap(&mut self.chol, &mut self.chol_scratch);
-        self.innovation_cov.copy_from(&self.tmp_pp);
+        copy_n(
+            self.innovation_cov.as_mut_slice(),
+            self.tmp_pp.as_slice(),
+            p * p,
+        );
         self.innovation_from(s, sys, u, y);
-        self.h_white.copy_from(&sys.h);
+        copy_n(self.h_white.as_mut_slice(), sys.h.as_slice(), p * n);
         solve_lower_in_place(self.chol.as_slice(), p, self.h_white.as_mut_slice(), n);
         // K = P Hᵀ Σ⁻¹ = (P Hᵀ L⁻ᵀ) L⁻¹: solve X Lᵀ = P Hᵀ, then K L = X.
-        self.gain.copy_from(&self.pht);
+        copy_n(self.gain.as_mut_slice(), self.pht.as_slice(), n * p);
         solve_right_lower_transpose_in_place(self.chol.as_slice(), p, self.gain.as_mut_slice(), n);
         solve_right_lower_in_place(self.chol.as_slice(), p, self.gain.as_mut_slice(), n);
         Ok(())
@@ -303,7 +311,11 @@ impl InnovationFilter {
             1.0,
             self.innovation.as_mut_slice(),
         );
-        self.innovation_white.copy_from(&self.innovation);
+        copy_n(
+            self.innovation_white.as_mut_slice(),
+            self.innovation.as_slice(),
+            p,
+        );
         solve_lower_in_place(
             self.chol.as_slice(),
             p,
@@ -325,7 +337,7 @@ impl InnovationFilter {
     #[inline(always)]
     fn updated_state(&mut self, s: impl Shape) {
         let (n, p) = (s.n(), s.p());
-        self.tmp_n.copy_from(&self.state);
+        copy_n(self.tmp_n.as_mut_slice(), self.state.as_slice(), n);
         gemv(
             1.0,
             self.gain.as_slice(),
@@ -384,7 +396,7 @@ impl InnovationFilter {
             0.0,
             self.tmp_nn2.as_mut_slice(),
         );
-        self.cov.copy_from(&sys.q);
+        copy_n(self.cov.as_mut_slice(), sys.q.as_slice(), n * n);
         gemm(
             1.0,
             self.tmp_nn2.as_slice(),

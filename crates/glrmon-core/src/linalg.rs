@@ -130,6 +130,13 @@ macro_rules! with_shape {
 }
 pub(crate) use with_shape;
 
+/// Copies the first `len` values of `src` into `dst` (a constant `len` under a
+/// [`Fixed`] shape makes it a few register moves instead of a call).
+#[inline(always)]
+pub(crate) fn copy_n(dst: &mut [f64], src: &[f64], len: usize) {
+    dst[..len].copy_from_slice(&src[..len]);
+}
+
 /// Element (i, j) of a column-major matrix with `rows` rows.
 #[inline(always)]
 pub(crate) fn at(rows: usize, i: usize, j: usize) -> usize {

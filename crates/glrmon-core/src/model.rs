@@ -80,7 +80,7 @@ impl SystemMatrices {
     pub fn is_finite(&self) -> bool {
         [&self.f, &self.g, &self.h, &self.j, &self.q, &self.r]
             .iter()
-            .all(|m| m.iter().all(|x| x.is_finite()))
+            .all(|m| m.as_slice().iter().all(|x| x.is_finite()))
     }
 }
 
@@ -164,11 +164,13 @@ impl LpvMatrix {
 
     /// Writes M_0 + Σ_i p_{s_i} M_i into `out` (same shape), without allocating.
     /// A scheduling index beyond `p` reads as 0 (the builder rejects such models).
+    #[inline]
     pub fn evaluate_into(&self, p: &[f64], out: &mut DMatrix<f64>) {
-        out.copy_from(&self.base);
+        let out = out.as_mut_slice();
+        out.copy_from_slice(self.base.as_slice());
         for (signal, m) in &self.terms {
             let weight = p.get(*signal).copied().unwrap_or(0.0);
-            for (o, x) in out.iter_mut().zip(m.iter()) {
+            for (o, x) in out.iter_mut().zip(m.as_slice()) {
                 *o += weight * x;
             }
         }
