@@ -288,6 +288,96 @@ fn simulated_mcap_and_csv_replay_to_identical_jsonl() {
     assert!(!alarms(&records(&dir.file("b.jsonl"))).is_empty());
 }
 
+/// `replay --stat-every N` writes every N-th `stat` line of the full replay and every
+/// other record unchanged (CSV and MCAP input, JSON lines and MCAP output); 0 writes
+/// no `stat` at all.
+#[test]
+fn replay_stat_every_decimates_only_the_stat_records() {
+    let dir = TempDir::new("stat-every");
+    let cfg = config("examples/dc-motor.toml");
+    let csv = dir.file("s.csv");
+    ok(&glrmon(&[
+        "simulate",
+        "--config",
+        &cfg,
+        "--samples",
+        "2000",
+        "--seed",
+        "9",
+        "--fault",
+        "actuator_bias",
+        "--onset",
+        "1000",
+        "--magnitude",
+        "0.5",
+        "--output",
+        &csv,
+    ]));
+    let full = dir.file("full.jsonl");
+    ok(&glrmon(&[
+        "replay", "--config", &cfg, &csv, "--output", &full,
+    ]));
+    let lines = |path: &str| -> Vec<String> {
+        std::fs::read_to_string(path)
+            .unwrap()
+            .lines()
+            .map(str::to_owned)
+            .collect()
+    };
+    let is_stat = |l: &String| l.starts_with("{\"type\":\"stat\"");
+    let all = lines(&full);
+    let stats: Vec<&String> = all.iter().filter(|l| is_stat(l)).collect();
+    let others: Vec<&String> = all.iter().filter(|l| !is_stat(l)).collect();
+    assert_eq!(stats.len(), 2000);
+    assert!(others.iter().any(|l| l.starts_with("{\"type\":\"alarm\"")));
+    for every in [0_usize, 7] {
+        let out = dir.file(&format!("every{every}.jsonl"));
+        let n = every.to_string();
+        ok(&glrmon(&[
+            "replay",
+            "--stat-every",
+            &n,
+            "--config",
+            &cfg,
+            &csv,
+            "--output",
+            &out,
+        ]));
+        // Through an MCAP file written with the same decimation, and replayed again.
+        let mcap = dir.file(&format!("every{every}.mcap"));
+        ok(&glrmon(&[
+            "replay",
+            "--stat-every",
+            &n,
+            "--config",
+            &cfg,
+            &csv,
+            "--output",
+            &mcap,
+        ]));
+        let again = dir.file(&format!("every{every}-again.jsonl"));
+        ok(&glrmon(&[
+            "replay",
+            "--stat-every",
+            &n,
+            &mcap,
+            "--output",
+            &again,
+        ]));
+        for path in [&out, &again] {
+            let got = lines(path);
+            let got_stats: Vec<&String> = got.iter().filter(|l| is_stat(l)).collect();
+            let got_others: Vec<&String> = got.iter().filter(|l| !is_stat(l)).collect();
+            let want: Vec<&String> = match every {
+                0 => Vec::new(),
+                e => stats.iter().step_by(e).copied().collect(),
+            };
+            assert_eq!(got_stats, want, "--stat-every {every}: {path}");
+            assert_eq!(got_others, others, "--stat-every {every}: {path}");
+        }
+    }
+}
+
 #[test]
 fn bad_rows_become_error_records_and_the_replay_continues() {
     let dir = TempDir::new("badrows");

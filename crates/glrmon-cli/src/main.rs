@@ -12,6 +12,7 @@ mod mcapin;
 mod metrics;
 mod net;
 mod print;
+mod readahead;
 mod recording;
 mod recover;
 mod replay;
@@ -26,6 +27,12 @@ use std::path::Path;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+
+/// mimalloc: samples, records and message buffers are allocated on one thread (the
+/// replay reader, the Zenoh callbacks) and freed on another (the monitors), which
+/// glibc's allocator does slowly (a quarter of a replay's CPU time, measured).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 /// Model-based fault detection and isolation (GLR, Zhang & Basseville 2014) on plant data.
 #[derive(Debug, Parser)]

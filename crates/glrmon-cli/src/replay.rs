@@ -22,6 +22,7 @@ use glrmon_wire::{
 
 use crate::csv::CsvReader;
 use crate::mcapin::{McapInput, is_mcap};
+use crate::readahead::ReadAhead;
 use crate::simulate::pick;
 use crate::{InvalidInput, load_config, print};
 
@@ -44,6 +45,10 @@ pub(crate) struct ReplayArgs {
     /// magnitude, isolation tests, Lasso paths).
     #[arg(long)]
     report: Option<PathBuf>,
+    /// Write every N-th `stat` record to the output (0: none; alarms, diagnoses and
+    /// errors are always written). The report keeps its own decimation.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    stat_every: u64,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
@@ -104,7 +109,6 @@ impl Outputs {
         log_time_ns: u64,
     ) -> anyhow::Result<()> {
         for record in records.drain(..) {
-            self.records += 1;
             if let Some(line) = print::line(&record) {
                 if !matches!(record, Record::Error(_)) {
                     self.alarm_lines.push(line);
@@ -117,6 +121,17 @@ impl Outputs {
             } else {
                 None
             };
+            let wanted = |s: &dyn Sink| match stat_index {
+                Some(i) => {
+                    let every = s.interest().stat_every.unwrap_or(1);
+                    every != 0 && i % every == 0
+                }
+                None => true,
+            };
+            if !self.sinks.iter().any(|s| wanted(s.as_ref())) {
+                continue;
+            }
+            self.records += 1;
             self.json.clear();
             encode_json(&record, &mut self.json)?;
             let output = Output {
@@ -126,13 +141,9 @@ impl Outputs {
                 stat_index,
             };
             for s in &mut self.sinks {
-                if let Some(i) = stat_index {
-                    let every = s.interest().stat_every.unwrap_or(1);
-                    if every == 0 || i % every != 0 {
-                        continue;
-                    }
+                if wanted(s.as_ref()) {
+                    s.write(&output).map_err(|e| anyhow::anyhow!("{e}"))?;
                 }
-                s.write(&output).map_err(|e| anyhow::anyhow!("{e}"))?;
             }
             self.json = output.json;
         }
@@ -147,8 +158,8 @@ impl Outputs {
     }
 }
 
-/// JSON lines of every record.
-struct JsonLines<W: Write + Send>(W);
+/// JSON lines of every record (`stat` records decimated: every `.1`-th, 0 for none).
+struct JsonLines<W: Write + Send>(W, u64);
 
 impl<W: Write + Send + 'static> Sink for JsonLines<W> {
     fn name(&self) -> &str {
@@ -157,7 +168,7 @@ impl<W: Write + Send + 'static> Sink for JsonLines<W> {
     fn interest(&self) -> glrmon_runtime::Interest {
         glrmon_runtime::Interest {
             inputs: false,
-            stat_every: Some(1),
+            stat_every: Some(self.1),
         }
     }
     fn write(&mut self, output: &Output) -> Result<(), glrmon_runtime::SinkError> {
@@ -177,8 +188,9 @@ impl<W: Write + Send + 'static> Sink for JsonLines<W> {
     }
 }
 
-/// An MCAP output, finished when the replay ends.
-struct McapOut(Option<McapFileSink>);
+/// An MCAP output, finished when the replay ends (`stat` records decimated as for
+/// [`JsonLines`]).
+struct McapOut(Option<McapFileSink>, u64);
 
 impl Sink for McapOut {
     fn name(&self) -> &str {
@@ -187,7 +199,7 @@ impl Sink for McapOut {
     fn interest(&self) -> glrmon_runtime::Interest {
         glrmon_runtime::Interest {
             inputs: true,
-            stat_every: Some(1),
+            stat_every: Some(self.1),
         }
     }
     fn write(&mut self, output: &Output) -> Result<(), glrmon_runtime::SinkError> {
@@ -216,20 +228,20 @@ fn output_sinks(args: &ReplayArgs, header: &FileHeader) -> anyhow::Result<Vec<Bo
         Some(p) if is_mcap(p) => {
             let sink = McapFileSink::create(p, header)
                 .with_context(|| format!("creating {}", p.display()))?;
-            sinks.push(Box::new(McapOut(Some(sink))));
+            sinks.push(Box::new(McapOut(Some(sink), args.stat_every)));
         }
         Some(p) => {
             let file =
                 std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?;
-            sinks.push(Box::new(JsonLines(std::io::BufWriter::with_capacity(
-                1 << 16,
-                file,
-            ))));
+            sinks.push(Box::new(JsonLines(
+                std::io::BufWriter::with_capacity(1 << 16, file),
+                args.stat_every,
+            )));
         }
-        None => sinks.push(Box::new(JsonLines(std::io::BufWriter::with_capacity(
-            1 << 16,
-            std::io::stdout(),
-        )))),
+        None => sinks.push(Box::new(JsonLines(
+            std::io::BufWriter::with_capacity(1 << 16, std::io::stdout()),
+            args.stat_every,
+        ))),
     }
     if let Some(p) = &args.report {
         sinks.push(Box::new(crate::report::ReportSink::new(p, &args.input)));
@@ -258,7 +270,7 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
     let file = std::fs::File::open(&args.input)
         .with_context(|| format!("opening {}", args.input.display()))?;
     let reader = std::io::BufReader::with_capacity(1 << 16, file);
-    let mut csv = CsvReader::new(reader, channel.dims)
+    let csv = CsvReader::new(reader, channel.dims)
         .map_err(|e| InvalidInput(format!("{}: {e}", args.input.display())))?;
     let mut monitor = Monitor::from_channel(channel)?;
     let header = FileHeader {
@@ -270,7 +282,7 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
         )]),
     };
     let mut outputs = Outputs::new(output_sinks(args, &header)?);
-    let rows = replay_csv_into(&mut csv, &mut monitor, &mut outputs)?;
+    let rows = replay_csv_into(csv, &mut monitor, &mut outputs)?;
     let alarm_lines = std::mem::take(&mut outputs.alarm_lines);
     outputs.finish()?;
     let c = monitor.counters();
@@ -287,26 +299,37 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Feeds every row to the monitor; bad rows become `error` records and the replay
-/// continues. Returns the number of rows.
-fn replay_csv_into<R: BufRead>(
-    csv: &mut CsvReader<R>,
+/// Feeds every row to the monitor, the rows parsed ahead on a reader thread; bad rows
+/// become `error` records and the replay continues. Returns the number of rows.
+fn replay_csv_into<R: BufRead + Send + 'static>(
+    csv: CsvReader<R>,
     monitor: &mut Monitor,
     outputs: &mut Outputs,
 ) -> anyhow::Result<u64> {
     let name: Arc<str> = Arc::from(monitor.channel());
-    let mut sample = Sample::default();
+    let mut rows_ahead = ReadAhead::spawn(csv, |csv| {
+        let mut sample = Sample::default();
+        // A bad row keeps the time it may have carried, for the record's log time.
+        Ok(csv.next_into(&mut sample).map(|row| match row {
+            Ok(()) => Ok(sample),
+            Err(e) => Err((e, sample.t)),
+        }))
+    })?;
     let mut records = Vec::new();
     let mut rows = 0;
-    while let Some(row) = csv.next_into(&mut sample) {
+    while let Some(row) = rows_ahead.next()? {
         rows += 1;
-        let log_time = glrmon_record::publish_time(sample.t, 0);
         match row {
-            Ok(()) => {
-                outputs.input(&name, &InputItem::Sample(sample.clone()), log_time)?;
+            Ok(sample) => {
+                let log_time = glrmon_record::publish_time(sample.t, 0);
+                if outputs.inputs_wanted {
+                    outputs.input(&name, &InputItem::Sample(sample.clone()), log_time)?;
+                }
                 monitor.on_sample(&sample, &mut records);
+                outputs.records(&name, &mut records, log_time)?;
             }
-            Err(e) => {
+            Err((e, t)) => {
+                let log_time = glrmon_record::publish_time(t, 0);
                 let message = format!("channel \"{}\": {}", monitor.channel(), e.message);
                 outputs.input(
                     &name,
@@ -324,10 +347,11 @@ fn replay_csv_into<R: BufRead>(
                     message,
                     stage: Stage::Receiving,
                 }));
+                outputs.records(&name, &mut records, log_time)?;
             }
         }
-        outputs.records(&name, &mut records, log_time)?;
     }
+    rows_ahead.finish()?;
     Ok(rows)
 }
 
@@ -398,11 +422,13 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
     let mut rejected: HashMap<Arc<str>, u64> = HashMap::new();
     let mut inputs = 0u64;
     let started = std::time::Instant::now();
-    while let Some(recorded) = input.next_input()? {
+    let progress_bytes = input.progress.0.clone();
+    let mut inputs_ahead = ReadAhead::spawn(input, McapInput::next_input)?;
+    while let Some(recorded) = inputs_ahead.next()? {
         inputs += 1;
         if inputs % 65_536 == 0 {
             if let Some(bar) = &progress {
-                bar.set_position(input.progress.0.load(Ordering::Relaxed));
+                bar.set_position(progress_bytes.load(Ordering::Relaxed));
             }
         }
         let Some(monitor) = monitors.get_mut(&recorded.channel) else {
@@ -429,6 +455,7 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
         }
         outputs.records(&recorded.channel, &mut records, log_time)?;
     }
+    let input = inputs_ahead.finish()?;
     if let Some(bar) = progress {
         bar.finish_and_clear();
     }

@@ -1,0 +1,167 @@
+//! Reading ahead on a thread of its own: a replay's input side (file reads, zstd,
+//! JSON or CSV decoding) runs beside the monitors instead of before each step.
+//!
+//! The reader hands over batches in order through a bounded queue (a few batches
+//! ahead, so memory stays flat in the file size), and the consumer sends emptied
+//! batches back to be refilled, so their storage is reused.
+
+use std::collections::VecDeque;
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::thread::JoinHandle;
+
+/// Items per batch handed over.
+const BATCH: usize = 1024;
+/// Batches queued ahead of the consumer.
+const AHEAD: usize = 4;
+
+/// A source read on another thread: [`ReadAhead::next`] yields its items in order,
+/// [`ReadAhead::finish`] gives the source back (for its end-of-file report).
+pub(crate) struct ReadAhead<S, T> {
+    full: Receiver<anyhow::Result<VecDeque<T>>>,
+    empty: SyncSender<VecDeque<T>>,
+    batch: VecDeque<T>,
+    done: bool,
+    reader: Option<JoinHandle<S>>,
+}
+
+impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
+    /// Starts reading `source` with `next` (`Ok(None)` at the end; an error ends the
+    /// reading and is returned by [`ReadAhead::next`] after the items before it).
+    pub(crate) fn spawn(
+        mut source: S,
+        mut next: impl FnMut(&mut S) -> anyhow::Result<Option<T>> + Send + 'static,
+    ) -> std::io::Result<Self> {
+        let (full_tx, full) = sync_channel::<anyhow::Result<VecDeque<T>>>(AHEAD);
+        let (empty, empty_rx) = sync_channel::<VecDeque<T>>(AHEAD + 2);
+        let reader = std::thread::Builder::new()
+            .name("replay-reader".into())
+            .spawn(move || {
+                loop {
+                    let mut batch = empty_rx
+                        .try_recv()
+                        .unwrap_or_else(|_| VecDeque::with_capacity(BATCH));
+                    let mut end = None;
+                    while batch.len() < BATCH {
+                        match next(&mut source) {
+                            Ok(Some(item)) => batch.push_back(item),
+                            Ok(None) => {
+                                end = Some(Ok(()));
+                                break;
+                            }
+                            Err(e) => {
+                                end = Some(Err(e));
+                                break;
+                            }
+                        }
+                    }
+                    // A consumer that stopped listening ends the reading too.
+                    if !batch.is_empty() && full_tx.send(Ok(batch)).is_err() {
+                        break;
+                    }
+                    match end {
+                        None => {}
+                        Some(Ok(())) => break,
+                        Some(Err(e)) => {
+                            let _ = full_tx.send(Err(e));
+                            break;
+                        }
+                    }
+                }
+                source
+            })?;
+        Ok(Self {
+            full,
+            empty,
+            batch: VecDeque::new(),
+            done: false,
+            reader: Some(reader),
+        })
+    }
+
+    /// The next item in source order; `Ok(None)` at the end.
+    ///
+    /// # Errors
+    /// The source's error, after every item read before it.
+    pub(crate) fn next(&mut self) -> anyhow::Result<Option<T>> {
+        loop {
+            if let Some(item) = self.batch.pop_front() {
+                return Ok(Some(item));
+            }
+            if self.done {
+                return Ok(None);
+            }
+            match self.full.recv() {
+                Ok(Ok(batch)) => {
+                    let used = std::mem::replace(&mut self.batch, batch);
+                    let _ = self.empty.try_send(used);
+                }
+                Ok(Err(e)) => {
+                    self.done = true;
+                    return Err(e);
+                }
+                Err(_) => self.done = true,
+            }
+        }
+    }
+
+    /// Waits for the reader and returns the source.
+    ///
+    /// # Errors
+    /// When the reader thread panicked.
+    pub(crate) fn finish(mut self) -> anyhow::Result<S> {
+        // Unblock a reader still waiting to hand over a batch.
+        drop(std::mem::replace(&mut self.full, sync_channel(0).1));
+        self.reader
+            .take()
+            .map(JoinHandle::join)
+            .ok_or_else(|| anyhow::anyhow!("the replay reader was already finished"))?
+            .map_err(|_| anyhow::anyhow!("the replay reader thread panicked"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every item arrives once and in order across many batches, the source comes
+    /// back, and an error arrives after the items read before it.
+    #[test]
+    fn items_in_order_then_the_error() {
+        let mut ahead = ReadAhead::spawn(0_u64, |n| {
+            *n += 1;
+            match *n {
+                n if n <= 5000 => Ok(Some(n)),
+                _ => Err(anyhow::anyhow!("bad record after 5000")),
+            }
+        })
+        .unwrap();
+        let mut expected = 1;
+        let err = loop {
+            match ahead.next() {
+                Ok(Some(x)) => {
+                    assert_eq!(x, expected);
+                    expected += 1;
+                }
+                Ok(None) => panic!("end before the error"),
+                Err(e) => break e,
+            }
+        };
+        assert_eq!(expected, 5001);
+        assert!(err.to_string().contains("after 5000"));
+        assert!(ahead.next().unwrap().is_none());
+        assert_eq!(ahead.finish().unwrap(), 5001);
+    }
+
+    /// A consumer that stops early does not leave the reader blocked.
+    #[test]
+    fn finishing_early_stops_the_reader() {
+        let mut ahead = ReadAhead::spawn(0_u64, |n| {
+            *n += 1;
+            Ok(Some(*n))
+        })
+        .unwrap();
+        assert_eq!(ahead.next().unwrap(), Some(1));
+        let read = ahead.finish().unwrap();
+        assert!(read >= 1 && read <= (BATCH * (AHEAD + 3)) as u64, "{read}");
+    }
+}
