@@ -798,9 +798,11 @@ impl WindowBank {
             stat: &mut self.stat,
             rank: &mut self.rank,
         };
+        assert!(slots.sized(N, M, P), "window arrays sized for the bank");
         let mut s = 0;
         while s + S::L <= w {
-            fused_lanes::<N, M, P, S>(&coefs, &mut slots, s);
+            // SAFETY: sized (asserted above) and s + L ≤ w.
+            unsafe { fused_lanes::<N, M, P, S>(&coefs, &mut slots, s) };
             s += S::L;
         }
         if s == w {
@@ -862,7 +864,9 @@ impl WindowBank {
             stat,
             rank,
         };
-        fused_lanes::<N, M, P, S>(&coefs, &mut padded, 0);
+        assert!(padded.sized(N, M, P), "tail arrays sized for one register");
+        // SAFETY: sized (asserted above) for w = L slots, and 0 + L ≤ L.
+        unsafe { fused_lanes::<N, M, P, S>(&coefs, &mut padded, 0) };
         let ring: [&mut [f64]; 7] = [
             &mut self.lag,
             &mut self.gamma,
@@ -1711,6 +1715,27 @@ struct SlotArrays<'a> {
     rank: &'a mut [f64],
 }
 
+impl SlotArrays<'_> {
+    /// Whether every array holds its components for w slots: Γ n·m, L⁻¹S p·m, C
+    /// m(m+1)/2, d m, the others one.
+    fn sized(&self, n: usize, m: usize, p: usize) -> bool {
+        let w = self.w;
+        [
+            (self.active.len(), 1),
+            (self.impulse.len(), 1),
+            (self.lag.len(), 1),
+            (self.gamma.len(), n * m),
+            (self.signature.len(), p * m),
+            (self.info.len(), m * (m + 1) / 2),
+            (self.score.len(), m),
+            (self.stat.len(), 1),
+            (self.rank.len(), 1),
+        ]
+        .iter()
+        .all(|&(len, components)| len >= components * w)
+    }
+}
+
 /// One vector register of onsets for the fused pass: the f64 operations it needs, each
 /// lane rounded as the scalar operation (no FMA), so every width gives the same bits.
 trait Lanes: Copy {
@@ -1719,10 +1744,17 @@ trait Lanes: Copy {
     /// Onsets per register.
     const L: usize;
     fn splat(x: f64) -> Self;
-    /// The first L values of `x`.
-    fn load(x: &[f64]) -> Self;
-    /// Writes the first L values of `x`.
-    fn store(self, x: &mut [f64]);
+    /// The L values from `x` on, unchecked (the fused pass checks its arrays' sizes
+    /// once per step instead of at every access).
+    ///
+    /// # Safety
+    /// `x` must be valid for reading L f64.
+    unsafe fn load_ptr(x: *const f64) -> Self;
+    /// Writes the L values from `x` on, unchecked.
+    ///
+    /// # Safety
+    /// `x` must be valid for writing L f64.
+    unsafe fn store_ptr(self, x: *mut f64);
     fn add(self, o: Self) -> Self;
     fn sub(self, o: Self) -> Self;
     fn mul(self, o: Self) -> Self;
@@ -1772,14 +1804,14 @@ impl Lanes for Lanes8 {
         Lanes8([x; 8])
     }
     #[inline(always)]
-    fn load(x: &[f64]) -> Self {
-        let mut r = [0.0; 8];
-        r.copy_from_slice(&x[..8]);
-        Lanes8(r)
+    unsafe fn load_ptr(x: *const f64) -> Self {
+        // SAFETY: the caller guarantees 8 readable f64 at x.
+        Lanes8(unsafe { std::ptr::read_unaligned(x.cast::<[f64; 8]>()) })
     }
     #[inline(always)]
-    fn store(self, x: &mut [f64]) {
-        x[..8].copy_from_slice(&self.0);
+    unsafe fn store_ptr(self, x: *mut f64) {
+        // SAFETY: the caller guarantees 8 writable f64 at x.
+        unsafe { std::ptr::write_unaligned(x.cast::<[f64; 8]>(), self.0) }
     }
     #[inline(always)]
     fn add(self, o: Self) -> Self {
@@ -1851,8 +1883,9 @@ macro_rules! x86_lanes {
         // SAFETY (every method): the intrinsics need the register type's feature, which
         // its only callers enable: `Avx2Lanes` is used only inside
         // `WindowBank::fused_run_avx2` and `fused_run_avx512`, which run only on a
-        // processor with AVX2, resp. AVX-512F, which implies it (see `WindowBank::step`). Loads and stores go through a
-        // slice of exactly L values.
+        // processor with AVX2, resp. AVX-512F, which implies it (see `WindowBank::step`).
+        // Loads and stores read and write L values at a pointer the caller vouches for
+        // (`Lanes::load_ptr`).
         impl Lanes for $ty {
             type Mask = $mask;
             const L: usize = $l;
@@ -1861,14 +1894,12 @@ macro_rules! x86_lanes {
                 $ty(unsafe { arch::$set1(x) })
             }
             #[inline(always)]
-            fn load(x: &[f64]) -> Self {
-                let x = &x[..$l];
-                $ty(unsafe { arch::$loadu(x.as_ptr()) })
+            unsafe fn load_ptr(x: *const f64) -> Self {
+                $ty(unsafe { arch::$loadu(x) })
             }
             #[inline(always)]
-            fn store(self, x: &mut [f64]) {
-                let x = &mut x[..$l];
-                unsafe { arch::$storeu(x.as_mut_ptr(), self.0) }
+            unsafe fn store_ptr(self, x: *mut f64) {
+                unsafe { arch::$storeu(x, self.0) }
             }
             #[inline(always)]
             fn add(self, o: Self) -> Self {
@@ -1937,19 +1968,36 @@ x86_lanes!(Avx2Lanes, arch::__m256d, 4, _mm256_set1_pd, _mm256_loadu_pd, _mm256_
 /// (eqs. (32)-(33)), the dropped-pivot LDLᵀ statistic dᵀC⁻d and rank (eq. (35)), and
 /// Γ ← AΓ + a·Ψ̃ − b·FKΦ̃ (eq. (46)); each onset gets the operations of the passes in
 /// their order, so the results are the same bits.
+///
+/// # Safety
+/// `v.sized(N, M, P)` and s0 + L ≤ `v.w` (checked once per step by the caller, so the
+/// loads and stores here go unchecked).
 // Index loops over the (i, j, q) of the equations, written as in the passes.
 #[allow(clippy::needless_range_loop)]
 #[inline(always)]
-fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
+unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
     c: &Coefs<N, M, P>,
     v: &mut SlotArrays<'_>,
     s0: usize,
 ) {
     let w = v.w;
+    debug_assert!(v.sized(N, M, P) && s0 + S::L <= w);
+    // SAFETY (every access): the caller checked `v.sized` and s0 + L ≤ w, and every
+    // index is (component)·w + s0 with the component below the array's count.
+    macro_rules! ld {
+        ($arr:expr, $i:expr) => {
+            unsafe { S::load_ptr($arr.as_ptr().add($i)) }
+        };
+    }
+    macro_rules! st {
+        ($x:expr, $arr:expr, $i:expr) => {
+            unsafe { $x.store_ptr($arr.as_mut_ptr().add($i)) }
+        };
+    }
     let zero = S::splat(0.0);
     let one = S::splat(1.0);
-    let active = S::load(&v.active[s0..]);
-    let lag = S::load(&v.lag[s0..]);
+    let active = ld!(v.active, s0);
+    let lag = ld!(v.lag, s0);
     let mut sf = [zero; M];
     let mut of = [zero; M];
     for j in 0..M {
@@ -1962,13 +2010,13 @@ fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
                 sf[j] = active.mul(lag.add(one));
                 of[j] = sf[j];
             }
-            Onset::Impulse => of[j] = S::load(&v.impulse[s0..]),
+            Onset::Impulse => of[j] = ld!(v.impulse, s0),
         }
     }
     let mut gamma = [[zero; N]; M];
     for (j, g) in gamma.iter_mut().enumerate() {
         for (q, g) in g.iter_mut().enumerate() {
-            *g = S::load(&v.gamma[(q + N * j) * w + s0..]);
+            *g = ld!(v.gamma, (q + N * j) * w + s0);
         }
     }
     // L⁻¹S (eq. (45)), sig[j][i].
@@ -1979,7 +2027,7 @@ fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
             for q in 0..N {
                 x = x.add(S::splat(c.h[i][q]).mul(gamma[j][q]));
             }
-            x.store(&mut v.signature[(i + P * j) * w + s0..]);
+            st!(x, v.signature, (i + P * j) * w + s0);
             sig[j][i] = x;
         }
     }
@@ -1992,18 +2040,18 @@ fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
                 continue;
             }
             let at = tri(a, b) * w + s0;
-            let mut x = S::load(&v.info[at..]);
+            let mut x = ld!(v.info, at);
             for i in 0..P {
                 x = x.add(sig[a][i].mul(sig[b][i]));
             }
-            x.store(&mut v.info[at..]);
+            st!(x, v.info, at);
             info[a][b] = x;
         }
-        let mut x = S::load(&v.score[a * w + s0..]);
+        let mut x = ld!(v.score, a * w + s0);
         for i in 0..P {
             x = x.add(sig[a][i].mul(S::splat(c.eps[i])));
         }
-        x.store(&mut v.score[a * w + s0..]);
+        st!(x, v.score, a * w + s0);
         score[a] = x;
     }
     // Dropped-pivot LDLᵀ (as `statistic_generic`): pivots dd, multipliers low[i][j].
@@ -2059,8 +2107,8 @@ fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
         z[j] = x;
         stat = stat.add(x.mul(x).mul(inv[j]));
     }
-    stat.store(&mut v.stat[s0..]);
-    rank.store(&mut v.rank[s0..]);
+    st!(stat, v.stat, s0);
+    st!(rank, v.rank, s0);
     // Γ ← AΓ + a·Ψ̃ − b·FKΦ̃ (eq. (46)), in place (Γ_k is held above).
     for j in 0..M {
         for i in 0..N {
@@ -2070,10 +2118,10 @@ fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
             for q in 0..N {
                 x = x.add(S::splat(c.a[i][q]).mul(gamma[j][q]));
             }
-            x.store(&mut v.gamma[(i + N * j) * w + s0..]);
+            st!(x, v.gamma, (i + N * j) * w + s0);
         }
     }
-    lag.add(one).store(&mut v.lag[s0..]);
+    st!(lag.add(one), v.lag, s0);
 }
 
 #[cfg(test)]
