@@ -660,8 +660,19 @@ impl WindowBank {
         Some(WindowMax {
             glr: self.stat[slot],
             onset: oldest + best_pos as u64,
-            rank: self.rank[slot] as usize,
+            rank: self.rank_at(slot) as usize,
         })
+    }
+
+    /// The rank of C_k(r) of slot s: the ring's, or in the stationary regime the
+    /// tabulated rank of its lag (not copied into the ring at every step).
+    #[inline(always)]
+    fn rank_at(&self, s: usize) -> f64 {
+        if self.steady {
+            self.tables.rank[self.table_index(s)]
+        } else {
+            self.rank[s]
+        }
     }
 
     /// Measured step k of the whole window (eqs. (45), (32)-(36), (46)): the signatures,
@@ -1139,7 +1150,7 @@ impl WindowBank {
 
     /// Rank of C_k(r) decided at the last [`WindowBank::maximize`].
     pub(crate) fn rank_of(&self, onset: u64) -> Option<usize> {
-        self.slot_for(onset).map(|s| self.rank[s] as usize)
+        self.slot_for(onset).map(|s| self.rank_at(s) as usize)
     }
 
     /// Statistic of onset r at the last [`WindowBank::maximize`].
@@ -1380,7 +1391,6 @@ impl WindowBank {
                 (4, 3),
                 (4, 4)
             );
-            self.rank[start..start + len].copy_from_slice(&self.tables.rank[idx..idx + len]);
         }
     }
 
@@ -1390,7 +1400,7 @@ impl WindowBank {
         self.pending = Some(k + 1);
     }
 
-    /// Leaves the stationary regime between steps: Γ, C and S of every onset are
+    /// Leaves the stationary regime between steps: Γ, C, S and the rank of every onset are
     /// written back from the tables (d was kept in the ring), and the general
     /// recursion goes on from there.
     pub(crate) fn leave_steady(&mut self) {
@@ -1413,6 +1423,7 @@ impl WindowBank {
             for c in 0..p * m {
                 self.signature[c * w + s] = self.tables.signature[c * w + idx];
             }
+            self.rank[s] = self.tables.rank[idx];
             self.lag[s] = (self.current + 1 - self.onset[s]) as f64;
         }
         self.steady = false;
@@ -1427,35 +1438,42 @@ impl WindowBank {
 #[inline(always)]
 fn lane_argmax(values: &[f64]) -> (f64, usize) {
     const L: usize = 8;
+    // Positions are kept as f64 (exact below 2⁵³) so that value and position take the
+    // same vector compare-and-blend.
     let mut best = [f64::NEG_INFINITY; L];
-    let mut at = [0_u64; L];
+    let mut at = [0.0_f64; L];
     let mut chunks = values.chunks_exact(L);
-    let mut base = 0_u64;
+    let mut base = [0.0_f64; L];
+    for (l, b) in base.iter_mut().enumerate() {
+        *b = l as f64;
+    }
     for c in &mut chunks {
         for l in 0..L {
             let better = c[l] > best[l];
             best[l] = if better { c[l] } else { best[l] };
-            at[l] = if better { base + l as u64 } else { at[l] };
+            at[l] = if better { base[l] } else { at[l] };
+            base[l] += L as f64;
         }
-        base += L as u64;
     }
-    let (mut value, mut pos) = (f64::NEG_INFINITY, u64::MAX);
+    let (mut value, mut pos) = (f64::NEG_INFINITY, f64::INFINITY);
     for l in 0..L {
         if best[l] > value || (best[l] == value && at[l] < pos) {
             value = best[l];
             pos = at[l];
         }
     }
+    let offset = values.len() - chunks.remainder().len();
+    let mut pos = pos as usize;
     for (i, v) in chunks.remainder().iter().enumerate() {
         if *v > value {
             value = *v;
-            pos = base + i as u64;
+            pos = offset + i;
         }
     }
     if value == f64::NEG_INFINITY {
         return (value, 0);
     }
-    (value, pos as usize)
+    (value, pos)
 }
 
 /// A contiguous run of slots [start, start + len) of the ring against the table entries
@@ -1480,20 +1498,37 @@ fn steady_fused<const M: usize, const P: usize, const L: usize>(
     inverse: &[f64],
     eps: &[f64; P],
 ) {
+    // Checked once here so that the lanes load and store unchecked: every component
+    // of the run's slots and table entries is inside its array.
+    let (w, end_slot, end_table) = (run.w, run.start + run.len, run.idx + run.len);
+    assert!(
+        end_slot <= w
+            && end_table <= w
+            && score.len() >= M * w
+            && stat.len() >= w
+            && signature.len() >= P * M * w
+            && inverse.len() >= M * (M + 1) / 2 * w,
+        "stationary run inside the window arrays"
+    );
     let mut s = 0;
     while s + L <= run.len {
-        steady_lanes::<M, P, L>(run, s, score, stat, signature, inverse, eps);
+        // SAFETY: checked above, s + L ≤ len.
+        unsafe { steady_lanes::<M, P, L>(run, s, score, stat, signature, inverse, eps) };
         s += L;
     }
     while s < run.len {
-        steady_lanes::<M, P, 1>(run, s, score, stat, signature, inverse, eps);
+        // SAFETY: checked above, s + 1 ≤ len.
+        unsafe { steady_lanes::<M, P, 1>(run, s, score, stat, signature, inverse, eps) };
         s += 1;
     }
 }
 
 /// L slots from offset s of the run: d += S(ℓ)ᵀL⁻¹ε (eq. (33)), then dᵀC(ℓ)⁻d.
+///
+/// # Safety
+/// The run lies inside the arrays (as `steady_fused` checks) and s + L ≤ run.len.
 #[inline(always)]
-fn steady_lanes<const M: usize, const P: usize, const L: usize>(
+unsafe fn steady_lanes<const M: usize, const P: usize, const L: usize>(
     run: SteadyRun,
     s: usize,
     score: &mut [f64],
@@ -1503,25 +1538,33 @@ fn steady_lanes<const M: usize, const P: usize, const L: usize>(
     eps: &[f64; P],
 ) {
     let (w, at_slot, at_table) = (run.w, run.start + s, run.idx + s);
+    // SAFETY (every access): the caller's contract; indices are (component)·w + an
+    // offset of the run, below the array's size.
+    let load = |x: &[f64], at: usize| -> [f64; L] {
+        unsafe { std::ptr::read_unaligned(x.as_ptr().add(at).cast::<[f64; L]>()) }
+    };
     let mut d = [[0.0; L]; M];
     for (a, da) in d.iter_mut().enumerate() {
-        da.copy_from_slice(&score[a * w + at_slot..a * w + at_slot + L]);
+        *da = load(score, a * w + at_slot);
         for (i, e) in eps.iter().enumerate() {
-            let c = (i + P * a) * w + at_table;
-            let x = &signature[c..c + L];
+            let x = load(signature, (i + P * a) * w + at_table);
             for l in 0..L {
                 da[l] += x[l] * e;
             }
         }
-        score[a * w + at_slot..a * w + at_slot + L].copy_from_slice(da);
+        unsafe {
+            std::ptr::write_unaligned(
+                score.as_mut_ptr().add(a * w + at_slot).cast::<[f64; L]>(),
+                *da,
+            );
+        }
     }
     // dᵀC⁻d = Σ_a d_a Σ_{b≤a} G_ab d_b with G_ab = 2·C⁻_ab off the diagonal.
     let mut st = [0.0; L];
     for a in 0..M {
         let mut t = [0.0; L];
         for (b, db) in d.iter().enumerate().take(a + 1) {
-            let c = tri(a, b) * w + at_table;
-            let g = &inverse[c..c + L];
+            let g = load(inverse, tri(a, b) * w + at_table);
             for l in 0..L {
                 t[l] += g[l] * db[l];
             }
@@ -1530,7 +1573,7 @@ fn steady_lanes<const M: usize, const P: usize, const L: usize>(
             st[l] += d[a][l] * t[l];
         }
     }
-    stat[at_slot..at_slot + L].copy_from_slice(&st);
+    unsafe { std::ptr::write_unaligned(stat.as_mut_ptr().add(at_slot).cast::<[f64; L]>(), st) };
 }
 
 /// The stationary measurement step over a run for any m, p: one pass per component.
