@@ -1431,48 +1431,52 @@ impl WindowBank {
 }
 
 /// The largest value of `values` and its first position (NaN ignored; (−∞, 0) when
-/// empty or all NaN), i.e. what a strict `>` scan finds, in one branch-free pass: eight
-/// independent lanes each keep their largest value and where it was first seen (no
-/// chain of compare-and-select through every value, so it vectorises and pipelines),
-/// then the lanes are reduced with ties going to the earliest position.
+/// empty or all NaN), i.e. what a strict `>` scan finds, without a chain of
+/// compare-and-select through every value: first the largest value over sixteen
+/// independent lanes (each a vector max) reduced by halving, then the first block of
+/// eight holding it (one vector compare per block) and its position inside the block.
 #[inline(always)]
 fn lane_argmax(values: &[f64]) -> (f64, usize) {
-    const L: usize = 8;
-    // Positions are kept as f64 (exact below 2⁵³) so that value and position take the
-    // same vector compare-and-blend.
+    const L: usize = 16;
+    const B: usize = 8;
     let mut best = [f64::NEG_INFINITY; L];
-    let mut at = [0.0_f64; L];
     let mut chunks = values.chunks_exact(L);
-    let mut base = [0.0_f64; L];
-    for (l, b) in base.iter_mut().enumerate() {
-        *b = l as f64;
-    }
     for c in &mut chunks {
         for l in 0..L {
-            let better = c[l] > best[l];
-            best[l] = if better { c[l] } else { best[l] };
-            at[l] = if better { base[l] } else { at[l] };
-            base[l] += L as f64;
+            best[l] = if c[l] > best[l] { c[l] } else { best[l] };
         }
     }
-    let (mut value, mut pos) = (f64::NEG_INFINITY, f64::INFINITY);
-    for l in 0..L {
-        if best[l] > value || (best[l] == value && at[l] < pos) {
-            value = best[l];
-            pos = at[l];
+    for (l, v) in chunks.remainder().iter().enumerate() {
+        best[l] = if *v > best[l] { *v } else { best[l] };
+    }
+    // A tree of halvings (no lane holds NaN, so the order of the maxima is free).
+    let mut width = L;
+    while width > 1 {
+        width /= 2;
+        for l in 0..width {
+            best[l] = if best[l + width] > best[l] {
+                best[l + width]
+            } else {
+                best[l]
+            };
         }
     }
-    let offset = values.len() - chunks.remainder().len();
-    let mut pos = pos as usize;
-    for (i, v) in chunks.remainder().iter().enumerate() {
-        if *v > value {
-            value = *v;
-            pos = offset + i;
-        }
-    }
+    let value = best[0];
     if value == f64::NEG_INFINITY {
         return (value, 0);
     }
+    let mut blocks = values.chunks_exact(B);
+    let mut base = 0;
+    for c in &mut blocks {
+        if c.iter().fold(false, |hit, v| hit | (*v == value)) {
+            break;
+        }
+        base += B;
+    }
+    let pos = values[base..]
+        .iter()
+        .position(|v| *v == value)
+        .map_or(0, |p| base + p);
     (value, pos)
 }
 
