@@ -51,6 +51,9 @@ pub(crate) struct McapInput {
     pub(crate) results: u64,
     /// Input messages that could not be decoded.
     pub(crate) bad_inputs: Vec<String>,
+    /// The channel name of the last input message, shared by every input of that
+    /// channel (one allocation per channel, and consumers can compare pointers).
+    last_channel: Option<Arc<str>>,
 }
 
 /// Whether a path names an MCAP file.
@@ -100,6 +103,7 @@ impl McapInput {
             limits: DecodeLimits::default(),
             results: 0,
             bad_inputs: Vec::new(),
+            last_channel: None,
         })
     }
 
@@ -129,7 +133,7 @@ impl McapInput {
                 TopicKind::Inputs => {
                     match decode_samples(channel, &m.data, &self.limits, &mut self.samples) {
                         Ok(()) => {
-                            let name: Arc<str> = Arc::from(channel.as_str());
+                            let name = self.channel_name(channel);
                             for s in self.samples.drain(..) {
                                 self.queued.push_back(RecordedInput {
                                     channel: name.clone(),
@@ -142,14 +146,29 @@ impl McapInput {
                     }
                 }
                 TopicKind::Intake => match decode_intake(&m.data) {
-                    Ok(event) => self.queued.push_back(RecordedInput {
-                        channel: Arc::from(channel.as_str()),
-                        item: InputItem::Intake(event),
-                        log_time_ns: m.log_time,
-                    }),
+                    Ok(event) => {
+                        let name = self.channel_name(channel);
+                        self.queued.push_back(RecordedInput {
+                            channel: name,
+                            item: InputItem::Intake(event),
+                            log_time_ns: m.log_time,
+                        });
+                    }
                     Err(e) => self.note_bad(format!("{}: {e}", m.topic.topic)),
                 },
                 _ => self.results += 1,
+            }
+        }
+    }
+
+    /// The shared name of `channel`.
+    fn channel_name(&mut self, channel: &str) -> Arc<str> {
+        match &self.last_channel {
+            Some(name) if **name == *channel => name.clone(),
+            _ => {
+                let name: Arc<str> = Arc::from(channel);
+                self.last_channel = Some(name.clone());
+                name
             }
         }
     }

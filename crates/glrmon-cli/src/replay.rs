@@ -58,8 +58,6 @@ pub(crate) struct ReplayArgs {
 struct Outputs {
     sinks: Vec<Box<dyn Sink>>,
     inputs_wanted: bool,
-    /// Per channel, the `stat` records so far.
-    stat_counts: HashMap<Arc<str>, u64>,
     alarm_lines: Vec<String>,
     records: u64,
     json: Vec<u8>,
@@ -71,7 +69,6 @@ impl Outputs {
         Self {
             sinks,
             inputs_wanted,
-            stat_counts: HashMap::new(),
             alarm_lines: Vec::new(),
             records: 0,
             json: Vec::with_capacity(512),
@@ -102,9 +99,11 @@ impl Outputs {
         Ok(())
     }
 
+    /// Encodes and writes the records of one input; `stats` counts the channel's
+    /// `stat` records so far (the sinks' decimation counts them).
     fn records(
         &mut self,
-        name: &Arc<str>,
+        stats: &mut u64,
         records: &mut Vec<Record>,
         log_time_ns: u64,
     ) -> anyhow::Result<()> {
@@ -115,9 +114,8 @@ impl Outputs {
                 }
             }
             let stat_index = if matches!(record, Record::Stat(_)) {
-                let n = self.stat_counts.entry(name.clone()).or_insert(0);
-                *n += 1;
-                Some(*n - 1)
+                *stats += 1;
+                Some(*stats - 1)
             } else {
                 None
             };
@@ -316,7 +314,7 @@ fn replay_csv_into<R: BufRead + Send + 'static>(
         }))
     })?;
     let mut records = Vec::new();
-    let mut rows = 0;
+    let (mut rows, mut stats) = (0, 0);
     while let Some(row) = rows_ahead.next()? {
         rows += 1;
         match row {
@@ -326,7 +324,7 @@ fn replay_csv_into<R: BufRead + Send + 'static>(
                     outputs.input(&name, &InputItem::Sample(sample.clone()), log_time)?;
                 }
                 monitor.on_sample(&sample, &mut records);
-                outputs.records(&name, &mut records, log_time)?;
+                outputs.records(&mut stats, &mut records, log_time)?;
             }
             Err((e, t)) => {
                 let log_time = glrmon_record::publish_time(t, 0);
@@ -347,7 +345,7 @@ fn replay_csv_into<R: BufRead + Send + 'static>(
                     message,
                     stage: Stage::Receiving,
                 }));
-                outputs.records(&name, &mut records, log_time)?;
+                outputs.records(&mut stats, &mut records, log_time)?;
             }
         }
     }
@@ -390,14 +388,20 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
         max_payload_bytes: cfg.daemon.max_payload_bytes,
         ..DecodeLimits::default()
     });
-    let mut monitors: HashMap<Arc<str>, Monitor> = HashMap::new();
+    // The replayed channels with their `stat` counts, found by name (the last one
+    // looked up is remembered: consecutive inputs of a channel share its name).
+    let mut channels: Vec<(Monitor, u64)> = Vec::new();
     let mut order: Vec<Arc<str>> = Vec::new();
+    let mut index: HashMap<Arc<str>, usize> = HashMap::new();
     for c in &cfg.channels {
         if args.channel.as_ref().is_none_or(|n| *n == c.name) {
-            monitors.insert(Arc::from(c.name.as_str()), Monitor::from_channel(c)?);
-            order.push(Arc::from(c.name.as_str()));
+            let name: Arc<str> = Arc::from(c.name.as_str());
+            index.insert(name.clone(), channels.len());
+            channels.push((Monitor::from_channel(c)?, 0));
+            order.push(name);
         }
     }
+    let mut last: Option<(Arc<str>, usize)> = None;
     let header = FileHeader {
         config: cfg.source.clone(),
         channels: order.iter().map(|c| c.to_string()).collect(),
@@ -431,7 +435,13 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
                 bar.set_position(progress_bytes.load(Ordering::Relaxed));
             }
         }
-        let Some(monitor) = monitors.get_mut(&recorded.channel) else {
+        let found = match &last {
+            Some((name, i)) if Arc::ptr_eq(name, &recorded.channel) => Some(*i),
+            _ => index.get(&recorded.channel).copied().inspect(|i| {
+                last = Some((recorded.channel.clone(), *i));
+            }),
+        };
+        let Some((monitor, stats)) = found.map(|i| &mut channels[i]) else {
             if args.channel.is_none() {
                 *unknown.entry(recorded.channel.clone()).or_insert(0) += 1;
             }
@@ -453,7 +463,7 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
                 }));
             }
         }
-        outputs.records(&recorded.channel, &mut records, log_time)?;
+        outputs.records(stats, &mut records, log_time)?;
     }
     let input = inputs_ahead.finish()?;
     if let Some(bar) = progress {
@@ -468,8 +478,8 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
         args.input.display(),
         input.messages(),
     );
-    for name in &order {
-        let c = monitors[name].counters();
+    for (name, (monitor, _)) in order.iter().zip(&channels) {
+        let c = monitor.counters();
         let errors: u64 = c.errors.values().sum::<u64>() + rejected.get(name).copied().unwrap_or(0);
         eprintln!(
             "  channel \"{name}\": {} samples, {} alarms, {errors} errors",
