@@ -858,9 +858,13 @@ impl WindowBank {
             &mut *info,
             &mut *score,
         ]) {
+            // Element loops of at most L (a handful of values per component: a call
+            // to memcpy/memset each would cost more than the copy).
             for (c, d) in dst.chunks_exact_mut(l).enumerate() {
-                d[..rest].copy_from_slice(&src[c * w + s..c * w + w]);
-                d[rest..].fill(0.0);
+                let src = &src[c * w + s..c * w + w];
+                for (x, d) in d.iter_mut().enumerate() {
+                    *d = if x < rest { src[x] } else { 0.0 };
+                }
             }
         }
         let mut padded = SlotArrays {
@@ -897,7 +901,9 @@ impl WindowBank {
             &*padded.rank,
         ]) {
             for (c, x) in src.chunks_exact(l).enumerate() {
-                dst[c * w + s..c * w + w].copy_from_slice(&x[..rest]);
+                for (d, x) in dst[c * w + s..c * w + w].iter_mut().zip(x) {
+                    *d = *x;
+                }
             }
         }
     }
