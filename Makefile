@@ -68,8 +68,12 @@ bench-replay: ## replay throughput and peak RSS on a 10 M-sample bench-A recordi
 	mkdir -p $(BENCH_DIR)
 	./target/release/glrmon simulate --config config/demo.toml --channel lpv --samples $(BENCH_SAMPLES) --output $(BENCH_DIR)/a.csv
 	./target/release/glrmon replay --quiet --config config/demo.toml --channel lpv $(BENCH_DIR)/a.csv --output $(BENCH_DIR)/a.mcap
-	ls -l $(BENCH_DIR)/a.mcap
-	/usr/bin/time -f "replay MCAP -> JSONL: %e s wall, %M KiB peak RSS" ./target/release/glrmon replay --quiet $(BENCH_DIR)/a.mcap --output /dev/null
+	./target/release/glrmon replay --quiet --stat-every 0 --config config/demo.toml --channel lpv $(BENCH_DIR)/a.csv --output $(BENCH_DIR)/in.mcap
+	ls -l $(BENCH_DIR)/a.csv $(BENCH_DIR)/a.mcap $(BENCH_DIR)/in.mcap
+	/usr/bin/time -f "replay inputs-only MCAP -> alarms only: %e s wall, %M KiB peak RSS" ./target/release/glrmon replay --quiet --stat-every 0 $(BENCH_DIR)/in.mcap --output /dev/null
+	/usr/bin/time -f "replay CSV -> alarms only: %e s wall, %M KiB peak RSS" ./target/release/glrmon replay --quiet --stat-every 0 --config config/demo.toml --channel lpv $(BENCH_DIR)/a.csv --output /dev/null
+	/usr/bin/time -f "replay CSV -> JSONL (every stat): %e s wall, %M KiB peak RSS" ./target/release/glrmon replay --quiet --config config/demo.toml --channel lpv $(BENCH_DIR)/a.csv --output /dev/null
+	/usr/bin/time -f "replay MCAP -> JSONL (every stat): %e s wall, %M KiB peak RSS" ./target/release/glrmon replay --quiet $(BENCH_DIR)/a.mcap --output /dev/null
 	/usr/bin/time -f "replay MCAP -> MCAP: %e s wall, %M KiB peak RSS" ./target/release/glrmon replay --quiet $(BENCH_DIR)/a.mcap --output $(BENCH_DIR)/b.mcap
 	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 100 --samples 2000 --batch 10
 	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 100 --samples 2000 --batch 10 --record $(BENCH_DIR)/rec

@@ -75,6 +75,14 @@ impl Outputs {
         }
     }
 
+    /// Whether any output keeps `stat` records (if none does, the monitors need not
+    /// build them).
+    fn wants_stats(&self) -> bool {
+        self.sinks
+            .iter()
+            .any(|s| s.interest().stat_every.unwrap_or(1) != 0)
+    }
+
     fn input(&mut self, name: &Arc<str>, item: &InputItem, log_time_ns: u64) -> anyhow::Result<()> {
         if !self.inputs_wanted {
             return Ok(());
@@ -280,6 +288,7 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
         )]),
     };
     let mut outputs = Outputs::new(output_sinks(args, &header)?);
+    monitor.set_stat_records(outputs.wants_stats());
     let rows = replay_csv_into(csv, &mut monitor, &mut outputs)?;
     let alarm_lines = std::mem::take(&mut outputs.alarm_lines);
     outputs.finish()?;
@@ -411,6 +420,9 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
         )]),
     };
     let mut outputs = Outputs::new(output_sinks(args, &header)?);
+    for (monitor, _) in &mut channels {
+        monitor.set_stat_records(outputs.wants_stats());
+    }
     let progress = (!args.quiet && std::io::stderr().is_terminal()).then(|| {
         let bar = indicatif::ProgressBar::new(input.progress.1);
         bar.set_style(

@@ -147,6 +147,8 @@ pub struct Monitor {
     diagnosis_failing: bool,
     /// The filter-consistency test, when enabled.
     consistency: Option<Consistency>,
+    /// Whether a `stat` record is appended for each processed sample.
+    stat_records: bool,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -194,7 +196,16 @@ impl Monitor {
             diagnosis_restart: false,
             diagnosis_failing: false,
             consistency: None,
+            stat_records: true,
         }
+    }
+
+    /// Whether [`Monitor::on_sample`] appends a `stat` record per processed sample (the
+    /// default). A consumer that keeps none of them (a replay for its alarms only)
+    /// turns them off and saves building and dropping one record per sample; every
+    /// other record and every number are unchanged.
+    pub fn set_stat_records(&mut self, enabled: bool) {
+        self.stat_records = enabled;
     }
 
     /// Adds the filter-consistency test (see [`glrmon_core::consistency`]): a
@@ -295,6 +306,25 @@ impl Monitor {
     #[must_use]
     pub fn alarm_active(&self) -> bool {
         self.alarm.is_active()
+    }
+
+    /// The `stat` record of the step just taken at k.
+    fn push_stat(&self, k: u64, t: Option<f64>, records: &mut Vec<Record>) {
+        records.push(Record::Stat(Stat {
+            channel: self.channel.clone(),
+            k,
+            t,
+            glr: self.out.glr,
+            onset: self.out.onset,
+            magnitude: if self.out.glr.is_some() {
+                self.out.magnitude.iter().copied().collect()
+            } else {
+                Vec::new()
+            },
+            rank: self.out.rank,
+            innovation: self.out.innovation.iter().copied().collect(),
+            threshold: Some(self.settings.alarm.threshold),
+        }));
     }
 
     /// Records that `n` samples were lost before reaching the monitor (dropped at
@@ -462,21 +492,9 @@ impl Monitor {
                 }
             }
         }
-        records.push(Record::Stat(Stat {
-            channel: self.channel.clone(),
-            k,
-            t: sample.t,
-            glr: self.out.glr,
-            onset: self.out.onset,
-            magnitude: if self.out.glr.is_some() {
-                self.out.magnitude.iter().copied().collect()
-            } else {
-                Vec::new()
-            },
-            rank: self.out.rank,
-            innovation: self.out.innovation.iter().copied().collect(),
-            threshold: Some(self.settings.alarm.threshold),
-        }));
+        if self.stat_records {
+            self.push_stat(k, sample.t, records);
+        }
         match self.alarm.update(k, self.out.glr) {
             AlarmTransition::Started => {
                 self.pending = Some(PendingAlarm {
@@ -712,6 +730,28 @@ mod tests {
             .filter(|r| matches!(r, Record::AlarmEnd(_)))
             .count();
         assert_eq!(ends, 1);
+    }
+
+    /// Without `stat` records the monitor emits exactly the other records of a run
+    /// with them (same alarms, isolation and numbers), and no `stat`.
+    #[test]
+    fn turning_stat_records_off_changes_nothing_else() {
+        let sc = scenarios::paper2014_unstable();
+        let mut sim = sc.faulty_simulator(1, "x0_jump", 201, 4.0).unwrap();
+        let (mut with, mut without) = (monitor(), monitor());
+        without.set_stat_records(false);
+        let (mut rw, mut ro) = (Vec::new(), Vec::new());
+        for _ in 0..450 {
+            let s = sample(&sim.next_sample());
+            with.on_sample(&s, &mut rw);
+            without.on_sample(&s, &mut ro);
+        }
+        let stats = rw.iter().filter(|r| matches!(r, Record::Stat(_))).count();
+        assert_eq!(stats, 450);
+        rw.retain(|r| !matches!(r, Record::Stat(_)));
+        assert!(rw.iter().any(|r| matches!(r, Record::Alarm(_))));
+        assert_eq!(rw, ro);
+        assert_eq!(with.counters(), without.counters());
     }
 
     #[test]
