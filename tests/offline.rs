@@ -295,28 +295,11 @@ fn simulated_mcap_and_csv_replay_to_identical_jsonl() {
 fn replay_stat_every_decimates_only_the_stat_records() {
     let dir = TempDir::new("stat-every");
     let cfg = config("examples/dc-motor.toml");
-    let csv = dir.file("s.csv");
-    ok(&glrmon(&[
-        "simulate",
-        "--config",
-        &cfg,
-        "--samples",
-        "2000",
-        "--seed",
-        "9",
-        "--fault",
-        "actuator_bias",
-        "--onset",
-        "1000",
-        "--magnitude",
-        "0.5",
-        "--output",
-        &csv,
-    ]));
-    let full = dir.file("full.jsonl");
-    ok(&glrmon(&[
-        "replay", "--config", &cfg, &csv, "--output", &full,
-    ]));
+    simulate_replay(&dir, &cfg, "actuator_bias", 1000, "0.5", 2000, 9);
+    let (csv, full) = (
+        dir.file("actuator_bias-9.csv"),
+        dir.file("actuator_bias-9.jsonl"),
+    );
     let lines = |path: &str| -> Vec<String> {
         std::fs::read_to_string(path)
             .unwrap()
@@ -331,30 +314,24 @@ fn replay_stat_every_decimates_only_the_stat_records() {
     assert_eq!(stats.len(), 2000);
     assert!(others.iter().any(|l| l.starts_with("{\"type\":\"alarm\"")));
     for every in [0_usize, 7] {
-        let out = dir.file(&format!("every{every}.jsonl"));
         let n = every.to_string();
-        ok(&glrmon(&[
-            "replay",
-            "--stat-every",
-            &n,
-            "--config",
-            &cfg,
-            &csv,
-            "--output",
-            &out,
-        ]));
-        // Through an MCAP file written with the same decimation, and replayed again.
-        let mcap = dir.file(&format!("every{every}.mcap"));
-        ok(&glrmon(&[
-            "replay",
-            "--stat-every",
-            &n,
-            "--config",
-            &cfg,
-            &csv,
-            "--output",
-            &mcap,
-        ]));
+        // To JSON lines, and through an MCAP file written with the same decimation.
+        let (out, mcap) = (
+            dir.file(&format!("every{every}.jsonl")),
+            dir.file(&format!("every{every}.mcap")),
+        );
+        for output in [&out, &mcap] {
+            ok(&glrmon(&[
+                "replay",
+                "--stat-every",
+                &n,
+                "--config",
+                &cfg,
+                &csv,
+                "--output",
+                output,
+            ]));
+        }
         let again = dir.file(&format!("every{every}-again.jsonl"));
         ok(&glrmon(&[
             "replay",
