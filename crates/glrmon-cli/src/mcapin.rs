@@ -51,8 +51,9 @@ pub(crate) struct McapInput {
     pub(crate) results: u64,
     /// Input messages that could not be decoded.
     pub(crate) bad_inputs: Vec<String>,
-    /// The channel name of the last input message, shared by every input of that
-    /// channel (one allocation per channel, and consumers can compare pointers).
+    /// The shared name of each channel met (one allocation per channel, and consumers
+    /// can compare pointers), and the last one used.
+    channel_names: std::collections::HashMap<String, Arc<str>>,
     last_channel: Option<Arc<str>>,
 }
 
@@ -103,6 +104,7 @@ impl McapInput {
             limits: DecodeLimits::default(),
             results: 0,
             bad_inputs: Vec::new(),
+            channel_names: std::collections::HashMap::new(),
             last_channel: None,
         })
     }
@@ -166,7 +168,14 @@ impl McapInput {
         match &self.last_channel {
             Some(name) if **name == *channel => name.clone(),
             _ => {
-                let name: Arc<str> = Arc::from(channel);
+                let name = match self.channel_names.get(channel) {
+                    Some(name) => name.clone(),
+                    None => {
+                        let name: Arc<str> = Arc::from(channel);
+                        self.channel_names.insert(channel.to_owned(), name.clone());
+                        name
+                    }
+                };
                 self.last_channel = Some(name.clone());
                 name
             }

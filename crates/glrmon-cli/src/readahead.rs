@@ -17,11 +17,12 @@ const AHEAD: usize = 4;
 /// A source read on another thread: [`ReadAhead::next`] yields its items in order,
 /// [`ReadAhead::finish`] gives the source back (for its end-of-file report).
 pub(crate) struct ReadAhead<S, T> {
-    full: Receiver<anyhow::Result<VecDeque<T>>>,
+    /// Batches in order, then `Ok(None)` at a clean end or the source's error.
+    full: Receiver<anyhow::Result<Option<VecDeque<T>>>>,
     empty: SyncSender<VecDeque<T>>,
     batch: VecDeque<T>,
     done: bool,
-    reader: Option<JoinHandle<S>>,
+    reader: JoinHandle<S>,
 }
 
 impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
@@ -31,7 +32,7 @@ impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
         mut source: S,
         mut next: impl FnMut(&mut S) -> anyhow::Result<Option<T>> + Send + 'static,
     ) -> std::io::Result<Self> {
-        let (full_tx, full) = sync_channel::<anyhow::Result<VecDeque<T>>>(AHEAD);
+        let (full_tx, full) = sync_channel::<anyhow::Result<Option<VecDeque<T>>>>(AHEAD);
         let (empty, empty_rx) = sync_channel::<VecDeque<T>>(AHEAD + 2);
         let reader = std::thread::Builder::new()
             .name("replay-reader".into())
@@ -55,14 +56,13 @@ impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
                         }
                     }
                     // A consumer that stopped listening ends the reading too.
-                    if !batch.is_empty() && full_tx.send(Ok(batch)).is_err() {
+                    if !batch.is_empty() && full_tx.send(Ok(Some(batch))).is_err() {
                         break;
                     }
                     match end {
                         None => {}
-                        Some(Ok(())) => break,
-                        Some(Err(e)) => {
-                            let _ = full_tx.send(Err(e));
+                        Some(end) => {
+                            let _ = full_tx.send(end.map(|()| None));
                             break;
                         }
                     }
@@ -74,14 +74,16 @@ impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
             empty,
             batch: VecDeque::new(),
             done: false,
-            reader: Some(reader),
+            reader,
         })
     }
 
     /// The next item in source order; `Ok(None)` at the end.
     ///
     /// # Errors
-    /// The source's error, after every item read before it.
+    /// The source's error, after every item read before it; an error too when the
+    /// reader stopped without reaching the end (it panicked), so that input is never
+    /// cut short silently.
     pub(crate) fn next(&mut self) -> anyhow::Result<Option<T>> {
         loop {
             if let Some(item) = self.batch.pop_front() {
@@ -91,15 +93,21 @@ impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
                 return Ok(None);
             }
             match self.full.recv() {
-                Ok(Ok(batch)) => {
+                Ok(Ok(Some(batch))) => {
                     let used = std::mem::replace(&mut self.batch, batch);
                     let _ = self.empty.try_send(used);
                 }
+                Ok(Ok(None)) => self.done = true,
                 Ok(Err(e)) => {
                     self.done = true;
                     return Err(e);
                 }
-                Err(_) => self.done = true,
+                Err(_) => {
+                    self.done = true;
+                    return Err(anyhow::anyhow!(
+                        "the replay reader thread stopped before the end of the input"
+                    ));
+                }
             }
         }
     }
@@ -108,13 +116,12 @@ impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
     ///
     /// # Errors
     /// When the reader thread panicked.
-    pub(crate) fn finish(mut self) -> anyhow::Result<S> {
+    pub(crate) fn finish(self) -> anyhow::Result<S> {
+        let Self { full, reader, .. } = self;
         // Unblock a reader still waiting to hand over a batch.
-        drop(std::mem::replace(&mut self.full, sync_channel(0).1));
-        self.reader
-            .take()
-            .map(JoinHandle::join)
-            .ok_or_else(|| anyhow::anyhow!("the replay reader was already finished"))?
+        drop(full);
+        reader
+            .join()
             .map_err(|_| anyhow::anyhow!("the replay reader thread panicked"))
     }
 }
@@ -150,6 +157,30 @@ mod tests {
         assert!(err.to_string().contains("after 5000"));
         assert!(ahead.next().unwrap().is_none());
         assert_eq!(ahead.finish().unwrap(), 5001);
+    }
+
+    /// A reader that panics mid-way is an error after the items before it, never a
+    /// clean (shortened) end.
+    #[test]
+    fn a_panicking_reader_is_an_error_not_an_end() {
+        let mut ahead = ReadAhead::spawn(0_u64, |n| {
+            *n += 1;
+            assert!(*n <= 3000, "reader fails at item 3001");
+            Ok(Some(*n))
+        })
+        .unwrap();
+        let mut seen = 0;
+        let err = loop {
+            match ahead.next() {
+                Ok(Some(_)) => seen += 1,
+                Ok(None) => panic!("a clean end after {seen} items"),
+                Err(e) => break e,
+            }
+        };
+        // The batch being filled when the reader failed is lost with it; the error says so.
+        assert_eq!(seen, 2 * BATCH);
+        assert!(err.to_string().contains("stopped before the end"), "{err}");
+        assert!(ahead.finish().is_err());
     }
 
     /// A consumer that stops early does not leave the reader blocked.

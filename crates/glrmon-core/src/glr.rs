@@ -1483,7 +1483,8 @@ fn lane_argmax(values: &[f64]) -> (f64, usize) {
         .iter()
         .position(|v| *v == value)
         .map_or(0, |p| base + p);
-    (value, pos)
+    // The value stored there (the lanes' maximum may be the other zero of a ±0 tie).
+    (values[pos], pos)
 }
 
 /// A contiguous run of slots [start, start + len) of the ring against the table entries
@@ -1510,10 +1511,11 @@ fn steady_fused<const M: usize, const P: usize, const L: usize>(
 ) {
     // Checked once here so that the lanes load and store unchecked: every component
     // of the run's slots and table entries is inside its array.
-    let (w, end_slot, end_table) = (run.w, run.start + run.len, run.idx + run.len);
+    let w = run.w;
     assert!(
-        end_slot <= w
-            && end_table <= w
+        run.start <= w
+            && run.len <= w - run.start
+            && run.idx <= w - run.len
             && score.len() >= M * w
             && stat.len() >= w
             && signature.len() >= P * M * w
@@ -2231,6 +2233,8 @@ mod tests {
                     .map(|_| match rnd() {
                         0 => f64::NAN,
                         6 => f64::NEG_INFINITY,
+                        5 => -0.0,
+                        4 => 0.0,
                         r => r as f64,
                     })
                     .collect();
@@ -2242,7 +2246,11 @@ mod tests {
                     }
                 }
                 let (got_value, got_pos) = lane_argmax(&v);
-                assert_eq!((got_value, got_pos), (value, pos), "{v:?}");
+                assert_eq!(
+                    (got_value.to_bits(), got_pos),
+                    (value.to_bits(), pos),
+                    "{v:?}"
+                );
             }
         }
     }
