@@ -1437,44 +1437,56 @@ impl WindowBank {
 }
 
 /// The largest value of `values` and its first position (NaN ignored; (−∞, 0) when
-/// empty or all NaN), i.e. what a strict `>` scan finds, without a chain of
+/// empty or all NaN), i.e. exactly what a strict `>` scan finds, without a chain of
 /// compare-and-select through every value: first the largest value over sixteen
-/// independent lanes (each a vector max) reduced by halving, then the first block of
-/// eight holding it (one vector compare per block) and its position inside the block.
+/// independent lanes (each a vector max; the last sixteen values are taken again
+/// instead of a partial register, which leaves a maximum unchanged) reduced by halving,
+/// then the first block of eight holding it (one vector compare per block) and its
+/// position inside the block.
 #[inline(always)]
 fn lane_argmax(values: &[f64]) -> (f64, usize) {
     const L: usize = 16;
     const B: usize = 8;
-    let mut best = [f64::NEG_INFINITY; L];
-    let mut chunks = values.chunks_exact(L);
-    for c in &mut chunks {
+    let n = values.len();
+    let value = if n >= L {
+        let mut best = [f64::NEG_INFINITY; L];
+        let mut chunks = values.chunks_exact(L);
+        for c in &mut chunks {
+            for l in 0..L {
+                best[l] = if c[l] > best[l] { c[l] } else { best[l] };
+            }
+        }
+        let last = &values[n - L..];
         for l in 0..L {
-            best[l] = if c[l] > best[l] { c[l] } else { best[l] };
+            best[l] = if last[l] > best[l] { last[l] } else { best[l] };
         }
-    }
-    for (l, v) in chunks.remainder().iter().enumerate() {
-        best[l] = if *v > best[l] { *v } else { best[l] };
-    }
-    // A tree of halvings (no lane holds NaN, so the order of the maxima is free).
-    let mut width = L;
-    while width > 1 {
-        width /= 2;
-        for l in 0..width {
-            best[l] = if best[l + width] > best[l] {
-                best[l + width]
-            } else {
-                best[l]
-            };
+        // A tree of halvings (no lane holds NaN, so the order of the maxima is free).
+        let mut width = L;
+        while width > 1 {
+            width /= 2;
+            for l in 0..width {
+                best[l] = if best[l + width] > best[l] {
+                    best[l + width]
+                } else {
+                    best[l]
+                };
+            }
         }
-    }
-    let value = best[0];
+        best[0]
+    } else {
+        values
+            .iter()
+            .fold(f64::NEG_INFINITY, |m, v| if *v > m { *v } else { m })
+    };
     if value == f64::NEG_INFINITY {
         return (value, 0);
     }
-    let mut blocks = values.chunks_exact(B);
     let mut base = 0;
-    for c in &mut blocks {
-        if c.iter().fold(false, |hit, v| hit | (*v == value)) {
+    while base + B <= n {
+        if values[base..base + B]
+            .iter()
+            .fold(false, |hit, v| hit | (*v == value))
+        {
             break;
         }
         base += B;
@@ -2227,7 +2239,7 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (x >> 33) % 7
         };
-        for len in 0..40 {
+        for len in 0..80 {
             for _ in 0..50 {
                 let v: Vec<f64> = (0..len)
                     .map(|_| match rnd() {
