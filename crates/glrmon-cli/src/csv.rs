@@ -16,6 +16,19 @@ enum Slot {
     P(usize),
 }
 
+impl std::fmt::Display for Slot {
+    /// The column's header name.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Slot::K => write!(f, "k"),
+            Slot::T => write!(f, "t"),
+            Slot::U(i) => write!(f, "u{i}"),
+            Slot::Y(i) => write!(f, "y{i}"),
+            Slot::P(i) => write!(f, "p{i}"),
+        }
+    }
+}
+
 /// A streaming reader of sample rows; memory stays flat in the file size.
 pub(crate) struct CsvReader<R> {
     input: R,
@@ -140,24 +153,22 @@ impl<R: BufRead> CsvReader<R> {
         }
         sample.k = k;
         for (text, slot) in line.split(',').zip(&self.slots) {
-            let (name, target): (String, &mut f64) = match *slot {
+            let target: &mut f64 = match *slot {
                 Slot::K => continue,
-                Slot::T => {
-                    let t = sample.t.insert(0.0);
-                    ("t".into(), t)
-                }
-                Slot::U(i) => (format!("u{i}"), &mut sample.u[i]),
-                Slot::Y(i) => (format!("y{i}"), &mut sample.y[i]),
-                Slot::P(i) => (format!("p{i}"), &mut sample.p[i]),
+                Slot::T => sample.t.insert(0.0),
+                Slot::U(i) => &mut sample.u[i],
+                Slot::Y(i) => &mut sample.y[i],
+                Slot::P(i) => &mut sample.p[i],
             };
+            // The column's name is only formatted for an error (not for every value).
             match text.trim().parse::<f64>() {
                 Ok(v) if v.is_finite() => *target = v,
                 Ok(_) => {
-                    let msg = format!("column {name}: \"{}\" is not finite", text.trim());
+                    let msg = format!("column {slot}: \"{}\" is not finite", text.trim());
                     return Some(Err(self.err(k, ErrorCode::NonFinite, msg)));
                 }
                 Err(_) => {
-                    let msg = format!("column {name}: \"{}\" is not a number", text.trim());
+                    let msg = format!("column {slot}: \"{}\" is not a number", text.trim());
                     return Some(Err(self.err(k, ErrorCode::WrongType, msg)));
                 }
             }

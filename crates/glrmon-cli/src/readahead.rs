@@ -3,7 +3,9 @@
 //!
 //! The reader hands over batches in order through a bounded queue (a few batches
 //! ahead, so memory stays flat in the file size), and the consumer sends emptied
-//! batches back to be refilled, so their storage is reused.
+//! batches back to be refilled, so their storage is reused; items the consumer is done
+//! with go back with them ([`ReadAhead::recycle`]) for the reader to decode into, so a
+//! steady replay allocates nothing per item.
 
 use std::collections::VecDeque;
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
@@ -21,29 +23,37 @@ pub(crate) struct ReadAhead<S, T> {
     full: Receiver<anyhow::Result<Option<VecDeque<T>>>>,
     empty: SyncSender<VecDeque<T>>,
     batch: VecDeque<T>,
+    /// Items handed back by the consumer, sent to the reader with the next empty batch.
+    spent: VecDeque<T>,
     done: bool,
     reader: JoinHandle<S>,
 }
 
 impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
     /// Starts reading `source` with `next` (`Ok(None)` at the end; an error ends the
-    /// reading and is returned by [`ReadAhead::next`] after the items before it).
+    /// reading and is returned by [`ReadAhead::next`] after the items before it). `next`
+    /// gets a recycled item when there is one, to decode into instead of allocating.
     pub(crate) fn spawn(
         mut source: S,
-        mut next: impl FnMut(&mut S) -> anyhow::Result<Option<T>> + Send + 'static,
+        mut next: impl FnMut(&mut S, Option<T>) -> anyhow::Result<Option<T>> + Send + 'static,
     ) -> std::io::Result<Self> {
         let (full_tx, full) = sync_channel::<anyhow::Result<Option<VecDeque<T>>>>(AHEAD);
         let (empty, empty_rx) = sync_channel::<VecDeque<T>>(AHEAD + 2);
         let reader = std::thread::Builder::new()
             .name("replay-reader".into())
             .spawn(move || {
+                let mut spares = VecDeque::new();
                 loop {
-                    let mut batch = empty_rx
-                        .try_recv()
-                        .unwrap_or_else(|_| VecDeque::with_capacity(BATCH));
+                    let mut batch = match empty_rx.try_recv() {
+                        Ok(mut returned) => {
+                            spares.extend(returned.drain(..));
+                            returned
+                        }
+                        Err(_) => VecDeque::with_capacity(BATCH),
+                    };
                     let mut end = None;
                     while batch.len() < BATCH {
-                        match next(&mut source) {
+                        match next(&mut source, spares.pop_front()) {
                             Ok(Some(item)) => batch.push_back(item),
                             Ok(None) => {
                                 end = Some(Ok(()));
@@ -73,6 +83,7 @@ impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
             full,
             empty,
             batch: VecDeque::new(),
+            spent: VecDeque::new(),
             done: false,
             reader,
         })
@@ -95,7 +106,8 @@ impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
             match self.full.recv() {
                 Ok(Ok(Some(batch))) => {
                     let used = std::mem::replace(&mut self.batch, batch);
-                    let _ = self.empty.try_send(used);
+                    let spent = std::mem::replace(&mut self.spent, used);
+                    let _ = self.empty.try_send(spent);
                 }
                 Ok(Ok(None)) => self.done = true,
                 Ok(Err(e)) => {
@@ -109,6 +121,14 @@ impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
                     ));
                 }
             }
+        }
+    }
+
+    /// Hands an item back for the reader to decode a later one into (its allocations
+    /// are reused; at most a batch is kept).
+    pub(crate) fn recycle(&mut self, item: T) {
+        if self.spent.len() < BATCH {
+            self.spent.push_back(item);
         }
     }
 
@@ -134,7 +154,7 @@ mod tests {
     /// back, and an error arrives after the items read before it.
     #[test]
     fn items_in_order_then_the_error() {
-        let mut ahead = ReadAhead::spawn(0_u64, |n| {
+        let mut ahead = ReadAhead::spawn(0_u64, |n, _| {
             *n += 1;
             match *n {
                 n if n <= 5000 => Ok(Some(n)),
@@ -163,7 +183,7 @@ mod tests {
     /// clean (shortened) end.
     #[test]
     fn a_panicking_reader_is_an_error_not_an_end() {
-        let mut ahead = ReadAhead::spawn(0_u64, |n| {
+        let mut ahead = ReadAhead::spawn(0_u64, |n, _| {
             *n += 1;
             assert!(*n <= 3000, "reader fails at item 3001");
             Ok(Some(*n))
@@ -183,10 +203,45 @@ mod tests {
         assert!(ahead.finish().is_err());
     }
 
+    /// Items handed back come back to the reader as spares, with their storage: over
+    /// 20 batches of items that each own a buffer, almost every item after the first
+    /// batches is decoded into a recycled one.
+    #[test]
+    fn recycled_items_are_decoded_into_again() {
+        // The source counts (items read, spares received with their capacity kept).
+        let mut ahead =
+            ReadAhead::spawn((0_usize, 0_usize), |(n, reused), spare: Option<Vec<u8>>| {
+                if *n == 20 * BATCH {
+                    return Ok(None);
+                }
+                *n += 1;
+                let mut item = match spare {
+                    Some(v) if v.capacity() >= 64 => {
+                        *reused += 1;
+                        v
+                    }
+                    _ => Vec::with_capacity(64),
+                };
+                item.clear();
+                item.push((*n % 251) as u8);
+                Ok(Some(item))
+            })
+            .unwrap();
+        let mut count = 0;
+        while let Some(item) = ahead.next().unwrap() {
+            count += 1;
+            assert_eq!(item[0], (count % 251) as u8);
+            ahead.recycle(item);
+        }
+        assert_eq!(count, 20 * BATCH);
+        let (_, reused) = ahead.finish().unwrap();
+        assert!(reused >= 10 * BATCH, "{reused} of {count} items reused");
+    }
+
     /// A consumer that stops early does not leave the reader blocked.
     #[test]
     fn finishing_early_stops_the_reader() {
-        let mut ahead = ReadAhead::spawn(0_u64, |n| {
+        let mut ahead = ReadAhead::spawn(0_u64, |n, _| {
             *n += 1;
             Ok(Some(*n))
         })

@@ -314,8 +314,11 @@ fn replay_csv_into<R: BufRead + Send + 'static>(
     outputs: &mut Outputs,
 ) -> anyhow::Result<u64> {
     let name: Arc<str> = Arc::from(monitor.channel());
-    let mut rows_ahead = ReadAhead::spawn(csv, |csv| {
-        let mut sample = Sample::default();
+    let mut rows_ahead = ReadAhead::spawn(csv, |csv, spare| {
+        let mut sample = match spare {
+            Some(Ok(sample)) => sample,
+            _ => Sample::default(),
+        };
         // A bad row keeps the time it may have carried, for the record's log time.
         Ok(csv.next_into(&mut sample).map(|row| match row {
             Ok(()) => Ok(sample),
@@ -334,6 +337,7 @@ fn replay_csv_into<R: BufRead + Send + 'static>(
                 }
                 monitor.on_sample(&sample, &mut records);
                 outputs.records(&mut stats, &mut records, log_time)?;
+                rows_ahead.recycle(Ok(sample));
             }
             Err((e, t)) => {
                 let log_time = glrmon_record::publish_time(t, 0);
@@ -439,7 +443,7 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
     let mut inputs = 0u64;
     let started = std::time::Instant::now();
     let progress_bytes = input.progress.0.clone();
-    let mut inputs_ahead = ReadAhead::spawn(input, McapInput::next_input)?;
+    let mut inputs_ahead = ReadAhead::spawn(input, |input, _| input.next_input())?;
     while let Some(recorded) = inputs_ahead.next()? {
         inputs += 1;
         if inputs % 65_536 == 0 {
