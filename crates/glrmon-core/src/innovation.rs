@@ -124,6 +124,8 @@ impl InnovationFilter {
         with_shape!(self.n, self.p, |s| self.measure_in(s, sys, u, y))
     }
 
+    /// [`InnovationFilter::measure`] for one [`Shape`] (n, p fixed at compile time for
+    /// the small channels, so the products unroll; the same operations either way).
     #[inline(always)]
     fn measure_in(
         &mut self,
@@ -191,6 +193,7 @@ impl InnovationFilter {
         with_shape!(self.n, self.p, |s| self.time_update_in(s, sys, u));
     }
 
+    /// [`InnovationFilter::time_update`] for one [`Shape`].
     #[inline(always)]
     fn time_update_in(&mut self, s: impl Shape, sys: &SystemMatrices, u: &[f64]) {
         let (n, p) = (s.n(), s.p());
