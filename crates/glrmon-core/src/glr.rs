@@ -89,6 +89,46 @@ macro_rules! wide_call {
     };
 }
 
+/// The fused step at one vector width: an entry compiled with `$feature` that finds the
+/// kernel of the bank's (n, m, p) ([`for_fused_dims!`]) and runs it around
+/// `fused_body`, and the kernels themselves, each a function of its own (not inlined
+/// into the dispatch, which keeps each function small for the compiler). One per
+/// feature: a generic function cannot carry `#[target_feature]`.
+macro_rules! fused_level {
+    ($feature:literal, $entry:ident, $run:ident, $lanes:ty, $doc:literal) => {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $feature)]
+        unsafe fn $entry(&mut self, k: u64, inputs: &StepInputs<'_>) -> Option<WindowMax> {
+            self.fused_body(k, inputs, |bank, inputs| {
+                for_fused_dims!(dispatch_fused, $run, bank, inputs)
+            })
+        }
+
+        #[doc = $doc]
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $feature)]
+        #[inline(never)]
+        unsafe fn $run<const N: usize, const M: usize, const P: usize>(
+            &mut self,
+            inputs: &StepInputs<'_>,
+        ) {
+            self.fused_run::<N, M, P, $lanes>(inputs);
+        }
+    };
+}
+
+/// Runs the kernel `$run::<n, m, p>` of the bank's dimensions (none beyond the list).
+macro_rules! dispatch_fused {
+    ($run:ident, $b:ident, $i:ident; $(($nn:literal, $mm:literal, $pp:literal)),*) => {
+        match ($b.n, $b.m, $b.p) {
+            // SAFETY: only called from the entry `fused_level!` compiles with the
+            // kernel's feature, which runs only on a processor that has it (see `step`).
+            $(($nn, $mm, $pp) => unsafe { $b.$run::<$nn, $mm, $pp>($i) },)*
+            _ => {}
+        }
+    };
+}
+
 /// Calls `$mac!` with the (n, m, p) for which [`WindowBank::step`] has a fused pass:
 /// n ≤ 4 states, m ≤ 4 faults, p ≤ 2 outputs. Each triple is compiled twice (AVX2 and
 /// AVX-512F), about 0.25 s of release build per kernel, so the list is bounded by the
@@ -703,62 +743,20 @@ impl WindowBank {
         }
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn fused_avx2(&mut self, k: u64, inputs: &StepInputs<'_>) -> Option<WindowMax> {
-        macro_rules! dispatch {
-            ($b:ident, $i:ident; $(($nn:literal, $mm:literal, $pp:literal)),*) => {
-                match ($b.n, $b.m, $b.p) {
-                    // SAFETY: this function runs only with AVX2 (see `step`).
-                    $(($nn, $mm, $pp) => unsafe { $b.fused_run_avx2::<$nn, $mm, $pp>($i) },)*
-                    _ => {}
-                }
-            };
-        }
-        self.fused_body(k, inputs, |bank, inputs| {
-            for_fused_dims!(dispatch, bank, inputs)
-        })
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    unsafe fn fused_avx512(&mut self, k: u64, inputs: &StepInputs<'_>) -> Option<WindowMax> {
-        macro_rules! dispatch {
-            ($b:ident, $i:ident; $(($nn:literal, $mm:literal, $pp:literal)),*) => {
-                match ($b.n, $b.m, $b.p) {
-                    // SAFETY: this function runs only with AVX-512F (see `step`).
-                    $(($nn, $mm, $pp) => unsafe { $b.fused_run_avx512::<$nn, $mm, $pp>($i) },)*
-                    _ => {}
-                }
-            };
-        }
-        self.fused_body(k, inputs, |bank, inputs| {
-            for_fused_dims!(dispatch, bank, inputs)
-        })
-    }
-
-    /// The fused pass for one (n, m, p) at one width, a function of its own (not inlined
-    /// into the dispatch, which keeps each function small for the compiler).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    #[inline(never)]
-    unsafe fn fused_run_avx2<const N: usize, const M: usize, const P: usize>(
-        &mut self,
-        inputs: &StepInputs<'_>,
-    ) {
-        self.fused_run::<N, M, P, Avx2Lanes>(inputs);
-    }
-
-    /// As [`WindowBank::fused_run_avx2`] with AVX-512F and eight onsets per register.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    #[inline(never)]
-    unsafe fn fused_run_avx512<const N: usize, const M: usize, const P: usize>(
-        &mut self,
-        inputs: &StepInputs<'_>,
-    ) {
-        self.fused_run::<N, M, P, Lanes8>(inputs);
-    }
+    fused_level!(
+        "avx2",
+        fused_avx2,
+        fused_run_avx2,
+        Avx2Lanes,
+        "The fused pass for one (n, m, p) with AVX2, four onsets per register."
+    );
+    fused_level!(
+        "avx512f",
+        fused_avx512,
+        fused_run_avx512,
+        Lanes8,
+        "The fused pass for one (n, m, p) with AVX-512F, eight onsets per register."
+    );
 
     /// [`WindowBank::step`] in one pass: the bookkeeping around `run`, the fused pass of
     /// the bank's dimensions.
