@@ -8,19 +8,11 @@
 //! fused pass runs at the AVX2 and AVX-512F levels (the baseline runs the passes), so
 //! on a processor without them this compares the passes with themselves.
 
-use glrmon_core::{Sample, StepOutput, VectorLevel};
-use glrmon_sim::scenarios;
+mod common;
 
-/// Every output of a step as bits: ε, εᵀΣ⁻¹ε, l_k, r̂, rank, θ̂.
-fn bits(out: &StepOutput) -> Vec<u64> {
-    let mut v: Vec<u64> = out.innovation.iter().map(|x| x.to_bits()).collect();
-    v.push(out.normalized_innovation.to_bits());
-    v.push(out.glr.map_or(u64::MAX, f64::to_bits));
-    v.push(out.onset.unwrap_or(u64::MAX));
-    v.push(out.rank as u64);
-    v.extend(out.magnitude.iter().map(|x| x.to_bits()));
-    v
-}
+use common::{bits, run_steps};
+use glrmon_core::{StepOutput, VectorLevel};
+use glrmon_sim::scenarios;
 
 /// The outputs of 4000 samples (fault at 2500, gaps at 1200-1202 and 2600) through
 /// the general path, fused or not.
@@ -32,22 +24,8 @@ fn run(sc: &scenarios::Scenario, fault: &str, level: VectorLevel, fused: bool) -
     det.set_fused_window(fused);
     let mut sim = sc.faulty_simulator(17, fault, 2_500, 2.0).unwrap();
     let mut out = StepOutput::new(sc.model_outputs(), sc.faults.len());
-    let mut all = Vec::new();
-    for k in 0..4_000u64 {
-        let x = sim.next_sample();
-        if (1_200..1_203).contains(&k) || k == 2_600 {
-            det.predict_only(k).unwrap();
-            continue;
-        }
-        let s = Sample {
-            k,
-            u: &x.u,
-            y: &x.y,
-            p: &x.p,
-        };
-        det.step(&s, &mut out).unwrap();
-        all.push(bits(&out));
-    }
+    let gap = |k| (1_200..1_203).contains(&k) || k == 2_600;
+    let all = run_steps(&mut det, &mut sim, &mut out, 4_000, gap, |_, out| bits(out));
     assert!(!det.is_stationary());
     all
 }

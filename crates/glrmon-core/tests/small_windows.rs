@@ -6,19 +6,11 @@
 //! regime (tables per lag, ranks read from the tables) must answer every per-onset
 //! query as the general path does.
 
+mod common;
+
+use common::{bits, run_steps};
 use glrmon_core::{Sample, StepOutput, VectorLevel};
 use glrmon_sim::scenarios;
-
-/// Every output of a step as bits (ε, l_k, r̂, rank, θ̂), then the statistic and rank
-/// of onset r̂ as the detector reports them afterwards.
-fn bits(out: &StepOutput) -> Vec<u64> {
-    let mut v: Vec<u64> = out.innovation.iter().map(|x| x.to_bits()).collect();
-    v.push(out.glr.map_or(u64::MAX, f64::to_bits));
-    v.push(out.onset.unwrap_or(u64::MAX));
-    v.push(out.rank as u64);
-    v.extend(out.magnitude.iter().map(|x| x.to_bits()));
-    v
-}
 
 /// `steps` samples of the general path (fault at half-time, a gap at a third).
 fn run(
@@ -35,29 +27,23 @@ fn run(
     det.set_fused_window(fused);
     let mut sim = sc.faulty_simulator(17, fault, steps / 2, 2.0).unwrap();
     let mut out = StepOutput::new(sc.model_outputs(), sc.faults.len());
-    let mut all = Vec::new();
-    for k in 0..steps {
-        let x = sim.next_sample();
-        if k == steps / 3 {
-            det.predict_only(k).unwrap();
-            continue;
-        }
-        let s = Sample {
-            k,
-            u: &x.u,
-            y: &x.y,
-            p: &x.p,
-        };
-        det.step(&s, &mut out).unwrap();
-        let mut b = bits(&out);
-        if let Some(r) = out.onset {
-            let (stat, rank) = det.onset_statistic(r).unwrap();
-            b.push(stat.to_bits());
-            b.push(rank as u64);
-        }
-        all.push(b);
-    }
-    all
+    // Every output, then the statistic and rank of onset r̂ as reported afterwards.
+    run_steps(
+        &mut det,
+        &mut sim,
+        &mut out,
+        steps,
+        |k| k == steps / 3,
+        |det, out| {
+            let mut b = bits(out);
+            if let Some(r) = out.onset {
+                let (stat, rank) = det.onset_statistic(r).unwrap();
+                b.push(stat.to_bits());
+                b.push(rank as u64);
+            }
+            b
+        },
+    )
 }
 
 /// The window of `sc` set to w (and the minimum lag kept below it).

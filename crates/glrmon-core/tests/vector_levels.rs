@@ -3,41 +3,19 @@
 //! so every output of every sample is bit-identical, through the general path, gaps
 //! and the LTI fast path. Levels this processor lacks are reported, not faked.
 
-use glrmon_core::{Sample, StepOutput, VectorLevel};
-use glrmon_sim::scenarios;
+mod common;
 
-fn bits(out: &StepOutput) -> Vec<u64> {
-    let mut v: Vec<u64> = out.innovation.iter().map(|x| x.to_bits()).collect();
-    v.push(out.normalized_innovation.to_bits());
-    v.push(out.glr.map_or(u64::MAX, f64::to_bits));
-    v.push(out.onset.unwrap_or(u64::MAX));
-    v.push(out.rank as u64);
-    v.extend(out.magnitude.iter().map(|x| x.to_bits()));
-    v
-}
+use common::{bits, run_steps};
+use glrmon_core::{StepOutput, VectorLevel};
+use glrmon_sim::scenarios;
 
 fn run(sc: &scenarios::Scenario, fault: &str, level: VectorLevel) -> Vec<Vec<u64>> {
     let mut det = sc.detector().unwrap();
     assert!(det.set_vector_level(level));
     let mut sim = sc.faulty_simulator(9, fault, 3_000, 2.0).unwrap();
     let mut out = StepOutput::new(sc.model_outputs(), sc.faults.len());
-    let mut all = Vec::new();
-    for k in 0..5_000u64 {
-        let x = sim.next_sample();
-        if (1_500..1_503).contains(&k) {
-            det.predict_only(k).unwrap();
-            continue;
-        }
-        let s = Sample {
-            k,
-            u: &x.u,
-            y: &x.y,
-            p: &x.p,
-        };
-        det.step(&s, &mut out).unwrap();
-        all.push(bits(&out));
-    }
-    all
+    let gap = |k| (1_500..1_503).contains(&k);
+    run_steps(&mut det, &mut sim, &mut out, 5_000, gap, |_, out| bits(out))
 }
 
 #[test]
