@@ -380,9 +380,8 @@ fn bad_rows_become_error_records_and_the_replay_continues() {
     lines.insert(80, lines[50].clone()); // k goes backwards
     std::fs::write(&csv, lines.join("\n") + "\n").unwrap();
     let out = dir.file("out.jsonl");
-    ok(&glrmon(&[
-        "replay", "--config", &cfg, &csv, "--output", &out,
-    ]));
+    let replay = glrmon(&["replay", "--config", &cfg, &csv, "--output", &out]);
+    ok(&replay);
     let recs = records(&out);
     let errors: Vec<(String, String)> = recs
         .iter()
@@ -394,6 +393,12 @@ fn bad_rows_become_error_records_and_the_replay_continues() {
             }
         })
         .collect();
+    // The summary counts every error record: rejected rows and the monitor's own.
+    let summary = String::from_utf8_lossy(&replay.stderr);
+    assert!(
+        summary.contains(&format!("{} errors", errors.len())),
+        "{summary}"
+    );
     let codes: Vec<&str> = errors
         .iter()
         .map(|e| e.0.as_str())

@@ -289,11 +289,11 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
     };
     let mut outputs = Outputs::new(output_sinks(args, &header)?);
     monitor.set_stat_records(outputs.wants_stats());
-    let rows = replay_csv_into(csv, &mut monitor, &mut outputs)?;
+    let (rows, rejected) = replay_csv_into(csv, &mut monitor, &mut outputs)?;
     let alarm_lines = std::mem::take(&mut outputs.alarm_lines);
     outputs.finish()?;
     let c = monitor.counters();
-    let errors: u64 = c.errors.values().sum();
+    let errors: u64 = c.errors.values().sum::<u64>() + rejected;
     eprintln!(
         "glrmon replay: channel \"{}\": {rows} rows, {} samples, {} alarms, {errors} errors",
         channel.name, c.samples, c.alarms,
@@ -307,12 +307,13 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
 }
 
 /// Feeds every row to the monitor, the rows parsed ahead on a reader thread; bad rows
-/// become `error` records and the replay continues. Returns the number of rows.
+/// become `error` records and the replay continues. Returns the number of rows and of
+/// rows rejected.
 fn replay_csv_into<R: BufRead + Send + 'static>(
     csv: CsvReader<R>,
     monitor: &mut Monitor,
     outputs: &mut Outputs,
-) -> anyhow::Result<u64> {
+) -> anyhow::Result<(u64, u64)> {
     let name: Arc<str> = Arc::from(monitor.channel());
     let mut rows_ahead = ReadAhead::spawn(csv, |csv, spare| {
         let mut sample = match spare {
@@ -326,7 +327,7 @@ fn replay_csv_into<R: BufRead + Send + 'static>(
         }))
     })?;
     let mut records = Vec::new();
-    let (mut rows, mut stats) = (0, 0);
+    let (mut rows, mut rejected, mut stats) = (0, 0, 0);
     while let Some(row) = rows_ahead.next()? {
         rows += 1;
         match row {
@@ -340,6 +341,7 @@ fn replay_csv_into<R: BufRead + Send + 'static>(
                 rows_ahead.recycle(Ok(sample));
             }
             Err((e, t)) => {
+                rejected += 1;
                 let log_time = glrmon_record::publish_time(t, 0);
                 let message = format!("channel \"{}\": {}", monitor.channel(), e.message);
                 outputs.input(
@@ -363,7 +365,7 @@ fn replay_csv_into<R: BufRead + Send + 'static>(
         }
     }
     rows_ahead.finish()?;
-    Ok(rows)
+    Ok((rows, rejected))
 }
 
 fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
