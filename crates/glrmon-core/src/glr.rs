@@ -95,7 +95,7 @@ macro_rules! wide_call {
 /// into the dispatch, which keeps each function small for the compiler). One per
 /// feature: a generic function cannot carry `#[target_feature]`.
 macro_rules! fused_level {
-    ($feature:literal, $entry:ident, $run:ident, $lanes:ty, $doc:literal) => {
+    ($feature:literal, $entry:ident, $run:ident, $lanes:ty, $half:ty, $doc:literal) => {
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = $feature)]
         unsafe fn $entry(&mut self, k: u64, inputs: &StepInputs<'_>) -> Option<WindowMax> {
@@ -112,7 +112,7 @@ macro_rules! fused_level {
             &mut self,
             inputs: &StepInputs<'_>,
         ) {
-            self.fused_run::<N, M, P, $lanes>(inputs);
+            self.fused_run::<N, M, P, $lanes, $half>(inputs);
         }
     };
 }
@@ -204,9 +204,6 @@ pub(crate) struct WindowBank {
     output_factor: Vec<f64>,
     /// The impulse output factor of the fused pass: 0 except at the slot of onset k.
     impulse: Vec<f64>,
-    /// The last w mod L slots of every component for the fused pass, zero-padded to a
-    /// register of L ≤ 8 onsets.
-    tail: Vec<f64>,
     ldl: Vec<f64>,
     inv_pivot: Vec<f64>,
     solved: Vec<f64>,
@@ -323,7 +320,6 @@ impl WindowBank {
             state_factor: z(m * slots),
             output_factor: z(m * slots),
             impulse: z(slots),
-            tail: z((6 + n * m + p * m + t + m) * 8),
             ldl: z(t * slots),
             inv_pivot: z(m * slots),
             solved: z(m * slots),
@@ -552,8 +548,8 @@ impl WindowBank {
         self.solved[..w].copy_from_slice(&self.score[..w]);
     }
 
-    /// The LDLᵀ statistic for m = 2 fused into one branch-free pass over the slots; the
-    /// same operations, in the same order, as [`WindowBank::statistic_generic`].
+    /// The statistic for m = 2 in one branch-free pass over the slots: [`quad2`], the
+    /// operations of the fused pass.
     #[inline(always)]
     fn statistic_m2(&mut self) {
         let w = self.slots;
@@ -561,26 +557,10 @@ impl WindowBank {
         let (c00, rest) = self.info.split_at(w);
         let (c10, c11) = rest.split_at(w);
         let (d0, d1) = self.score.split_at(w);
-        let (iv0, iv1) = self.inv_pivot.split_at_mut(w);
-        let (z0, z1) = self.solved.split_at_mut(w);
-        let l10 = &mut self.ldl[w..2 * w];
-        let (c11, d1, iv1, z1) = (&c11[..w], &d1[..w], &mut iv1[..w], &mut z1[..w]);
+        let (c11, d1) = (&c11[..w], &d1[..w]);
+        let (stat, rank) = (&mut self.stat[..w], &mut self.rank[..w]);
         for s in 0..w {
-            let cut = c00[s].max(c11[s]) * tol;
-            let keep0 = c00[s] > cut && c00[s] > 0.0;
-            let inv0 = if keep0 { 1.0 / c00[s] } else { 0.0 };
-            let l = c10[s] * inv0;
-            let dd1 = c11[s] - l * l * c00[s];
-            let keep1 = dd1 > cut && dd1 > 0.0;
-            let inv1 = if keep1 { 1.0 / dd1 } else { 0.0 };
-            let y1 = d1[s] - l * d0[s];
-            iv0[s] = inv0;
-            iv1[s] = inv1;
-            l10[s] = l;
-            z0[s] = d0[s];
-            z1[s] = y1;
-            self.rank[s] = f64::from(u8::from(keep0)) + f64::from(u8::from(keep1));
-            self.stat[s] = d0[s] * d0[s] * inv0 + y1 * y1 * inv1;
+            (stat[s], rank[s]) = quad2(c00[s], c10[s], c11[s], d0[s], d1[s], tol);
         }
     }
 
@@ -748,6 +728,7 @@ impl WindowBank {
         fused_avx2,
         fused_run_avx2,
         Avx2Lanes,
+        f64,
         "The fused pass for one (n, m, p) with AVX2, four onsets per register."
     );
     fused_level!(
@@ -755,6 +736,7 @@ impl WindowBank {
         fused_avx512,
         fused_run_avx512,
         Lanes8,
+        Avx2Lanes,
         "The fused pass for one (n, m, p) with AVX-512F, eight onsets per register."
     );
 
@@ -785,11 +767,12 @@ impl WindowBank {
         self.best(k)
     }
 
-    /// The fused pass over every slot with n = N, m = M, p = P: whole registers over
-    /// the ring, then the last w mod L slots through a zero-padded copy (one kernel
-    /// per width keeps the build time down; padding lanes are computed and dropped).
+    /// The fused pass over every slot with n = N, m = M, p = P: whole registers of S
+    /// over the ring, then one register of H if that many slots are left, then the last
+    /// few slots one at a time. The kernel is the same at every width, so the slots get
+    /// the same bits whichever register they fall in, and nothing is copied or padded.
     #[inline(always)]
-    fn fused_run<const N: usize, const M: usize, const P: usize, S: Lanes>(
+    fn fused_run<const N: usize, const M: usize, const P: usize, S: Lanes, H: Lanes>(
         &mut self,
         inputs: &StepInputs<'_>,
     ) {
@@ -814,95 +797,15 @@ impl WindowBank {
             unsafe { fused_lanes::<N, M, P, S>(&coefs, &mut slots, s) };
             s += S::L;
         }
-        if s == w {
-            return;
+        if s + H::L <= w {
+            // SAFETY: as above.
+            unsafe { fused_lanes::<N, M, P, H>(&coefs, &mut slots, s) };
+            s += H::L;
         }
-        let (l, rest) = (S::L, w - s);
-        let t = M * (M + 1) / 2;
-        let sizes = [1, 1, 1, N * M, P * M, t, M, 1, 1];
-        let mut parts: [&mut [f64]; 9] = Default::default();
-        let mut buf = &mut self.tail[..];
-        for (part, size) in parts.iter_mut().zip(sizes) {
-            let (head, tail) = buf.split_at_mut(size * l);
-            *part = head;
-            buf = tail;
-        }
-        let [
-            active,
-            impulse,
-            lag,
-            gamma,
-            signature,
-            info,
-            score,
-            stat,
-            rank,
-        ] = parts;
-        let ring: [&[f64]; 7] = [
-            &self.active,
-            &self.impulse,
-            &self.lag,
-            &self.gamma,
-            &self.signature,
-            &self.info,
-            &self.score,
-        ];
-        for (src, dst) in ring.into_iter().zip([
-            &mut *active,
-            &mut *impulse,
-            &mut *lag,
-            &mut *gamma,
-            &mut *signature,
-            &mut *info,
-            &mut *score,
-        ]) {
-            // Element loops of at most L (a handful of values per component: a call
-            // to memcpy/memset each would cost more than the copy).
-            for (c, d) in dst.chunks_exact_mut(l).enumerate() {
-                let src = &src[c * w + s..c * w + w];
-                for (x, d) in d.iter_mut().enumerate() {
-                    *d = if x < rest { src[x] } else { 0.0 };
-                }
-            }
-        }
-        let mut padded = SlotArrays {
-            w: l,
-            active,
-            impulse,
-            lag,
-            gamma,
-            signature,
-            info,
-            score,
-            stat,
-            rank,
-        };
-        assert!(padded.sized(N, M, P), "tail arrays sized for one register");
-        // SAFETY: sized (asserted above) for w = L slots, and 0 + L ≤ L.
-        unsafe { fused_lanes::<N, M, P, S>(&coefs, &mut padded, 0) };
-        let ring: [&mut [f64]; 7] = [
-            &mut self.lag,
-            &mut self.gamma,
-            &mut self.signature,
-            &mut self.info,
-            &mut self.score,
-            &mut self.stat,
-            &mut self.rank,
-        ];
-        for (dst, src) in ring.into_iter().zip([
-            &*padded.lag,
-            &*padded.gamma,
-            &*padded.signature,
-            &*padded.info,
-            &*padded.score,
-            &*padded.stat,
-            &*padded.rank,
-        ]) {
-            for (c, x) in src.chunks_exact(l).enumerate() {
-                for (d, x) in dst[c * w + s..c * w + w].iter_mut().zip(x) {
-                    *d = *x;
-                }
-            }
+        while s < w {
+            // SAFETY: as above, one slot.
+            unsafe { fused_lanes::<N, M, P, f64>(&coefs, &mut slots, s) };
+            s += 1;
         }
     }
 
@@ -968,6 +871,14 @@ impl WindowBank {
                 return true;
             }
             (&self.tables.info, t)
+        } else if self.rank[s] as usize == m && m == 2 {
+            // C⁻¹d = adj(C)d/δ, the regular case of `quad2`.
+            let c = |i| self.info[i * w + s];
+            let (a, b, c, d1, d2) = (c(0), c(1), c(2), self.score[s], self.score[w + s]);
+            let det = a * c - b * b;
+            out[0] = (c * d1 - b * d2) / det;
+            out[1] = (a * d2 - b * d1) / det;
+            return true;
         } else if self.rank[s] as usize == m {
             if !self.factored {
                 self.factor_slot(s);
@@ -1286,6 +1197,21 @@ impl WindowBank {
                     }
                     tb.work_ldl[at(m, i, j)] = x * tb.work_inv_pivot[j];
                 }
+            }
+            if m == 2 {
+                // The pivot decisions of `quad2` (the rank of the general path).
+                let c = |i| tb.info[i * w + idx];
+                let (a, b, c) = (c(0), c(1), c(2));
+                let (_, r) = quad2(a, b, c, 0.0, 0.0, tol);
+                let cut = a.max(c) * tol;
+                let (keep_a, keep_c) = (a > cut && a > 0.0, c > cut && c > 0.0);
+                (tb.work_inv_pivot[0], tb.work_inv_pivot[1]) = match (keep_a, r as usize) {
+                    (true, 2) => (1.0 / a, a / (a * c - b * b)),
+                    (true, _) => (1.0 / a, 0.0),
+                    (false, _) if keep_c => (0.0, 1.0 / c),
+                    _ => (0.0, 0.0),
+                };
+                rank = r;
             }
             tb.rank[idx] = rank;
             // L⁻¹ (unit lower triangular).
@@ -1842,6 +1768,63 @@ trait Lanes: Copy {
     }
 }
 
+/// One onset: the passes' per-slot loops share the fused pass's kernels ([`quad2`]) and
+/// with them its operations.
+impl Lanes for f64 {
+    type Mask = bool;
+    const L: usize = 1;
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        x
+    }
+    #[inline(always)]
+    unsafe fn load_ptr(x: *const f64) -> Self {
+        // SAFETY: the caller guarantees one readable f64 at x.
+        unsafe { x.read_unaligned() }
+    }
+    #[inline(always)]
+    unsafe fn store_ptr(self, x: *mut f64) {
+        // SAFETY: the caller guarantees one writable f64 at x.
+        unsafe { x.write_unaligned(self) }
+    }
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        self + o
+    }
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        self - o
+    }
+    #[inline(always)]
+    fn mul(self, o: Self) -> Self {
+        self * o
+    }
+    #[inline(always)]
+    fn div(self, o: Self) -> Self {
+        self / o
+    }
+    #[inline(always)]
+    fn gt(self, o: Self) -> bool {
+        self > o
+    }
+    #[inline(always)]
+    fn nan(self) -> bool {
+        self.is_nan()
+    }
+    #[inline(always)]
+    fn and(a: bool, b: bool) -> bool {
+        a & b
+    }
+    #[inline(always)]
+    fn or(a: bool, b: bool) -> bool {
+        a | b
+    }
+    #[inline(always)]
+    fn select(m: bool, a: Self, b: Self) -> Self {
+        if m { a } else { b }
+    }
+}
+
 /// Eight onsets as a plain array, for the AVX-512F level: each operation is a loop
 /// over the lanes that the compiler turns into one 512-bit instruction (written
 /// without the 512-bit intrinsics, which need Rust 1.89, above the workspace's MSRV).
@@ -2119,11 +2102,37 @@ unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
         st!(x, v.score, a * w + s0);
         score[a] = x;
     }
-    // Dropped-pivot LDLᵀ (as `statistic_generic`): pivots dd, multipliers low[i][j].
     let tol = S::splat(c.tol);
-    let cut = if M == 2 {
-        info[0][0].max(info[1][1]).mul(tol)
+    let (stat, rank) = if M == 2 {
+        quad2(info[0][0], info[1][0], info[1][1], score[0], score[1], tol)
     } else {
+        ldl_statistic(&info, &score, tol)
+    };
+    st!(stat, v.stat, s0);
+    st!(rank, v.rank, s0);
+    // Γ ← AΓ + a·Ψ̃ − b·FKΦ̃ (eq. (46)), in place (Γ_k is held above).
+    for j in 0..M {
+        for i in 0..N {
+            let mut x = S::splat(c.psi[j][i])
+                .mul(sf[j])
+                .sub(S::splat(c.fk_phi[j][i]).mul(of[j]));
+            for q in 0..N {
+                x = x.add(S::splat(c.a[i][q]).mul(gamma[j][q]));
+            }
+            st!(x, v.gamma, (i + N * j) * w + s0);
+        }
+    }
+    st!(lag.add(one), v.lag, s0);
+}
+
+/// The dropped-pivot LDLᵀ statistic dᵀC⁻d and rank C of L onsets (eq. (35)), with the
+/// operations of [`WindowBank::statistic_generic`].
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn ldl_statistic<const M: usize, S: Lanes>(info: &[[S; M]; M], score: &[S; M], tol: S) -> (S, S) {
+    let zero = S::splat(0.0);
+    let one = S::splat(1.0);
+    let cut = {
         let mut x = zero;
         for (a, row) in info.iter().enumerate() {
             x = x.max(row[a]);
@@ -2172,21 +2181,45 @@ unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
         z[j] = x;
         stat = stat.add(x.mul(x).mul(inv[j]));
     }
-    st!(stat, v.stat, s0);
-    st!(rank, v.rank, s0);
-    // Γ ← AΓ + a·Ψ̃ − b·FKΦ̃ (eq. (46)), in place (Γ_k is held above).
-    for j in 0..M {
-        for i in 0..N {
-            let mut x = S::splat(c.psi[j][i])
-                .mul(sf[j])
-                .sub(S::splat(c.fk_phi[j][i]).mul(of[j]));
-            for q in 0..N {
-                x = x.add(S::splat(c.a[i][q]).mul(gamma[j][q]));
-            }
-            st!(x, v.gamma, (i + N * j) * w + s0);
-        }
-    }
-    st!(lag.add(one), v.lag, s0);
+    (stat, rank)
+}
+
+/// dᵀC⁺d and rank C for m = 2, C = [[a, b], [b, c]], with one division: the
+/// dropped-pivot LDLᵀ of [`WindowBank::statistic_generic`] (eq. (35)) with its two
+/// pivots a and δ/a, δ = ac − b², kept when above the cut-off τ·max(a, c), written over
+/// one denominator: with z = a·d₂ − b·d₁,
+///
+///   d₁²/a + (d₂ − (b/a)d₁)²/(δ/a) = (d₁²δ + z²) / (aδ)   (both pivots kept),
+///
+/// d₁²/a when only the first is kept, and d₂²/c when the first is dropped (then the
+/// second pivot is c itself). A sum of two non-negative terms over a positive
+/// denominator: no cancellation beyond δ's own, which the LDLᵀ shares. The
+/// comparisons test δ against τ·max(a, c)·a instead of δ/a against the cut-off, so no
+/// division decides a rank. One division instead of the LDLᵀ's two: division is the
+/// slowest operation of the window pass (issue 9).
+#[inline(always)]
+fn quad2<S: Lanes>(a: S, b: S, c: S, d1: S, d2: S, tol: S) -> (S, S) {
+    let zero = S::splat(0.0);
+    let one = S::splat(1.0);
+    let cut = a.max(c).mul(tol);
+    let keep_a = S::and(a.gt(cut), a.gt(zero));
+    let keep_c = S::and(c.gt(cut), c.gt(zero));
+    let det = a.mul(c).sub(b.mul(b));
+    let keep_det = S::and(det.gt(cut.mul(a)), det.gt(zero));
+    let z = a.mul(d2).sub(b.mul(d1));
+    let d1s = d1.mul(d1);
+    let (full_num, full_den) = (d1s.mul(det).add(z.mul(z)), a.mul(det));
+    let num_a = S::select(keep_det, full_num, d1s);
+    let den_a = S::select(keep_det, full_den, a);
+    let num = S::select(keep_a, num_a, S::select(keep_c, d2.mul(d2), zero));
+    let den = S::select(keep_a, den_a, S::select(keep_c, c, one));
+    let second = S::select(
+        keep_a,
+        S::select(keep_det, one, zero),
+        S::select(keep_c, one, zero),
+    );
+    let rank = S::select(keep_a, one, zero).add(second);
+    (num.div(den), rank)
 }
 
 #[cfg(test)]
@@ -2266,18 +2299,32 @@ mod tests {
     }
 
     #[test]
-    fn fused_m1_m2_statistics_equal_generic_ldl_bit_for_bit() {
-        for m in [1, 2] {
-            let mut fast = bank_with_random_stats(m, 3);
+    fn m1_statistic_equals_generic_ldl_bit_for_bit() {
+        let mut fast = bank_with_random_stats(1, 3);
+        let mut slow = fast.clone();
+        fast.statistic_m1();
+        slow.statistic_generic();
+        assert_eq!(fast.stat, slow.stat);
+        assert_eq!(fast.rank, slow.rank);
+    }
+
+    /// The one-division 2×2 form (`quad2`) is the dropped-pivot LDLᵀ statistic written
+    /// over one denominator: the same ranks and the same value to rounding, over
+    /// regular, rank-one and zero C.
+    #[test]
+    fn m2_one_division_form_equals_generic_ldl() {
+        for seed in 1..40 {
+            let mut fast = bank_with_random_stats(2, seed);
             let mut slow = fast.clone();
-            if m == 1 {
-                fast.statistic_m1();
-            } else {
-                fast.statistic_m2();
-            }
+            fast.statistic_m2();
             slow.statistic_generic();
-            assert_eq!(fast.stat, slow.stat, "m = {m}");
-            assert_eq!(fast.rank, slow.rank, "m = {m}");
+            assert_eq!(fast.rank, slow.rank, "seed {seed}");
+            for (s, (f, g)) in fast.stat.iter().zip(&slow.stat).enumerate() {
+                assert!(
+                    (f - g).abs() <= 1e-12 * (1.0 + g.abs()),
+                    "seed {seed}, slot {s}: {f} vs {g}"
+                );
+            }
         }
     }
 
@@ -2288,7 +2335,11 @@ mod tests {
     fn dropped_pivot_ldl_equals_moore_penrose_quadratic_form() {
         for m in [2, 3, 5] {
             let mut b = bank_with_random_stats(m, 11);
-            b.statistic_generic();
+            if m == 2 {
+                b.statistic_m2();
+            } else {
+                b.statistic_generic();
+            }
             let w = b.slots;
             for s in 0..w {
                 let mut a = vec![0.0; m * m];

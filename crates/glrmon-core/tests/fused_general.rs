@@ -33,7 +33,7 @@ fn run(sc: &scenarios::Scenario, fault: &str, level: VectorLevel, fused: bool) -
 #[test]
 fn fused_window_pass_equals_the_separate_passes_bit_for_bit() {
     // The scenarios' own windows, then windows that are not a multiple of the register
-    // width (the last slots go through the padded tail).
+    // width (the last slots go through a half-width register and one at a time).
     let with_window = |mut sc: scenarios::Scenario, w: usize| {
         sc.window.window = w;
         sc

@@ -1,6 +1,7 @@
 //! Windows smaller than, and not a multiple of, a vector register (w = 2 … 18): the
 //! fused pass reads and writes its lanes unchecked after one size check per step, and
-//! its last partial register goes through a zero-padded copy, so these windows
+//! the slots after its last whole register go through a half-width register and one at
+//! a time, so these windows
 //! exercise every edge of that bookkeeping. They must give the bits of the passes at
 //! every vector level (through a fault and a predict-only gap), and the stationary
 //! regime (tables per lag, ranks read from the tables) must answer every per-onset
