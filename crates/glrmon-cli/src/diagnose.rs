@@ -103,7 +103,7 @@ impl Samples {
                 .next_into(sample)
                 .map(|r| r.map_err(|e| format!("{} ({})", e.message, e.code.as_str())))),
             Self::Mcap(input, channel) => loop {
-                let Some(recorded) = input.next_input()? else {
+                let Some(recorded) = input.next_input(None)? else {
                     let (lines, damaged) = input.damage_report();
                     if damaged {
                         return Err(InvalidInput(lines.join("; ")).into());

@@ -36,6 +36,9 @@ pub(crate) struct RecordedInput {
     pub(crate) log_time_ns: u64,
 }
 
+/// Spare samples kept for decoding into.
+const SPARE_SAMPLES: usize = 64;
+
 /// A recording opened for its inputs.
 pub(crate) struct McapInput {
     reader: McapReader<Counting<BufReader<File>>>,
@@ -45,6 +48,8 @@ pub(crate) struct McapInput {
     pub(crate) progress: (Arc<AtomicU64>, u64),
     pending: VecDeque<Event>,
     samples: Vec<Sample>,
+    /// Samples the consumer handed back ([`McapInput::next_input`]), decoded into again.
+    spare_samples: Vec<Sample>,
     queued: VecDeque<RecordedInput>,
     limits: DecodeLimits,
     /// Recorded result messages met (not replayed).
@@ -100,6 +105,7 @@ impl McapInput {
             progress: (read, size),
             pending,
             samples: Vec::new(),
+            spare_samples: Vec::new(),
             queued: VecDeque::new(),
             limits: DecodeLimits::default(),
             results: 0,
@@ -114,8 +120,22 @@ impl McapInput {
         self.limits = limits;
     }
 
-    /// The next recorded input of any channel, in file order.
-    pub(crate) fn next_input(&mut self) -> anyhow::Result<Option<RecordedInput>> {
+    /// The next recorded input of any channel, in file order. `spare` is an input the
+    /// consumer is done with: its sample is decoded into again (no allocation per
+    /// sample, and the memory is freed by the thread that allocated it).
+    pub(crate) fn next_input(
+        &mut self,
+        spare: Option<RecordedInput>,
+    ) -> anyhow::Result<Option<RecordedInput>> {
+        if let Some(RecordedInput {
+            item: InputItem::Sample(s),
+            ..
+        }) = spare
+        {
+            if self.spare_samples.len() < SPARE_SAMPLES {
+                self.spare_samples.push(s);
+            }
+        }
         loop {
             if let Some(i) = self.queued.pop_front() {
                 return Ok(Some(i));
@@ -133,6 +153,9 @@ impl McapInput {
             };
             match kind {
                 TopicKind::Inputs => {
+                    if self.samples.is_empty() {
+                        self.samples.extend(self.spare_samples.pop());
+                    }
                     match decode_samples(channel, &m.data, &self.limits, &mut self.samples) {
                         Ok(()) => {
                             let name = self.channel_name(channel);

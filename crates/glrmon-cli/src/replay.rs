@@ -445,7 +445,7 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
     let mut inputs = 0u64;
     let started = std::time::Instant::now();
     let progress_bytes = input.progress.0.clone();
-    let mut inputs_ahead = ReadAhead::spawn(input, |input, _| input.next_input())?;
+    let mut inputs_ahead = ReadAhead::spawn(input, |input, spare| input.next_input(spare))?;
     while let Some(recorded) = inputs_ahead.next()? {
         inputs += 1;
         if inputs % 65_536 == 0 {
@@ -463,6 +463,7 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
             if args.channel.is_none() {
                 *unknown.entry(recorded.channel.clone()).or_insert(0) += 1;
             }
+            inputs_ahead.recycle(recorded);
             continue;
         };
         let log_time = recorded.log_time_ns;
@@ -482,6 +483,7 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
             }
         }
         outputs.records(stats, &mut records, log_time)?;
+        inputs_ahead.recycle(recorded);
     }
     let input = inputs_ahead.finish()?;
     if let Some(bar) = progress {
