@@ -673,9 +673,7 @@ impl WindowBank {
             &self.stat[start..start + first_run],
             &self.stat[..count - first_run],
         ];
-        let (v0, p0) = lane_argmax(runs[0]);
-        let (v1, p1) = lane_argmax(runs[1]);
-        let best_pos = if v1 > v0 { first_run + p1 } else { p0 };
+        let (_, best_pos) = lane_argmax(runs[0], runs[1]);
         let slot = (start + best_pos) % self.slots;
         Some(WindowMax {
             glr: self.stat[slot],
@@ -1360,51 +1358,68 @@ impl WindowBank {
     }
 }
 
-/// The largest value of `values` and its first position (NaN ignored; (−∞, 0) when
-/// empty or all NaN), i.e. exactly what a strict `>` scan finds, without a chain of
-/// compare-and-select through every value: first the largest value over sixteen
-/// independent lanes (each a vector max; the last sixteen values are taken again
-/// instead of a partial register, which leaves a maximum unchanged) reduced by halving,
-/// then the first block of eight holding it (one vector compare per block) and its
-/// position inside the block.
+/// The largest value of the concatenation `first ++ second` and its first position
+/// (NaN ignored; (−∞, 0) when empty or all NaN), i.e. exactly what a strict `>` scan
+/// finds, without a chain of compare-and-select through every value: first the largest
+/// value over sixteen independent lanes (each a vector max; the last sixteen values of
+/// a run are taken again instead of a partial register, which leaves a maximum
+/// unchanged) reduced once by halving, then the first block of eight holding it (one
+/// vector compare per block) and its position inside the block. The window's ring is
+/// two such runs in onset order; both go through one reduction.
 #[inline(always)]
-fn lane_argmax(values: &[f64]) -> (f64, usize) {
+fn lane_argmax(first: &[f64], second: &[f64]) -> (f64, usize) {
     const L: usize = 16;
-    const B: usize = 8;
-    let n = values.len();
-    let value = if n >= L {
-        let mut best = [f64::NEG_INFINITY; L];
-        let mut chunks = values.chunks_exact(L);
-        for c in &mut chunks {
+    let mut best = [f64::NEG_INFINITY; L];
+    for run in [first, second] {
+        let n = run.len();
+        if n >= L {
+            let mut chunks = run.chunks_exact(L);
+            for c in &mut chunks {
+                for l in 0..L {
+                    best[l] = if c[l] > best[l] { c[l] } else { best[l] };
+                }
+            }
+            let last = &run[n - L..];
             for l in 0..L {
-                best[l] = if c[l] > best[l] { c[l] } else { best[l] };
+                best[l] = if last[l] > best[l] { last[l] } else { best[l] };
+            }
+        } else {
+            for (l, v) in run.iter().enumerate() {
+                best[l] = if *v > best[l] { *v } else { best[l] };
             }
         }
-        let last = &values[n - L..];
-        for l in 0..L {
-            best[l] = if last[l] > best[l] { last[l] } else { best[l] };
+    }
+    // A tree of halvings (no lane holds NaN, so the order of the maxima is free).
+    let mut width = L;
+    while width > 1 {
+        width /= 2;
+        for l in 0..width {
+            best[l] = if best[l + width] > best[l] {
+                best[l + width]
+            } else {
+                best[l]
+            };
         }
-        // A tree of halvings (no lane holds NaN, so the order of the maxima is free).
-        let mut width = L;
-        while width > 1 {
-            width /= 2;
-            for l in 0..width {
-                best[l] = if best[l + width] > best[l] {
-                    best[l + width]
-                } else {
-                    best[l]
-                };
-            }
-        }
-        best[0]
-    } else {
-        values
-            .iter()
-            .fold(f64::NEG_INFINITY, |m, v| if *v > m { *v } else { m })
-    };
+    }
+    let value = best[0];
     if value == f64::NEG_INFINITY {
         return (value, 0);
     }
+    match first_position(first, value) {
+        Some(pos) => (first[pos], pos),
+        None => {
+            let pos = first_position(second, value).unwrap_or(0);
+            (second.get(pos).copied().unwrap_or(value), first.len() + pos)
+        }
+    }
+}
+
+/// The first position of `value` in `values`: the first block of eight that holds it
+/// (one vector compare per block), then the position inside the block.
+#[inline(always)]
+fn first_position(values: &[f64], value: f64) -> Option<usize> {
+    const B: usize = 8;
+    let n = values.len();
     let mut base = 0;
     while base + B <= n {
         if values[base..base + B]
@@ -1415,12 +1430,10 @@ fn lane_argmax(values: &[f64]) -> (f64, usize) {
         }
         base += B;
     }
-    let pos = values[base..]
+    values[base..]
         .iter()
         .position(|v| *v == value)
-        .map_or(0, |p| base + p);
-    // The value stored there (the lanes' maximum may be the other zero of a ±0 tie).
-    (values[pos], pos)
+        .map(|p| base + p)
 }
 
 /// A contiguous run of slots [start, start + len) of the ring against the table entries
@@ -2260,7 +2273,8 @@ mod tests {
     }
 
     /// The lane scan finds what a plain strict-`>` scan finds: the largest value and
-    /// its earliest position, NaN ignored, ties to the earliest.
+    /// its earliest position, NaN ignored, ties to the earliest, however the values
+    /// are split into the two runs.
     #[test]
     fn lane_argmax_equals_the_earliest_strict_maximum() {
         let mut x = 5_u64;
@@ -2270,7 +2284,7 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (x >> 33) % 7
         };
-        for len in 0..80 {
+        for len in 0_usize..80 {
             for _ in 0..50 {
                 let v: Vec<f64> = (0..len)
                     .map(|_| match rnd() {
@@ -2288,12 +2302,14 @@ mod tests {
                         pos = i;
                     }
                 }
-                let (got_value, got_pos) = lane_argmax(&v);
-                assert_eq!(
-                    (got_value.to_bits(), got_pos),
-                    (value.to_bits(), pos),
-                    "{v:?}"
-                );
+                for split in [0, len / 3, len / 2, len.saturating_sub(5), len] {
+                    let (got_value, got_pos) = lane_argmax(&v[..split], &v[split..]);
+                    assert_eq!(
+                        (got_value.to_bits(), got_pos),
+                        (value.to_bits(), pos),
+                        "{v:?} split at {split}"
+                    );
+                }
             }
         }
     }
