@@ -95,7 +95,7 @@ macro_rules! wide_call {
 /// into the dispatch, which keeps each function small for the compiler). One per
 /// feature: a generic function cannot carry `#[target_feature]`.
 macro_rules! fused_level {
-    ($feature:literal, $entry:ident, $run:ident, $lanes:ty, $half:ty, $doc:literal) => {
+    ($feature:literal, $entry:ident, $run:ident, $rest:ident, $lanes:ty, $half:ty, $doc:literal) => {
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = $feature)]
         unsafe fn $entry(&mut self, k: u64, inputs: &StepInputs<'_>) -> Option<WindowMax> {
@@ -112,7 +112,24 @@ macro_rules! fused_level {
             &mut self,
             inputs: &StepInputs<'_>,
         ) {
-            self.fused_run::<N, M, P, $lanes, $half>(inputs);
+            let coefs = Coefs::<N, M, P>::new(inputs, &self.kinds, self.tolerance);
+            let rest = self.fused_run::<N, M, P, $lanes>(&coefs);
+            if rest < self.slots {
+                // SAFETY: compiled with the same feature as this kernel.
+                unsafe { self.$rest::<N, M, P>(&coefs, rest) };
+            }
+        }
+
+        /// The slots after the kernel's last whole register.
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $feature)]
+        #[inline(never)]
+        unsafe fn $rest<const N: usize, const M: usize, const P: usize>(
+            &mut self,
+            coefs: &Coefs<N, M, P>,
+            first: usize,
+        ) {
+            self.fused_rest::<N, M, P, $half>(coefs, first);
         }
     };
 }
@@ -725,6 +742,7 @@ impl WindowBank {
         "avx2",
         fused_avx2,
         fused_run_avx2,
+        fused_rest_avx2,
         Avx2Lanes,
         f64,
         "The fused pass for one (n, m, p) with AVX2, four onsets per register."
@@ -733,6 +751,7 @@ impl WindowBank {
         "avx512f",
         fused_avx512,
         fused_run_avx512,
+        fused_rest_avx512,
         Lanes8,
         Avx2Lanes,
         "The fused pass for one (n, m, p) with AVX-512F, eight onsets per register."
@@ -765,19 +784,11 @@ impl WindowBank {
         self.best(k)
     }
 
-    /// The fused pass over every slot with n = N, m = M, p = P: whole registers of S
-    /// over the ring, then one register of H if that many slots are left, then the last
-    /// few slots one at a time. The kernel is the same at every width, so the slots get
-    /// the same bits whichever register they fall in, and nothing is copied or padded.
+    /// The per-slot arrays of the fused pass, checked once for n = N, m = M, p = P.
     #[inline(always)]
-    fn fused_run<const N: usize, const M: usize, const P: usize, S: Lanes, H: Lanes>(
-        &mut self,
-        inputs: &StepInputs<'_>,
-    ) {
-        let coefs = Coefs::<N, M, P>::new(inputs, &self.kinds, self.tolerance);
-        let w = self.slots;
-        let mut slots = SlotArrays {
-            w,
+    fn slot_arrays<const N: usize, const M: usize, const P: usize>(&mut self) -> SlotArrays<'_> {
+        let slots = SlotArrays {
+            w: self.slots,
             active: &self.active,
             impulse: &self.impulse,
             lag: &mut self.lag,
@@ -789,20 +800,48 @@ impl WindowBank {
             rank: &mut self.rank,
         };
         assert!(slots.sized(N, M, P), "window arrays sized for the bank");
+        slots
+    }
+
+    /// The fused pass with n = N, m = M, p = P over whole registers of S from the
+    /// first slot; returns the first slot left (fewer than a register).
+    #[inline(always)]
+    fn fused_run<const N: usize, const M: usize, const P: usize, S: Lanes>(
+        &mut self,
+        coefs: &Coefs<N, M, P>,
+    ) -> usize {
+        let mut slots = self.slot_arrays::<N, M, P>();
+        let w = slots.w;
         let mut s = 0;
         while s + S::L <= w {
-            // SAFETY: sized (asserted above) and s + L ≤ w.
-            unsafe { fused_lanes::<N, M, P, S>(&coefs, &mut slots, s) };
+            // SAFETY: sized (checked by `slot_arrays`) and s + L ≤ w.
+            unsafe { fused_lanes::<N, M, P, S>(coefs, &mut slots, s) };
             s += S::L;
         }
+        s
+    }
+
+    /// The fused pass over the slots from s on, fewer than a register: one register of
+    /// H if that many are left, then one slot at a time. The kernel is the same at
+    /// every width, so every slot gets the same bits whichever register it falls in,
+    /// and nothing is copied or padded. A function of its own, apart from the main
+    /// loop, so that its registers do not crowd the main loop's.
+    #[inline(always)]
+    fn fused_rest<const N: usize, const M: usize, const P: usize, H: Lanes>(
+        &mut self,
+        coefs: &Coefs<N, M, P>,
+        mut s: usize,
+    ) {
+        let mut slots = self.slot_arrays::<N, M, P>();
+        let w = slots.w;
         if s + H::L <= w {
-            // SAFETY: as above.
-            unsafe { fused_lanes::<N, M, P, H>(&coefs, &mut slots, s) };
+            // SAFETY: sized (checked by `slot_arrays`) and s + L ≤ w.
+            unsafe { fused_lanes::<N, M, P, H>(coefs, &mut slots, s) };
             s += H::L;
         }
         while s < w {
             // SAFETY: as above, one slot.
-            unsafe { fused_lanes::<N, M, P, f64>(&coefs, &mut slots, s) };
+            unsafe { fused_lanes::<N, M, P, f64>(coefs, &mut slots, s) };
             s += 1;
         }
     }
