@@ -116,20 +116,22 @@ macro_rules! fused_level {
             let rest = self.fused_run::<N, M, P, $lanes>(&coefs);
             if rest < self.slots {
                 // SAFETY: compiled with the same feature as this kernel.
-                unsafe { self.$rest::<N, M, P>(&coefs, rest) };
+                unsafe { self.$rest::<N, M, P>(inputs, rest) };
             }
         }
 
-        /// The slots after the kernel's last whole register.
+        /// The slots after the kernel's last whole register (with coefficients of its
+        /// own: a reference to the main loop's would keep them out of its registers).
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = $feature)]
         #[inline(never)]
         unsafe fn $rest<const N: usize, const M: usize, const P: usize>(
             &mut self,
-            coefs: &Coefs<N, M, P>,
+            inputs: &StepInputs<'_>,
             first: usize,
         ) {
-            self.fused_rest::<N, M, P, $half>(coefs, first);
+            let coefs = Coefs::<N, M, P>::new(inputs, &self.kinds, self.tolerance);
+            self.fused_rest::<N, M, P, $half>(&coefs, first);
         }
     };
 }
@@ -810,8 +812,8 @@ impl WindowBank {
         &mut self,
         coefs: &Coefs<N, M, P>,
     ) -> usize {
+        let w = self.slots;
         let mut slots = self.slot_arrays::<N, M, P>();
-        let w = slots.w;
         let mut s = 0;
         while s + S::L <= w {
             // SAFETY: sized (checked by `slot_arrays`) and s + L ≤ w.
