@@ -77,7 +77,8 @@ impl Onset {
 /// predict-only steps for missing samples (where `signals` repeats the last sample's).
 pub trait ColumnFn: Send + std::fmt::Debug {
     /// Writes the column at sample `k` into `out` (length n for a state column, p for
-    /// an output column). `system` holds the model matrices already evaluated at k.
+    /// an output column), every entry: on entry `out` may hold an earlier sample's
+    /// column. `system` holds the model matrices already evaluated at k.
     fn evaluate(&mut self, k: u64, signals: &Signals<'_>, system: &SystemMatrices, out: &mut [f64]);
 }
 

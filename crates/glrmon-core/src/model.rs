@@ -93,7 +93,9 @@ pub trait StateSpace: Send + std::fmt::Debug {
     fn dims(&self) -> Dims;
 
     /// Writes F_k, G_k, H_k, J_k, Q_k, R_k for sample `k` with known signals `signals`
-    /// into `out` (already sized by [`SystemMatrices::zeros`]).
+    /// into `out` (already sized by [`SystemMatrices::zeros`]), every entry: on entry
+    /// `out` may hold the matrices of any earlier sample, not necessarily the last (the
+    /// detector exchanges buffers instead of copying them).
     fn evaluate(&mut self, k: u64, signals: &Signals<'_>, out: &mut SystemMatrices);
 
     /// True when the matrices never change (an LTI model). Lets callers take
