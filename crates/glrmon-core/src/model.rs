@@ -78,9 +78,18 @@ impl SystemMatrices {
     /// Whether every entry of every matrix is finite.
     #[must_use]
     pub fn is_finite(&self) -> bool {
-        [&self.f, &self.g, &self.h, &self.j, &self.q, &self.r]
+        // A value is not finite when its exponent bits are all ones: OR-ing that test
+        // over the entries is branch-free and vectorisable (checked at every sample),
+        // unlike a test and a branch per entry.
+        const EXP: u64 = 0x7ff0_0000_0000_0000;
+        let any_nonfinite = |m: &DMatrix<f64>| {
+            m.as_slice()
+                .iter()
+                .fold(false, |a, x| a | (x.to_bits() & EXP == EXP))
+        };
+        ![&self.f, &self.g, &self.h, &self.j, &self.q, &self.r]
             .iter()
-            .all(|m| m.as_slice().iter().all(|x| x.is_finite()))
+            .fold(false, |a, m| a | any_nonfinite(m))
     }
 }
 
@@ -359,6 +368,31 @@ impl StateSpace for Lpv {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn is_finite_rejects_each_non_finite_value_in_each_matrix() {
+        let dims = Dims {
+            states: 2,
+            inputs: 1,
+            outputs: 1,
+            signals: 0,
+        };
+        let edge = [0.0, -0.0, f64::MAX, f64::MIN, f64::MIN_POSITIVE, 5e-324];
+        for value in edge {
+            let mut s = SystemMatrices::zeros(dims);
+            s.q[(1, 1)] = value;
+            assert!(s.is_finite(), "{value}");
+        }
+        for value in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            for m in 0..6 {
+                let mut s = SystemMatrices::zeros(dims);
+                let target = [&mut s.f, &mut s.g, &mut s.h, &mut s.j, &mut s.q, &mut s.r];
+                let last = target[m].len() - 1;
+                target.into_iter().nth(m).unwrap()[last] = value;
+                assert!(!s.is_finite(), "{value} in matrix {m}");
+            }
+        }
+    }
 
     #[test]
     fn lpv_evaluates_affine_combination() {
