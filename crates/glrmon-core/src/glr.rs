@@ -250,7 +250,8 @@ pub(crate) struct WindowBank {
     /// passes.
     fused: bool,
     /// Whether `ldl`, `inv_pivot` and `solved` hold the last step's factorisation of
-    /// every slot (the passes) or of none (the fused pass keeps it in registers).
+    /// every slot (the passes for m ≠ 2) or of none (the fused pass keeps it in
+    /// registers; m = 2 has none).
     factored: bool,
 }
 
@@ -526,7 +527,8 @@ impl WindowBank {
 
     #[inline(always)]
     fn maximize_body(&mut self, k: u64) -> Option<WindowMax> {
-        self.factored = true;
+        // The m = 2 statistic (`quad2`) keeps no factorisation: θ̂ uses adj(C)/δ.
+        self.factored = self.m != 2;
         match self.m {
             1 => self.statistic_m1(),
             2 => self.statistic_m2(),
