@@ -914,8 +914,8 @@ impl WindowBank {
             (&self.tables.info, t)
         } else if self.rank[s] as usize == m && m == 2 {
             // C⁻¹d = adj(C)d/δ, the regular case of `quad2`.
-            let c = |i| self.info[i * w + s];
-            let (a, b, c, d1, d2) = (c(0), c(1), c(2), self.score[s], self.score[w + s]);
+            let info = |i| self.info[i * w + s];
+            let (a, b, c, d1, d2) = (info(0), info(1), info(2), self.score[s], self.score[w + s]);
             let det = a * c - b * b;
             out[0] = (c * d1 - b * d2) / det;
             out[1] = (a * d2 - b * d1) / det;
@@ -1241,8 +1241,8 @@ impl WindowBank {
             }
             if m == 2 {
                 // The pivot decisions of `quad2` (the rank of the general path).
-                let c = |i| tb.info[i * w + idx];
-                let (a, b, c) = (c(0), c(1), c(2));
+                let info = |i| tb.info[i * w + idx];
+                let (a, b, c) = (info(0), info(1), info(2));
                 let (_, r) = quad2(a, b, c, 0.0, 0.0, tol);
                 let cut = a.max(c) * tol;
                 let (keep_a, keep_c) = (a > cut && a > 0.0, c > cut && c > 0.0);
