@@ -14,6 +14,12 @@
 //! θ̂_k          = C_k(r̂)⁺ d_k(r̂)                                (34)
 //! ```
 //!
+//! In (46) each fault column enters through one factor: Ψ_k(r) − F_kK_kΦ_k(r) =
+//! a(k − r)Ψ̃_k − b(k − r)F_kK_kΦ̃_k, and a = b for the step, ramp and known profiles
+//! while a = 0 for an impulse, so it is b(k − r)·G_k with the forcing column
+//! G_k = Ψ̃_k − F_kK_kΦ̃_k (G_k = −F_kK_kΦ̃_k for an impulse): one product per entry
+//! of Γ instead of two and a difference ([`forcing`]).
+//!
 //! The sums start at j = r, not r + 1 as printed in (32)-(33): for a state step fault
 //! S_r(r) = 0 and the two agree; for impulses and output faults the j = r term carries
 //! the fault.
@@ -219,10 +225,13 @@ pub(crate) struct WindowBank {
     /// d_k(r): [a·slots + s].
     score: Vec<f64>,
     // Per-step scratch over slots.
-    state_factor: Vec<f64>,
+    /// b_j(k − r): the factor of L⁻¹Φ̃ in the signature (eq. (45)) and of the forcing
+    /// column in Γ's time update (eq. (46), [`forcing`]).
     output_factor: Vec<f64>,
     /// The impulse output factor of the fused pass: 0 except at the slot of onset k.
     impulse: Vec<f64>,
+    /// The forcing columns G_k of eq. (46) (n×m, [`forcing`]) of the time update.
+    forcing: Vec<f64>,
     ldl: Vec<f64>,
     inv_pivot: Vec<f64>,
     solved: Vec<f64>,
@@ -337,9 +346,9 @@ impl WindowBank {
             signature: z(p * m * slots),
             info: z(t * slots),
             score: z(m * slots),
-            state_factor: z(m * slots),
             output_factor: z(m * slots),
             impulse: z(slots),
+            forcing: z(n * m),
             ldl: z(t * slots),
             inv_pivot: z(m * slots),
             solved: z(m * slots),
@@ -395,28 +404,23 @@ impl WindowBank {
         self.lag[0] = 0.0;
     }
 
-    /// Per-slot profile factors at step k: a_j(k − r) and b_j(k − r), one loop per
-    /// profile kind so that the loops over slots are branch-free.
+    /// Per-slot profile factors b_j(k − r) at step k, one loop per profile kind so that
+    /// the loops over slots are branch-free. (The state factor a_j is b_j, or 0 for an
+    /// impulse, and enters only through the forcing column.)
     #[inline(always)]
     fn compute_factors(&mut self, k: u64) {
         let slots = self.slots;
         let newest = self.first.map(|_| self.slot_of(k));
         for (j, kind) in self.kinds.iter().enumerate() {
-            let sf = &mut self.state_factor[j * slots..(j + 1) * slots];
             let of = &mut self.output_factor[j * slots..(j + 1) * slots];
             match kind {
-                Onset::Step | Onset::Known => {
-                    sf.copy_from_slice(&self.active);
-                    of.copy_from_slice(&self.active);
-                }
+                Onset::Step | Onset::Known => of.copy_from_slice(&self.active),
                 Onset::Ramp => {
-                    for ((f, a), l) in sf.iter_mut().zip(&self.active).zip(&self.lag) {
+                    for ((f, a), l) in of.iter_mut().zip(&self.active).zip(&self.lag) {
                         *f = a * (l + 1.0);
                     }
-                    of.copy_from_slice(sf);
                 }
                 Onset::Impulse => {
-                    sf.fill(0.0);
                     of.fill(0.0);
                     if let Some(s) = newest {
                         if self.onset[s] == k {
@@ -1001,20 +1005,21 @@ impl WindowBank {
         if recompute_factors {
             self.compute_factors(k);
         }
-        let (n, m, w) = (self.n, self.m, self.slots);
-        for j in 0..m {
-            let sf = &self.state_factor[j * w..(j + 1) * w];
-            let of = &self.output_factor[j * w..(j + 1) * w];
+        let (n, w) = (self.n, self.slots);
+        for (j, kind) in self.kinds.iter().enumerate() {
+            for i in 0..n {
+                self.forcing[i + n * j] = forcing(*kind, psi[at(n, i, j)], fk_phi[at(n, i, j)]);
+            }
+            let factor = &self.output_factor[j * w..(j + 1) * w];
             let src = &self.gamma[n * j * w..n * (j + 1) * w];
             let dst = &mut self.gamma_next[n * j * w..n * (j + 1) * w];
-            let psi_j = &psi[n * j..n * (j + 1)];
-            let fkphi_j = &fk_phi[n * j..n * (j + 1)];
+            let g = &self.forcing[n * j..n * (j + 1)];
             match n {
-                1 => gamma_column::<1>(closed_loop, psi_j, fkphi_j, sf, of, src, dst),
-                2 => gamma_column::<2>(closed_loop, psi_j, fkphi_j, sf, of, src, dst),
-                3 => gamma_column::<3>(closed_loop, psi_j, fkphi_j, sf, of, src, dst),
-                4 => gamma_column::<4>(closed_loop, psi_j, fkphi_j, sf, of, src, dst),
-                _ => gamma_column_generic(n, closed_loop, psi_j, fkphi_j, sf, of, src, dst),
+                1 => gamma_column::<1>(closed_loop, g, factor, src, dst),
+                2 => gamma_column::<2>(closed_loop, g, factor, src, dst),
+                3 => gamma_column::<3>(closed_loop, g, factor, src, dst),
+                4 => gamma_column::<4>(closed_loop, g, factor, src, dst),
+                _ => gamma_column_generic(n, closed_loop, g, factor, src, dst),
             }
         }
         std::mem::swap(&mut self.gamma, &mut self.gamma_next);
@@ -1281,14 +1286,13 @@ impl WindowBank {
                     tb.inverse[tri(a, b) * w + idx] = if a == b { g } else { 2.0 * g };
                 }
             }
-            // Γ(ℓ + 1) = AΓ(ℓ) + a(ℓ)Ψ̃ − b(ℓ)FKΦ̃ (eq. (46)), in the order of `gamma_column`.
+            // Γ(ℓ + 1) = AΓ(ℓ) + b(ℓ)G (eq. (46), [`forcing`]), in the order of
+            // `gamma_column`.
             for (j, kind) in self.kinds.iter().enumerate() {
-                let (sf, of) = (
-                    kind.state_factor(lag as u64),
-                    kind.output_factor(lag as u64),
-                );
+                let b = kind.output_factor(lag as u64);
                 for i in 0..n {
-                    let mut v = psi[at(n, i, j)] * sf - fk_phi[at(n, i, j)] * of;
+                    let g = forcing(*kind, psi[at(n, i, j)], fk_phi[at(n, i, j)]);
+                    let mut v = g * b;
                     for l in 0..n {
                         v += closed_loop[at(n, i, l)] * tb.work_gamma[l + n * j];
                     }
@@ -1623,15 +1627,12 @@ fn steady_passes(
 #[inline(always)]
 fn gamma_column<const N: usize>(
     a: &[f64],
-    psi: &[f64],
-    fk_phi: &[f64],
-    sf: &[f64],
-    of: &[f64],
+    forcing: &[f64],
+    factor: &[f64],
     src: &[f64],
     dst: &mut [f64],
 ) {
-    let w = sf.len();
-    let of = &of[..w];
+    let w = factor.len();
     let rows: [&[f64]; N] = std::array::from_fn(|l| &src[l * w..(l + 1) * w]);
     let mut coef = [[0.0; N]; N];
     for (i, row) in coef.iter_mut().enumerate() {
@@ -1640,9 +1641,9 @@ fn gamma_column<const N: usize>(
         }
     }
     for (i, out) in dst.chunks_exact_mut(w).take(N).enumerate() {
-        let (ps, fp, ci) = (psi[i], fk_phi[i], coef[i]);
+        let (g, ci) = (forcing[i], coef[i]);
         for s in 0..w {
-            let mut v = ps * sf[s] - fp * of[s];
+            let mut v = g * factor[s];
             for l in 0..N {
                 v += ci[l] * rows[l][s];
             }
@@ -1652,30 +1653,39 @@ fn gamma_column<const N: usize>(
 }
 
 /// Column j of eq. (46) for any n, in the same operation order as [`gamma_column`].
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn gamma_column_generic(
     n: usize,
     a: &[f64],
-    psi: &[f64],
-    fk_phi: &[f64],
-    sf: &[f64],
-    of: &[f64],
+    forcing: &[f64],
+    factor: &[f64],
     src: &[f64],
     dst: &mut [f64],
 ) {
-    let w = sf.len();
+    let w = factor.len();
     for (i, out) in dst.chunks_exact_mut(w).take(n).enumerate() {
-        let (ps, fp) = (psi[i], fk_phi[i]);
-        for ((d, f), g) in out.iter_mut().zip(sf).zip(of) {
-            *d = ps * f - fp * g;
+        let g = forcing[i];
+        for (d, f) in out.iter_mut().zip(factor) {
+            *d = g * f;
         }
         for l in 0..n {
             let c = a[at(n, i, l)];
-            for (d, g) in out.iter_mut().zip(&src[l * w..(l + 1) * w]) {
-                *d += c * g;
+            for (d, x) in out.iter_mut().zip(&src[l * w..(l + 1) * w]) {
+                *d += c * x;
             }
         }
+    }
+}
+
+/// Entry i of fault j's forcing column G in eq. (46), a(ℓ)Ψ̃ − b(ℓ)FKΦ̃ = b(ℓ)·G: the
+/// state and output factors are equal for the step, ramp and known profiles (G = Ψ̃ −
+/// FKΦ̃), and the state factor is 0 for an impulse (G = −FKΦ̃).
+#[inline(always)]
+fn forcing(kind: Onset, psi: f64, fk_phi: f64) -> f64 {
+    if kind == Onset::Impulse {
+        -fk_phi
+    } else {
+        psi - fk_phi
     }
 }
 
@@ -1704,9 +1714,8 @@ struct Coefs<const N: usize, const M: usize, const P: usize> {
     eps: [f64; P],
     /// A_il at [i][l].
     a: [[f64; N]; N],
-    /// Ψ̃_ij and (FKΦ̃)_ij at [j][i].
-    psi: [[f64; N]; M],
-    fk_phi: [[f64; N]; M],
+    /// The forcing column G_ij of eq. (46) ([`forcing`]) at [j][i].
+    forcing: [[f64; N]; M],
     kinds: [Onset; M],
     tol: f64,
 }
@@ -1719,8 +1728,7 @@ impl<const N: usize, const M: usize, const P: usize> Coefs<N, M, P> {
             phi: [[0.0; M]; P],
             eps: [0.0; P],
             a: [[0.0; N]; N],
-            psi: [[0.0; N]; M],
-            fk_phi: [[0.0; N]; M],
+            forcing: [[0.0; N]; M],
             kinds: [Onset::Step; M],
             tol,
         };
@@ -1737,9 +1745,9 @@ impl<const N: usize, const M: usize, const P: usize> Coefs<N, M, P> {
             for l in 0..N {
                 c.a[i][l] = inputs.closed_loop[at(N, i, l)];
             }
-            for j in 0..M {
-                c.psi[j][i] = inputs.psi[at(N, i, j)];
-                c.fk_phi[j][i] = inputs.fk_phi[at(N, i, j)];
+            for (j, kind) in kinds[..M].iter().enumerate() {
+                c.forcing[j][i] =
+                    forcing(*kind, inputs.psi[at(N, i, j)], inputs.fk_phi[at(N, i, j)]);
             }
         }
         c.kinds.copy_from_slice(&kinds[..M]);
@@ -2070,7 +2078,7 @@ x86_lanes!(Avx2Lanes, arch::__m256d, 4, _mm256_set1_pd, _mm256_loadu_pd, _mm256_
 /// Slots s0 … s0 + L − 1 of measured step k in registers: the profile factors
 /// (`compute_factors`), L⁻¹S = (L⁻¹H)Γ + b·L⁻¹Φ̃ (eq. (45)), C += SᵀS and d += SᵀL⁻¹ε
 /// (eqs. (32)-(33)), the dropped-pivot LDLᵀ statistic dᵀC⁻d and rank (eq. (35)), and
-/// Γ ← AΓ + a·Ψ̃ − b·FKΦ̃ (eq. (46)); each onset gets the operations of the passes in
+/// Γ ← AΓ + b·G (eq. (46), [`forcing`]); each onset gets the operations of the passes in
 /// their order, so the results are the same bits.
 ///
 /// # Safety
@@ -2102,20 +2110,15 @@ unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
     let one = S::splat(1.0);
     let active = ld!(v.active, s0);
     let lag = ld!(v.lag, s0);
-    let mut sf = [zero; M];
+    // The output factors b_j(k − r), which are also the factors of the forcing
+    // columns (eq. (46), [`forcing`]).
     let mut of = [zero; M];
     for j in 0..M {
-        match c.kinds[j] {
-            Onset::Step | Onset::Known => {
-                sf[j] = active;
-                of[j] = active;
-            }
-            Onset::Ramp => {
-                sf[j] = active.mul(lag.add(one));
-                of[j] = sf[j];
-            }
-            Onset::Impulse => of[j] = ld!(v.impulse, s0),
-        }
+        of[j] = match c.kinds[j] {
+            Onset::Step | Onset::Known => active,
+            Onset::Ramp => active.mul(lag.add(one)),
+            Onset::Impulse => ld!(v.impulse, s0),
+        };
     }
     let mut gamma = [[zero; N]; M];
     for (j, g) in gamma.iter_mut().enumerate() {
@@ -2166,12 +2169,10 @@ unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
     };
     st!(stat, v.stat, s0);
     st!(rank, v.rank, s0);
-    // Γ ← AΓ + a·Ψ̃ − b·FKΦ̃ (eq. (46)), in place (Γ_k is held above).
+    // Γ ← AΓ + f·G (eq. (46)), in place (Γ_k is held above).
     for j in 0..M {
         for i in 0..N {
-            let mut x = S::splat(c.psi[j][i])
-                .mul(sf[j])
-                .sub(S::splat(c.fk_phi[j][i]).mul(of[j]));
+            let mut x = S::splat(c.forcing[j][i]).mul(of[j]);
             for q in 0..N {
                 x = x.add(S::splat(c.a[i][q]).mul(gamma[j][q]));
             }
