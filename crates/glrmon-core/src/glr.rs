@@ -40,8 +40,10 @@
 //! positive semi-definite C an exactly zero pivot comes with an exactly zero column of
 //! the Schur complement, so the dropped-pivot factorisation is a generalised inverse
 //! C⁻ (C C⁻ C = C); since d ∈ range(C), dᵀC⁻d = dᵀC⁺d is exactly 2 ln LR and is χ²
-//! with dof = rank C = the number of kept pivots. The magnitude θ̂ at r̂ uses the
-//! Moore–Penrose pseudo-inverse (eigenvalues ≤ τ·λ_max dropped) when C is deficient.
+//! with dof = rank C = the number of kept pivots. The cut-off is never negative (τ > 0,
+//! and C's diagonal is a sum of squares), so a kept pivot is positive without a test
+//! of its own. The magnitude θ̂ at r̂ uses the Moore–Penrose pseudo-inverse
+//! (eigenvalues ≤ τ·λ_max dropped) when C is deficient.
 //!
 //! # Stationary regime (LTI fast path)
 //! When A_k, F_kK_k, L_k⁻¹H_k, Ψ̃_k and Φ̃_k are constant (an LTI model whose Riccati
@@ -324,6 +326,7 @@ impl WindowBank {
         kinds: Vec<Onset>,
         tolerance: f64,
     ) -> Self {
+        debug_assert!(tolerance > 0.0, "the rank cut-off needs τ > 0");
         let known = kinds.iter().all(|k| *k == Onset::Known);
         let slots = if known { 1 } else { window };
         let t = m * (m + 1) / 2;
@@ -565,7 +568,7 @@ impl WindowBank {
             .zip(self.rank.iter_mut())
             .zip(&mut self.inv_pivot[..w]);
         for (((st, rk), iv), (c, z)) in it.zip(c.iter().zip(d)) {
-            let keep = *c > tol * c && *c > 0.0;
+            let keep = *c > tol * c;
             *iv = if keep { 1.0 / c } else { 0.0 };
             *rk = if keep { 1.0 } else { 0.0 };
             *st = z * z * *iv;
@@ -627,7 +630,7 @@ impl WindowBank {
                     .zip(&self.cutoff)
                     .zip(self.rank.iter_mut())
                 {
-                    let keep = *d > *c && *d > 0.0;
+                    let keep = *d > *c;
                     *iv = if keep { 1.0 / d } else { 0.0 };
                     *r += if keep { 1.0 } else { 0.0 };
                 }
@@ -868,7 +871,7 @@ impl WindowBank {
                 d -= l * l * self.ldl[tri(q, q) * w + s];
             }
             self.ldl[tri(j, j) * w + s] = d;
-            let keep = d > cut && d > 0.0;
+            let keep = d > cut;
             let inv = if keep { 1.0 / d } else { 0.0 };
             self.inv_pivot[j * w + s] = inv;
             for i in (j + 1)..m {
@@ -1231,7 +1234,7 @@ impl WindowBank {
                     d -= l * l * tb.work_ldl[at(m, q, q)];
                 }
                 tb.work_ldl[at(m, j, j)] = d;
-                let keep = d > cut && d > 0.0;
+                let keep = d > cut;
                 tb.work_inv_pivot[j] = if keep { 1.0 / d } else { 0.0 };
                 rank += if keep { 1.0 } else { 0.0 };
                 for i in (j + 1)..m {
@@ -1818,7 +1821,6 @@ trait Lanes: Copy {
     fn gt(self, o: Self) -> Self::Mask;
     /// self is NaN.
     fn nan(self) -> Self::Mask;
-    fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask;
     fn or(a: Self::Mask, b: Self::Mask) -> Self::Mask;
     /// m ? a : b per lane.
     fn select(m: Self::Mask, a: Self, b: Self) -> Self;
@@ -1874,10 +1876,6 @@ impl Lanes for f64 {
     #[inline(always)]
     fn nan(self) -> bool {
         self.is_nan()
-    }
-    #[inline(always)]
-    fn and(a: bool, b: bool) -> bool {
-        a & b
     }
     #[inline(always)]
     fn or(a: bool, b: bool) -> bool {
@@ -1958,14 +1956,6 @@ impl Lanes for Lanes8 {
         r
     }
     #[inline(always)]
-    fn and(a: [bool; 8], b: [bool; 8]) -> [bool; 8] {
-        let mut r = [false; 8];
-        for l in 0..8 {
-            r[l] = a[l] & b[l];
-        }
-        r
-    }
-    #[inline(always)]
     fn or(a: [bool; 8], b: [bool; 8]) -> [bool; 8] {
         let mut r = [false; 8];
         for l in 0..8 {
@@ -1990,7 +1980,7 @@ macro_rules! x86_lanes {
     ($ty:ident, $mask:ty, $l:literal, $set1:ident, $loadu:ident, $storeu:ident,
      $add:ident, $sub:ident, $mul:ident, $div:ident,
      gt: |$ga:ident, $gb:ident| $gt:expr, nan: |$na:ident| $nan:expr,
-     and: |$aa:ident, $ab:ident| $and:expr, or: |$oa:ident, $ob:ident| $or:expr,
+     or: |$oa:ident, $ob:ident| $or:expr,
      select: |$sm:ident, $sa:ident, $sb:ident| $sel:expr) => {
         // SAFETY (every method): the intrinsics need the register type's feature, which
         // its only callers enable: `Avx2Lanes` is used only inside
@@ -2041,11 +2031,6 @@ macro_rules! x86_lanes {
             }
             #[inline(always)]
             #[allow(unused_unsafe)]
-            fn and($aa: $mask, $ab: $mask) -> $mask {
-                unsafe { $and }
-            }
-            #[inline(always)]
-            #[allow(unused_unsafe)]
             fn or($oa: $mask, $ob: $mask) -> $mask {
                 unsafe { $or }
             }
@@ -2071,7 +2056,6 @@ x86_lanes!(Avx2Lanes, arch::__m256d, 4, _mm256_set1_pd, _mm256_loadu_pd, _mm256_
     _mm256_add_pd, _mm256_sub_pd, _mm256_mul_pd, _mm256_div_pd,
     gt: |a, b| arch::_mm256_cmp_pd::<{ arch::_CMP_GT_OQ }>(a, b),
     nan: |a| arch::_mm256_cmp_pd::<{ arch::_CMP_UNORD_Q }>(a, a),
-    and: |a, b| arch::_mm256_and_pd(a, b),
     or: |a, b| arch::_mm256_or_pd(a, b),
     select: |m, a, b| arch::_mm256_blendv_pd(b, a, m));
 
@@ -2210,7 +2194,7 @@ fn ldl_statistic<const M: usize, S: Lanes>(info: &[[S; M]; M], score: &[S; M], t
             }
         }
         dd[j] = d;
-        let keep = S::and(d.gt(cut), d.gt(zero));
+        let keep = d.gt(cut);
         inv[j] = S::select(keep, one.div(d), zero);
         rank = rank.add(S::select(keep, one, zero));
         for i in 0..M {
@@ -2259,10 +2243,10 @@ fn quad2<S: Lanes>(a: S, b: S, c: S, d1: S, d2: S, tol: S) -> (S, S) {
     let zero = S::splat(0.0);
     let one = S::splat(1.0);
     let cut = a.max(c).mul(tol);
-    let keep_a = S::and(a.gt(cut), a.gt(zero));
-    let keep_c = S::and(c.gt(cut), c.gt(zero));
+    let keep_a = a.gt(cut);
+    let keep_c = c.gt(cut);
     let det = a.mul(c).sub(b.mul(b));
-    let keep_det = S::and(det.gt(cut.mul(a)), det.gt(zero));
+    let keep_det = det.gt(cut.mul(a));
     let z = a.mul(d2).sub(b.mul(d1));
     let d1s = d1.mul(d1);
     let (full_num, full_den) = (d1s.mul(det).add(z.mul(z)), a.mul(det));
