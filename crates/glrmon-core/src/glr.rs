@@ -601,7 +601,7 @@ impl WindowBank {
         for a in 0..m {
             let caa = &self.info[tri(a, a) * w..(tri(a, a) + 1) * w];
             for (c, x) in self.cutoff.iter_mut().zip(caa) {
-                *c = c.max(*x);
+                *c = larger(*c, *x);
             }
         }
         let tol = self.tolerance;
@@ -1224,7 +1224,7 @@ impl WindowBank {
             // C(ℓ)⁻ = L⁻ᵀD⁺L⁻¹ from the dropped-pivot LDLᵀ of `statistic_generic`.
             let cut = (0..m)
                 .map(|a| tb.info[tri(a, a) * w + idx])
-                .fold(0.0_f64, f64::max)
+                .fold(0.0_f64, larger)
                 * tol;
             let mut rank = 0.0;
             for j in 0..m {
@@ -1252,8 +1252,8 @@ impl WindowBank {
                 let info = |i| tb.info[i * w + idx];
                 let (a, b, c) = (info(0), info(1), info(2));
                 let (_, r) = quad2(a, b, c, 0.0, 0.0, tol);
-                let cut = a.max(c) * tol;
-                let (keep_a, keep_c) = (a > cut && a > 0.0, c > cut && c > 0.0);
+                let cut = larger(a, c) * tol;
+                let (keep_a, keep_c) = (a > cut, c > cut);
                 (tb.work_inv_pivot[0], tb.work_inv_pivot[1]) = match (keep_a, r as usize) {
                     (true, 2) => (1.0 / a, a / (a * c - b * b)),
                     (true, _) => (1.0 / a, 0.0),
@@ -1699,10 +1699,19 @@ fn forcing(kind: Onset, psi: f64, fk_phi: f64) -> f64 {
 #[inline(always)]
 fn pivot_cutoff(m: usize, diag: impl Fn(usize) -> f64, tol: f64) -> f64 {
     if m == 2 {
-        diag(0).max(diag(1)) * tol
+        larger(diag(0), diag(1)) * tol
     } else {
-        (0..m).fold(0.0_f64, |c, a| c.max(diag(a))) * tol
+        (0..m).fold(0.0_f64, |c, a| larger(c, diag(a))) * tol
     }
+}
+
+/// y if y > x, else x: the larger of two, as the rank cut-offs take it in every path
+/// (and `maxpd` computes it). A NaN y is passed over, so a maximum folded from 0 over
+/// C's diagonal ignores NaN entries as `f64::max` would; max(C₁₁, C₂₂) for m = 2 is NaN
+/// when C₁₁ is, and then no pivot is kept.
+#[inline(always)]
+fn larger(x: f64, y: f64) -> f64 {
+    if y > x { y } else { x }
 }
 
 /// The coefficients of measured step k for the fused pass, with n = N, m = M, p = P
@@ -1819,18 +1828,14 @@ trait Lanes: Copy {
     fn div(self, o: Self) -> Self;
     /// self > o (false for NaN).
     fn gt(self, o: Self) -> Self::Mask;
-    /// self is NaN.
-    fn nan(self) -> Self::Mask;
-    fn or(a: Self::Mask, b: Self::Mask) -> Self::Mask;
     /// m ? a : b per lane.
     fn select(m: Self::Mask, a: Self, b: Self) -> Self;
 
-    /// `f64::max` per lane (the other operand when one is NaN); on equal operands
-    /// either, which is the same value up to the sign of zero, and the cut-off it feeds
-    /// decides the same for ±0.
+    /// [`larger`] per lane: one compare and one blend (or one `maxpd`), where
+    /// `f64::max`'s NaN rule costs two compares more.
     #[inline(always)]
     fn max(self, o: Self) -> Self {
-        Self::select(Self::or(o.gt(self), self.nan()), o, self)
+        Self::select(o.gt(self), o, self)
     }
 }
 
@@ -1872,14 +1877,6 @@ impl Lanes for f64 {
     #[inline(always)]
     fn gt(self, o: Self) -> bool {
         self > o
-    }
-    #[inline(always)]
-    fn nan(self) -> bool {
-        self.is_nan()
-    }
-    #[inline(always)]
-    fn or(a: bool, b: bool) -> bool {
-        a | b
     }
     #[inline(always)]
     fn select(m: bool, a: Self, b: Self) -> Self {
@@ -1948,22 +1945,6 @@ impl Lanes for Lanes8 {
         r
     }
     #[inline(always)]
-    fn nan(self) -> [bool; 8] {
-        let mut r = [false; 8];
-        for l in 0..8 {
-            r[l] = self.0[l].is_nan();
-        }
-        r
-    }
-    #[inline(always)]
-    fn or(a: [bool; 8], b: [bool; 8]) -> [bool; 8] {
-        let mut r = [false; 8];
-        for l in 0..8 {
-            r[l] = a[l] | b[l];
-        }
-        r
-    }
-    #[inline(always)]
     fn select(m: [bool; 8], a: Self, b: Self) -> Self {
         let mut r = [0.0; 8];
         for l in 0..8 {
@@ -1979,8 +1960,7 @@ impl Lanes for Lanes8 {
 macro_rules! x86_lanes {
     ($ty:ident, $mask:ty, $l:literal, $set1:ident, $loadu:ident, $storeu:ident,
      $add:ident, $sub:ident, $mul:ident, $div:ident,
-     gt: |$ga:ident, $gb:ident| $gt:expr, nan: |$na:ident| $nan:expr,
-     or: |$oa:ident, $ob:ident| $or:expr,
+     gt: |$ga:ident, $gb:ident| $gt:expr,
      select: |$sm:ident, $sa:ident, $sb:ident| $sel:expr) => {
         // SAFETY (every method): the intrinsics need the register type's feature, which
         // its only callers enable: `Avx2Lanes` is used only inside
@@ -2025,16 +2005,6 @@ macro_rules! x86_lanes {
                 unsafe { $gt }
             }
             #[inline(always)]
-            fn nan(self) -> $mask {
-                let $na = self.0;
-                unsafe { $nan }
-            }
-            #[inline(always)]
-            #[allow(unused_unsafe)]
-            fn or($oa: $mask, $ob: $mask) -> $mask {
-                unsafe { $or }
-            }
-            #[inline(always)]
             fn select($sm: $mask, a: Self, b: Self) -> Self {
                 let ($sa, $sb) = (a.0, b.0);
                 $ty(unsafe { $sel })
@@ -2055,8 +2025,6 @@ struct Avx2Lanes(arch::__m256d);
 x86_lanes!(Avx2Lanes, arch::__m256d, 4, _mm256_set1_pd, _mm256_loadu_pd, _mm256_storeu_pd,
     _mm256_add_pd, _mm256_sub_pd, _mm256_mul_pd, _mm256_div_pd,
     gt: |a, b| arch::_mm256_cmp_pd::<{ arch::_CMP_GT_OQ }>(a, b),
-    nan: |a| arch::_mm256_cmp_pd::<{ arch::_CMP_UNORD_Q }>(a, a),
-    or: |a, b| arch::_mm256_or_pd(a, b),
     select: |m, a, b| arch::_mm256_blendv_pd(b, a, m));
 
 /// Slots s0 … s0 + L − 1 of measured step k in registers: the profile factors
