@@ -1419,28 +1419,39 @@ impl WindowBank {
 #[inline(always)]
 fn lane_argmax(first: &[f64], second: &[f64]) -> (f64, usize) {
     const L: usize = 16;
-    let mut best = [f64::NEG_INFINITY; L];
+    const H: usize = L / 2;
+    // Two registers of eight lanes (`Lanes8`'s shape, which the compiler keeps in
+    // vector registers; one array of sixteen it splits into pairs).
+    let mut lo = [f64::NEG_INFINITY; H];
+    let mut hi = [f64::NEG_INFINITY; H];
+    #[inline(always)]
+    fn fold8(best: &mut [f64; H], c: &[f64]) {
+        for l in 0..H {
+            best[l] = if c[l] > best[l] { c[l] } else { best[l] };
+        }
+    }
     for run in [first, second] {
         let n = run.len();
         if n >= L {
             let mut chunks = run.chunks_exact(L);
             for c in &mut chunks {
-                for l in 0..L {
-                    best[l] = if c[l] > best[l] { c[l] } else { best[l] };
-                }
+                fold8(&mut lo, &c[..H]);
+                fold8(&mut hi, &c[H..]);
             }
             let last = &run[n - L..];
-            for l in 0..L {
-                best[l] = if last[l] > best[l] { last[l] } else { best[l] };
-            }
+            fold8(&mut lo, &last[..H]);
+            fold8(&mut hi, &last[H..]);
         } else {
             for (l, v) in run.iter().enumerate() {
-                best[l] = if *v > best[l] { *v } else { best[l] };
+                let b = if l < H { &mut lo[l] } else { &mut hi[l - H] };
+                *b = if *v > *b { *v } else { *b };
             }
         }
     }
     // A tree of halvings (no lane holds NaN, so the order of the maxima is free).
-    let mut width = L;
+    fold8(&mut lo, &hi);
+    let mut best = lo;
+    let mut width = H;
     while width > 1 {
         width /= 2;
         for l in 0..width {
