@@ -531,6 +531,14 @@ impl Detector {
         self.bank.set_fused(enabled);
     }
 
+    /// Runs the window at the baseline level with a·b + c rounded twice, as on an x86-64
+    /// processor without FMA (see [`crate::VectorLevel`]); for the test that compares
+    /// that case with the fused rounding.
+    #[doc(hidden)]
+    pub fn set_separate_rounding(&mut self) {
+        self.bank.set_separate_rounding();
+    }
+
     /// Whether the stationary regime (the LTI fast path) is in force.
     #[must_use]
     pub fn is_stationary(&self) -> bool {

@@ -68,13 +68,13 @@ macro_rules! wide {
     };
     ($body:ident, $avx2:ident, $wide:ident => $avx512:ident, ($($a:ident: $t:ty),*) $(-> $r:ty)?) => {
         #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2")]
+        #[target_feature(enable = "avx2,fma")]
         unsafe fn $avx2(&mut self, $($a: $t),*) $(-> $r)? {
             self.$body($($a),*)
         }
 
         #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx512f")]
+        #[target_feature(enable = "avx512f,fma")]
         unsafe fn $avx512(&mut self, $($a: $t),*) $(-> $r)? {
             self.$wide($($a),*)
         }
@@ -256,6 +256,9 @@ pub(crate) struct WindowBank {
     tables: LagTables,
     /// Vector width of the window loops (same bits at every width).
     level: Level,
+    /// Whether the passes round a·b + c once ([`madd`], crate::simd): always at the AVX
+    /// levels, whose fused pass does.
+    fused_madd: bool,
     /// Whether a measured step runs the fused single pass ([`WindowBank::step`]); set
     /// when (n, m, p) is one of the fused dimensions, cleared only to compare with the
     /// passes.
@@ -366,6 +369,7 @@ impl WindowBank {
             current: 0,
             steady: false,
             level: Level::detect(),
+            fused_madd: crate::simd::fused_multiply_add(),
             fused: fused_dims(n, m, p),
             factored: false,
             tables: LagTables {
@@ -459,6 +463,21 @@ impl WindowBank {
 
     #[inline(always)]
     fn accumulate_body(&mut self, k: u64, h_white: &[f64], phi_white: &[f64], eps_white: &[f64]) {
+        if self.fused_madd {
+            self.accumulate_in::<true>(k, h_white, phi_white, eps_white);
+        } else {
+            self.accumulate_in::<false>(k, h_white, phi_white, eps_white);
+        }
+    }
+
+    #[inline(always)]
+    fn accumulate_in<const FUSED: bool>(
+        &mut self,
+        k: u64,
+        h_white: &[f64],
+        phi_white: &[f64],
+        eps_white: &[f64],
+    ) {
         self.current = k;
         self.compute_factors(k);
         let (n, m, p, w) = (self.n, self.m, self.p, self.slots);
@@ -474,13 +493,13 @@ impl WindowBank {
                     let h = h_white[at(p, i, l)];
                     let g = &self.gamma[(l + n * j) * w..(l + n * j + 1) * w];
                     for (d, g) in dst.iter_mut().zip(g) {
-                        *d += h * g;
+                        *d = madd::<FUSED>(h, *g, *d);
                     }
                 }
             }
         }
         if m == 2 && p == 1 {
-            self.accumulate_m2_p1(eps_white[0]);
+            self.accumulate_m2_p1::<FUSED>(eps_white[0]);
             return;
         }
         for a in 0..m {
@@ -490,7 +509,7 @@ impl WindowBank {
                     let sa = &self.signature[(i + p * a) * w..(i + p * a + 1) * w];
                     let sb = &self.signature[(i + p * b) * w..(i + p * b + 1) * w];
                     for ((c, x), y) in c.iter_mut().zip(sa).zip(sb) {
-                        *c += x * y;
+                        *c = madd::<FUSED>(*x, *y, *c);
                     }
                 }
             }
@@ -498,7 +517,7 @@ impl WindowBank {
             for (i, e) in eps_white.iter().enumerate().take(p) {
                 let sa = &self.signature[(i + p * a) * w..(i + p * a + 1) * w];
                 for (d, x) in d.iter_mut().zip(sa) {
-                    *d += x * e;
+                    *d = madd::<FUSED>(*x, *e, *d);
                 }
             }
         }
@@ -507,7 +526,7 @@ impl WindowBank {
     /// C and d updates for m = 2, p = 1 in one pass (same operations and order as the
     /// generic loops).
     #[inline(always)]
-    fn accumulate_m2_p1(&mut self, e: f64) {
+    fn accumulate_m2_p1<const FUSED: bool>(&mut self, e: f64) {
         let w = self.slots;
         let (s0, s1) = self.signature.split_at(w);
         let (c00, rest) = self.info.split_at_mut(w);
@@ -516,11 +535,11 @@ impl WindowBank {
         let (s1, c10, c11, d1) = (&s1[..w], &mut c10[..w], &mut c11[..w], &mut d1[..w]);
         for s in 0..w {
             let (x0, x1) = (s0[s], s1[s]);
-            c00[s] += x0 * x0;
-            c10[s] += x1 * x0;
-            c11[s] += x1 * x1;
-            d0[s] += x0 * e;
-            d1[s] += x1 * e;
+            c00[s] = madd::<FUSED>(x0, x0, c00[s]);
+            c10[s] = madd::<FUSED>(x1, x0, c10[s]);
+            c11[s] = madd::<FUSED>(x1, x1, c11[s]);
+            d0[s] = madd::<FUSED>(x0, e, d0[s]);
+            d1[s] = madd::<FUSED>(x1, e, d1[s]);
         }
     }
 
@@ -750,7 +769,7 @@ impl WindowBank {
     }
 
     fused_level!(
-        "avx2",
+        "avx2,fma",
         fused_avx2,
         fused_run_avx2,
         fused_rest_avx2,
@@ -759,7 +778,7 @@ impl WindowBank {
         "The fused pass for one (n, m, p) with AVX2, four onsets per register."
     );
     fused_level!(
-        "avx512f",
+        "avx512f,fma",
         fused_avx512,
         fused_run_avx512,
         fused_rest_avx512,
@@ -1017,12 +1036,17 @@ impl WindowBank {
             let src = &self.gamma[n * j * w..n * (j + 1) * w];
             let dst = &mut self.gamma_next[n * j * w..n * (j + 1) * w];
             let g = &self.forcing[n * j..n * (j + 1)];
-            match n {
-                1 => gamma_column::<1>(closed_loop, g, factor, src, dst),
-                2 => gamma_column::<2>(closed_loop, g, factor, src, dst),
-                3 => gamma_column::<3>(closed_loop, g, factor, src, dst),
-                4 => gamma_column::<4>(closed_loop, g, factor, src, dst),
-                _ => gamma_column_generic(n, closed_loop, g, factor, src, dst),
+            match (n, self.fused_madd) {
+                (1, true) => gamma_column::<1, true>(closed_loop, g, factor, src, dst),
+                (2, true) => gamma_column::<2, true>(closed_loop, g, factor, src, dst),
+                (3, true) => gamma_column::<3, true>(closed_loop, g, factor, src, dst),
+                (4, true) => gamma_column::<4, true>(closed_loop, g, factor, src, dst),
+                (1, false) => gamma_column::<1, false>(closed_loop, g, factor, src, dst),
+                (2, false) => gamma_column::<2, false>(closed_loop, g, factor, src, dst),
+                (3, false) => gamma_column::<3, false>(closed_loop, g, factor, src, dst),
+                (4, false) => gamma_column::<4, false>(closed_loop, g, factor, src, dst),
+                (_, true) => gamma_column_generic::<true>(n, closed_loop, g, factor, src, dst),
+                (_, false) => gamma_column_generic::<false>(n, closed_loop, g, factor, src, dst),
             }
         }
         std::mem::swap(&mut self.gamma, &mut self.gamma_next);
@@ -1148,6 +1172,13 @@ impl WindowBank {
         self.level = level;
     }
 
+    /// Runs the passes at the baseline level with a·b + c rounded twice, as on a
+    /// processor without FMA (for the test of that case).
+    pub(crate) fn set_separate_rounding(&mut self) {
+        self.level = Level::Baseline;
+        self.fused_madd = false;
+    }
+
     /// Whether measured steps run the fused pass.
     pub(crate) fn fused(&self) -> bool {
         self.fused
@@ -1184,7 +1215,7 @@ impl WindowBank {
             return false;
         }
         let (n, m, p, w) = (self.n, self.m, self.p, self.slots);
-        let tol = self.tolerance;
+        let (tol, fused) = (self.tolerance, self.fused_madd);
         let tb = &mut self.tables;
         for (j, kind) in self.kinds.iter().enumerate() {
             let f = kind.entry_factor();
@@ -1200,7 +1231,7 @@ impl WindowBank {
                 for i in 0..p {
                     let mut v = phi_white[at(p, i, j)] * of;
                     for l in 0..n {
-                        v += h_white[at(p, i, l)] * tb.work_gamma[l + n * j];
+                        v = madd_as(fused, h_white[at(p, i, l)], tb.work_gamma[l + n * j], v);
                     }
                     tb.signature[(i + p * j) * w + idx] = v;
                 }
@@ -1215,8 +1246,12 @@ impl WindowBank {
                         tb.info[c * w + idx + 1]
                     };
                     for i in 0..p {
-                        v += tb.signature[(i + p * a) * w + idx]
-                            * tb.signature[(i + p * b) * w + idx];
+                        v = madd_as(
+                            fused,
+                            tb.signature[(i + p * a) * w + idx],
+                            tb.signature[(i + p * b) * w + idx],
+                            v,
+                        );
                     }
                     tb.info[c * w + idx] = v;
                 }
@@ -1297,7 +1332,7 @@ impl WindowBank {
                     let g = forcing(*kind, psi[at(n, i, j)], fk_phi[at(n, i, j)]);
                     let mut v = g * b;
                     for l in 0..n {
-                        v += closed_loop[at(n, i, l)] * tb.work_gamma[l + n * j];
+                        v = madd_as(fused, closed_loop[at(n, i, l)], tb.work_gamma[l + n * j], v);
                     }
                     tb.work_next[i + n * j] = v;
                     tb.gamma[(i + n * j) * w + idx] = v;
@@ -1639,7 +1674,7 @@ fn steady_passes(
 /// Column j of eq. (46) for every slot, n known at compile time: one fused pass.
 /// `src`/`dst` hold the n rows of Γ(:, j) as n consecutive arrays over the slots.
 #[inline(always)]
-fn gamma_column<const N: usize>(
+fn gamma_column<const N: usize, const FUSED: bool>(
     a: &[f64],
     forcing: &[f64],
     factor: &[f64],
@@ -1659,7 +1694,7 @@ fn gamma_column<const N: usize>(
         for s in 0..w {
             let mut v = g * factor[s];
             for l in 0..N {
-                v += ci[l] * rows[l][s];
+                v = madd::<FUSED>(ci[l], rows[l][s], v);
             }
             out[s] = v;
         }
@@ -1668,7 +1703,7 @@ fn gamma_column<const N: usize>(
 
 /// Column j of eq. (46) for any n, in the same operation order as [`gamma_column`].
 #[inline(always)]
-fn gamma_column_generic(
+fn gamma_column_generic<const FUSED: bool>(
     n: usize,
     a: &[f64],
     forcing: &[f64],
@@ -1685,10 +1720,23 @@ fn gamma_column_generic(
         for l in 0..n {
             let c = a[at(n, i, l)];
             for (d, x) in out.iter_mut().zip(&src[l * w..(l + 1) * w]) {
-                *d += c * x;
+                *d = madd::<FUSED>(c, *x, *d);
             }
         }
     }
+}
+
+/// c + a·b as the window's recursions take it: rounded once (`f64::mul_add`), or twice
+/// on an x86-64 processor without AVX2 and FMA (crate::simd).
+#[inline(always)]
+fn madd<const FUSED: bool>(a: f64, b: f64, c: f64) -> f64 {
+    if FUSED { a.mul_add(b, c) } else { a * b + c }
+}
+
+/// [`madd`] with the rounding chosen at run time (off the per-sample path).
+#[inline(always)]
+fn madd_as(fused: bool, a: f64, b: f64, c: f64) -> f64 {
+    if fused { a.mul_add(b, c) } else { a * b + c }
 }
 
 /// Entry i of fault j's forcing column G in eq. (46), a(ℓ)Ψ̃ − b(ℓ)FKΦ̃ = b(ℓ)·G: the
@@ -1815,7 +1863,8 @@ impl SlotArrays<'_> {
 }
 
 /// One vector register of onsets for the fused pass: the f64 operations it needs, each
-/// lane rounded as the scalar operation (no FMA), so every width gives the same bits.
+/// lane rounded as the scalar operation (`mul_add` as `f64::mul_add`), so every width
+/// gives the same bits.
 trait Lanes: Copy {
     /// A per-lane condition.
     type Mask: Copy;
@@ -1837,6 +1886,8 @@ trait Lanes: Copy {
     fn sub(self, o: Self) -> Self;
     fn mul(self, o: Self) -> Self;
     fn div(self, o: Self) -> Self;
+    /// self + a·b rounded once (`f64::mul_add` per lane): what the passes compute.
+    fn mul_add(self, a: Self, b: Self) -> Self;
     /// self > o (false for NaN).
     fn gt(self, o: Self) -> Self::Mask;
     /// m ? a : b per lane.
@@ -1880,6 +1931,10 @@ impl Lanes for f64 {
     #[inline(always)]
     fn mul(self, o: Self) -> Self {
         self * o
+    }
+    #[inline(always)]
+    fn mul_add(self, a: Self, b: Self) -> Self {
+        a.mul_add(b, self)
     }
     #[inline(always)]
     fn div(self, o: Self) -> Self {
@@ -1944,6 +1999,14 @@ impl Lanes for Lanes8 {
         self.zip(o, |a, b| a * b)
     }
     #[inline(always)]
+    fn mul_add(self, a: Self, b: Self) -> Self {
+        let mut r = [0.0; 8];
+        for l in 0..8 {
+            r[l] = a.0[l].mul_add(b.0[l], self.0[l]);
+        }
+        Lanes8(r)
+    }
+    #[inline(always)]
     fn div(self, o: Self) -> Self {
         self.zip(o, |a, b| a / b)
     }
@@ -1970,7 +2033,7 @@ impl Lanes for Lanes8 {
 #[cfg(target_arch = "x86_64")]
 macro_rules! x86_lanes {
     ($ty:ident, $mask:ty, $l:literal, $set1:ident, $loadu:ident, $storeu:ident,
-     $add:ident, $sub:ident, $mul:ident, $div:ident,
+     $add:ident, $sub:ident, $mul:ident, $div:ident, $fmadd:ident,
      gt: |$ga:ident, $gb:ident| $gt:expr,
      select: |$sm:ident, $sa:ident, $sb:ident| $sel:expr) => {
         // SAFETY (every method): the intrinsics need the register type's feature, which
@@ -2007,6 +2070,10 @@ macro_rules! x86_lanes {
                 $ty(unsafe { arch::$mul(self.0, o.0) })
             }
             #[inline(always)]
+            fn mul_add(self, a: Self, b: Self) -> Self {
+                $ty(unsafe { arch::$fmadd(a.0, b.0, self.0) })
+            }
+            #[inline(always)]
             fn div(self, o: Self) -> Self {
                 $ty(unsafe { arch::$div(self.0, o.0) })
             }
@@ -2034,7 +2101,7 @@ struct Avx2Lanes(arch::__m256d);
 
 #[cfg(target_arch = "x86_64")]
 x86_lanes!(Avx2Lanes, arch::__m256d, 4, _mm256_set1_pd, _mm256_loadu_pd, _mm256_storeu_pd,
-    _mm256_add_pd, _mm256_sub_pd, _mm256_mul_pd, _mm256_div_pd,
+    _mm256_add_pd, _mm256_sub_pd, _mm256_mul_pd, _mm256_div_pd, _mm256_fmadd_pd,
     gt: |a, b| arch::_mm256_cmp_pd::<{ arch::_CMP_GT_OQ }>(a, b),
     select: |m, a, b| arch::_mm256_blendv_pd(b, a, m));
 
@@ -2095,7 +2162,7 @@ unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
         for i in 0..P {
             let mut x = S::splat(c.phi[i][j]).mul(of[j]);
             for q in 0..N {
-                x = x.add(S::splat(c.h[i][q]).mul(gamma[j][q]));
+                x = x.mul_add(S::splat(c.h[i][q]), gamma[j][q]);
             }
             st!(x, v.signature, (i + P * j) * w + s0);
             sig[j][i] = x;
@@ -2112,14 +2179,14 @@ unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
             let at = tri(a, b) * w + s0;
             let mut x = ld!(v.info, at);
             for i in 0..P {
-                x = x.add(sig[a][i].mul(sig[b][i]));
+                x = x.mul_add(sig[a][i], sig[b][i]);
             }
             st!(x, v.info, at);
             info[a][b] = x;
         }
         let mut x = ld!(v.score, a * w + s0);
         for i in 0..P {
-            x = x.add(sig[a][i].mul(S::splat(c.eps[i])));
+            x = x.mul_add(sig[a][i], S::splat(c.eps[i]));
         }
         st!(x, v.score, a * w + s0);
         score[a] = x;
@@ -2137,7 +2204,7 @@ unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
         for i in 0..N {
             let mut x = S::splat(c.forcing[j][i]).mul(of[j]);
             for q in 0..N {
-                x = x.add(S::splat(c.a[i][q]).mul(gamma[j][q]));
+                x = x.mul_add(S::splat(c.a[i][q]), gamma[j][q]);
             }
             st!(x, v.gamma, (i + N * j) * w + s0);
         }

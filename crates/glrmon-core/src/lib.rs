@@ -14,7 +14,7 @@ pub mod isolation;
 pub mod kitanidis;
 mod linalg;
 mod simd;
-pub use simd::VectorLevel;
+pub use simd::{VectorLevel, fused_multiply_add};
 pub mod model;
 pub mod sparse;
 pub mod threshold;
