@@ -1355,17 +1355,26 @@ impl WindowBank {
 
     #[inline(always)]
     fn steady_4(&mut self, k: u64, eps_white: &[f64]) {
-        self.accumulate_steady_body::<4>(k, eps_white);
+        if self.fused_madd {
+            self.accumulate_steady_body::<4, true>(k, eps_white);
+        } else {
+            self.accumulate_steady_body::<4, false>(k, eps_white);
+        }
     }
 
     #[inline(always)]
     fn steady_8(&mut self, k: u64, eps_white: &[f64]) {
-        self.accumulate_steady_body::<8>(k, eps_white);
+        self.accumulate_steady_body::<8, true>(k, eps_white);
     }
 
-    /// [`WindowBank::accumulate_steady`] with L onsets per step of the fused loop.
+    /// [`WindowBank::accumulate_steady`] with L onsets per step of the fused loop, a·b + c
+    /// rounded once if FUSED ([`madd`]).
     #[inline(always)]
-    fn accumulate_steady_body<const L: usize>(&mut self, k: u64, eps_white: &[f64]) {
+    fn accumulate_steady_body<const L: usize, const FUSED: bool>(
+        &mut self,
+        k: u64,
+        eps_white: &[f64],
+    ) {
         self.current = k;
         let (m, p, w) = (self.m, self.p, self.slots);
         let base = self.slot_of(k);
@@ -1379,10 +1388,10 @@ impl WindowBank {
             macro_rules! fused {
                 ($(($mm:literal, $pp:literal)),*) => {
                     match (m, p) {
-                        $(($mm, $pp) => steady_fused::<$mm, $pp, L>(
+                        $(($mm, $pp) => steady_fused::<$mm, $pp, L, FUSED>(
                             run, score, stat, sig, inv, eps_white[..$pp].try_into().unwrap_or(&[0.0; $pp]),
                         ),)*
-                        _ => steady_passes(run, m, p, score, stat, sig, inv, eps_white),
+                        _ => steady_passes::<FUSED>(run, m, p, score, stat, sig, inv, eps_white),
                     }
                 };
             }
@@ -1546,7 +1555,7 @@ struct SteadyRun {
 /// one pass, L slots at a time (loaded into registers, so the lanes vectorise), then
 /// the remainder one slot at a time with the same operations.
 #[inline(always)]
-fn steady_fused<const M: usize, const P: usize, const L: usize>(
+fn steady_fused<const M: usize, const P: usize, const L: usize, const FUSED: bool>(
     run: SteadyRun,
     score: &mut [f64],
     stat: &mut [f64],
@@ -1570,12 +1579,12 @@ fn steady_fused<const M: usize, const P: usize, const L: usize>(
     let mut s = 0;
     while s + L <= run.len {
         // SAFETY: checked above, s + L ≤ len.
-        unsafe { steady_lanes::<M, P, L>(run, s, score, stat, signature, inverse, eps) };
+        unsafe { steady_lanes::<M, P, L, FUSED>(run, s, score, stat, signature, inverse, eps) };
         s += L;
     }
     while s < run.len {
         // SAFETY: checked above, s + 1 ≤ len.
-        unsafe { steady_lanes::<M, P, 1>(run, s, score, stat, signature, inverse, eps) };
+        unsafe { steady_lanes::<M, P, 1, FUSED>(run, s, score, stat, signature, inverse, eps) };
         s += 1;
     }
 }
@@ -1585,7 +1594,7 @@ fn steady_fused<const M: usize, const P: usize, const L: usize>(
 /// # Safety
 /// The run lies inside the arrays (as `steady_fused` checks) and s + L ≤ run.len.
 #[inline(always)]
-unsafe fn steady_lanes<const M: usize, const P: usize, const L: usize>(
+unsafe fn steady_lanes<const M: usize, const P: usize, const L: usize, const FUSED: bool>(
     run: SteadyRun,
     s: usize,
     score: &mut [f64],
@@ -1606,7 +1615,7 @@ unsafe fn steady_lanes<const M: usize, const P: usize, const L: usize>(
         for (i, e) in eps.iter().enumerate() {
             let x = load(signature, (i + P * a) * w + at_table);
             for l in 0..L {
-                da[l] += x[l] * e;
+                da[l] = madd::<FUSED>(x[l], *e, da[l]);
             }
         }
         unsafe {
@@ -1623,11 +1632,11 @@ unsafe fn steady_lanes<const M: usize, const P: usize, const L: usize>(
         for (b, db) in d.iter().enumerate().take(a + 1) {
             let g = load(inverse, tri(a, b) * w + at_table);
             for l in 0..L {
-                t[l] += g[l] * db[l];
+                t[l] = madd::<FUSED>(g[l], db[l], t[l]);
             }
         }
         for l in 0..L {
-            st[l] += d[a][l] * t[l];
+            st[l] = madd::<FUSED>(d[a][l], t[l], st[l]);
         }
     }
     unsafe { std::ptr::write_unaligned(stat.as_mut_ptr().add(at_slot).cast::<[f64; L]>(), st) };
@@ -1636,7 +1645,7 @@ unsafe fn steady_lanes<const M: usize, const P: usize, const L: usize>(
 /// The stationary measurement step over a run for any m, p: one pass per component.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn steady_passes(
+fn steady_passes<const FUSED: bool>(
     run: SteadyRun,
     m: usize,
     p: usize,
@@ -1652,7 +1661,7 @@ fn steady_passes(
         for (i, e) in eps.iter().enumerate().take(p) {
             let c = (i + p * a) * w + idx;
             for (d, x) in d.iter_mut().zip(&signature[c..c + len]) {
-                *d += x * e;
+                *d = madd::<FUSED>(*x, *e, *d);
             }
         }
     }
@@ -1663,9 +1672,13 @@ fn steady_passes(
         for a in 0..m {
             let mut t = 0.0;
             for b in 0..=a {
-                t += inverse[tri(a, b) * w + idx + s] * score[b * w + start + s];
+                t = madd::<FUSED>(
+                    inverse[tri(a, b) * w + idx + s],
+                    score[b * w + start + s],
+                    t,
+                );
             }
-            st += score[a * w + start + s] * t;
+            st = madd::<FUSED>(score[a * w + start + s], t, st);
         }
         stat[s] = st;
     }
