@@ -1170,6 +1170,8 @@ impl WindowBank {
     /// Sets the vector width; the caller has checked that the processor supports it.
     pub(crate) fn set_level(&mut self, level: Level) {
         self.level = level;
+        // The AVX levels' fused pass always rounds a·b + c once; their passes must too.
+        self.fused_madd |= level != Level::Baseline;
     }
 
     /// Runs the passes at the baseline level with a·b + c rounded twice, as on a
