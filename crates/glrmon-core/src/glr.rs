@@ -1751,7 +1751,11 @@ fn madd<const FUSED: bool>(a: f64, b: f64, c: f64) -> f64 {
 /// [`madd`] with the rounding chosen at run time (off the per-sample path).
 #[inline(always)]
 fn madd_as(fused: bool, a: f64, b: f64, c: f64) -> f64 {
-    if fused { a.mul_add(b, c) } else { a * b + c }
+    if fused {
+        madd::<true>(a, b, c)
+    } else {
+        madd::<false>(a, b, c)
+    }
 }
 
 /// Entry i of fault j's forcing column G in eq. (46), a(ℓ)Ψ̃ − b(ℓ)FKΦ̃ = b(ℓ)·G: the
@@ -2175,10 +2179,7 @@ unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
     let mut sig = [[zero; P]; M];
     for j in 0..M {
         for i in 0..P {
-            let mut x = S::splat(c.phi[i][j]).mul(of[j]);
-            for q in 0..N {
-                x = x.mul_add(S::splat(c.h[i][q]), gamma[j][q]);
-            }
+            let x = affine(c.phi[i][j], of[j], &c.h[i], &gamma[j]);
             st!(x, v.signature, (i + P * j) * w + s0);
             sig[j][i] = x;
         }
@@ -2214,17 +2215,26 @@ unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
     };
     st!(stat, v.stat, s0);
     st!(rank, v.rank, s0);
-    // Γ ← AΓ + f·G (eq. (46)), in place (Γ_k is held above).
+    // Γ ← AΓ + b·G (eq. (46)), in place (Γ_k is held above).
     for j in 0..M {
         for i in 0..N {
-            let mut x = S::splat(c.forcing[j][i]).mul(of[j]);
-            for q in 0..N {
-                x = x.mul_add(S::splat(c.a[i][q]), gamma[j][q]);
-            }
+            let x = affine(c.forcing[j][i], of[j], &c.a[i], &gamma[j]);
             st!(x, v.gamma, (i + N * j) * w + s0);
         }
     }
     st!(lag.add(one), v.lag, s0);
+}
+
+/// c₀·f + Σ_q row_q·col_q, the sum in q's order with fused multiply-adds: one entry of
+/// L⁻¹S = (L⁻¹H)Γ + b·L⁻¹Φ̃ (eq. (45)) or of AΓ + b·G (eq. (46)) for a column of Γ, as
+/// the passes compute it.
+#[inline(always)]
+fn affine<const N: usize, S: Lanes>(c0: f64, f: S, row: &[f64; N], col: &[S; N]) -> S {
+    let mut x = S::splat(c0).mul(f);
+    for q in 0..N {
+        x = x.mul_add(S::splat(row[q]), col[q]);
+    }
+    x
 }
 
 /// The dropped-pivot LDLᵀ statistic dᵀC⁻d and rank C of L onsets (eq. (35)), with the
