@@ -705,8 +705,29 @@ impl Detector {
             .information(onset, info.as_mut_slice(), score.as_mut_slice())
     }
 
+    /// Keeps (`true`) or stops keeping the fault signature of every onset after each
+    /// measured step, for [`Detector::signature`], from the next measured step on.
+    ///
+    /// Off by default: the statistic needs only C_k(r) and d_k(r) (eqs. (32)-(33)),
+    /// which the fused window pass computes from signatures it holds in registers.
+    /// Keeping them costs p·m stores per onset and step and p·m·w·8 bytes more of the
+    /// window's cache footprint (10 KiB at p = 2, m = 4, w = 160, where the rest is
+    /// 37.5 KiB and a 48 KiB L1 data cache then no longer holds it).
+    ///
+    /// ```
+    /// # use glrmon_core::Detector;
+    /// # fn f(det: &mut Detector) {
+    /// det.keep_signatures(true);
+    /// # }
+    /// ```
+    pub fn keep_signatures(&mut self, keep: bool) {
+        self.bank.set_keep_signatures(keep);
+    }
+
     /// Writes the fault signature S_k(r) = H_kΓ_k(r) + Φ_k(r) (p×m, eq. (45)) of onset r
-    /// at the last measured sample k; false when r is not in the window.
+    /// at the last measured sample k; false when r is not in the window, or when the
+    /// signatures are not kept ([`Detector::keep_signatures`]) or were switched on after
+    /// that sample.
     pub fn signature(&self, onset: u64, out: &mut DMatrix<f64>) -> bool {
         if self.last_measured != self.next_k.map(|n| n - 1) {
             // The last step was predict-only: no signature at that sample.

@@ -220,7 +220,9 @@ pub(crate) struct WindowBank {
     /// Γ_k(r): component (i, j) of slot s at [(i + n j)·slots + s].
     gamma: Vec<f64>,
     gamma_next: Vec<f64>,
-    /// L_k⁻¹S_k(r): component (i, j) at [(i + p j)·slots + s].
+    /// L_k⁻¹S_k(r): component (i, j) at [(i + p j)·slots + s]. The passes' scratch
+    /// between the signatures and C, d; the fused pass writes it only for
+    /// `keep_signatures`.
     signature: Vec<f64>,
     /// C_k(r), packed lower triangle: [tri(a, b)·slots + s].
     info: Vec<f64>,
@@ -267,6 +269,13 @@ pub(crate) struct WindowBank {
     /// every slot (the passes for m ≠ 2) or of none (the fused pass keeps it in
     /// registers; m = 2 has none).
     factored: bool,
+    /// Whether measured steps keep every onset's L_k⁻¹S_k(r) readable
+    /// ([`WindowBank::whitened_signature`]); off by default, see
+    /// `Detector::keep_signatures`.
+    keep_signatures: bool,
+    /// Set when `keep_signatures` is switched on, until the next measured step: the
+    /// signatures in store are not the last step's.
+    signatures_stale: bool,
 }
 
 /// The matrices of measured step k that the window needs, all column-major.
@@ -372,6 +381,8 @@ impl WindowBank {
             fused_madd: crate::simd::fused_multiply_add(),
             fused: fused_dims(n, m, p),
             factored: false,
+            keep_signatures: false,
+            signatures_stale: false,
             tables: LagTables {
                 signature: z(p * m * slots),
                 info: z(t * slots),
@@ -751,6 +762,7 @@ impl WindowBank {
     /// [`WindowBank::time_update`] run as passes. Both do the same operations per onset
     /// in the same order, so they give the same bits.
     pub(crate) fn step(&mut self, k: u64, inputs: &StepInputs<'_>) -> Option<WindowMax> {
+        self.signatures_stale = false;
         if !self.fused || self.level == Level::Baseline {
             self.accumulate(k, inputs.h_white, inputs.phi_white, inputs.eps_white);
             let best = self.maximize(k);
@@ -824,6 +836,7 @@ impl WindowBank {
             lag: &mut self.lag,
             gamma: &mut self.gamma,
             signature: &mut self.signature,
+            keep_signature: self.keep_signatures,
             info: &mut self.info,
             score: &mut self.score,
             stat: &mut self.stat,
@@ -848,6 +861,14 @@ impl WindowBank {
             unsafe { fused_lanes::<N, M, P, S>(coefs, &mut slots, s) };
             s += S::L;
         }
+        if split_statistic(M) {
+            let mut t = 0;
+            while t + S::L <= w {
+                // SAFETY: as above.
+                unsafe { statistic_lanes::<M, S>(coefs.tol, &mut slots, t) };
+                t += S::L;
+            }
+        }
         s
     }
 
@@ -867,11 +888,19 @@ impl WindowBank {
         if s + H::L <= w {
             // SAFETY: sized (checked by `slot_arrays`) and s + L ≤ w.
             unsafe { fused_lanes::<N, M, P, H>(coefs, &mut slots, s) };
+            if split_statistic(M) {
+                // SAFETY: as above.
+                unsafe { statistic_lanes::<M, H>(coefs.tol, &mut slots, s) };
+            }
             s += H::L;
         }
         while s < w {
             // SAFETY: as above, one slot.
             unsafe { fused_lanes::<N, M, P, f64>(coefs, &mut slots, s) };
+            if split_statistic(M) {
+                // SAFETY: as above.
+                unsafe { statistic_lanes::<M, f64>(coefs.tol, &mut slots, s) };
+            }
             s += 1;
         }
     }
@@ -1169,8 +1198,12 @@ impl WindowBank {
         true
     }
 
-    /// Copies L_k⁻¹S_k(r) (p×m) of the last measured step.
+    /// Copies L_k⁻¹S_k(r) (p×m) of the last measured step; false when r is not in the
+    /// window or the signatures are not kept ([`WindowBank::set_keep_signatures`]).
     pub(crate) fn whitened_signature(&self, onset: u64, out: &mut [f64]) -> bool {
+        if !self.keep_signatures || self.signatures_stale {
+            return false;
+        }
         let Some(s) = self.slot_for(onset) else {
             return false;
         };
@@ -1242,6 +1275,13 @@ impl WindowBank {
     pub(crate) fn set_separate_rounding(&mut self) {
         self.level = Level::Baseline;
         self.fused_madd = false;
+    }
+
+    /// Keeps (or stops keeping) the signatures of every onset readable after each
+    /// measured step, from the next one on.
+    pub(crate) fn set_keep_signatures(&mut self, keep: bool) {
+        self.signatures_stale |= keep && !self.keep_signatures;
+        self.keep_signatures = keep;
     }
 
     /// Whether measured steps run the fused pass.
@@ -1413,6 +1453,7 @@ impl WindowBank {
     /// and the statistic d_k(r)ᵀC(ℓ)⁻d_k(r) for every slot, two contiguous runs of the
     /// ring against two contiguous runs of the tables.
     pub(crate) fn accumulate_steady(&mut self, k: u64, eps_white: &[f64]) {
+        self.signatures_stale = false;
         wide_call!(self, steady_4, steady_avx2, steady_avx512, (k, eps_white))
     }
 
@@ -1917,6 +1958,8 @@ struct SlotArrays<'a> {
     lag: &'a mut [f64],
     gamma: &'a mut [f64],
     signature: &'a mut [f64],
+    /// Whether to store L⁻¹S (the fused pass holds it in registers for C and d).
+    keep_signature: bool,
     info: &'a mut [f64],
     score: &'a mut [f64],
     stat: &'a mut [f64],
@@ -2189,9 +2232,11 @@ x86_lanes!(Avx2Lanes, arch::__m256d, 4, _mm256_set1_pd, _mm256_loadu_pd, _mm256_
 
 /// Slots s0 … s0 + L − 1 of measured step k in registers: the profile factors
 /// (`compute_factors`), L⁻¹S = (L⁻¹H)Γ + b·L⁻¹Φ̃ (eq. (45)), C += SᵀS and d += SᵀL⁻¹ε
-/// (eqs. (32)-(33)), the dropped-pivot LDLᵀ statistic dᵀC⁻d and rank (eq. (35)), and
-/// Γ ← AΓ + b·G (eq. (46), [`forcing`]); each onset gets the operations of the passes in
-/// their order, so the results are the same bits.
+/// (eqs. (32)-(33)), the dropped-pivot LDLᵀ statistic dᵀC⁻d and rank (eq. (35); for
+/// m ≥ 3 in a loop of its own, [`split_statistic`]), and Γ ← AΓ + b·G (eq. (46),
+/// [`forcing`]); each onset gets the operations of the passes in their order, so the
+/// results are the same bits. L⁻¹S stays in registers unless the signatures are kept
+/// (`Detector::keep_signatures`).
 ///
 /// # Safety
 /// `v.sized(N, M, P)` and s0 + L ≤ `v.w` (checked once per step by the caller, so the
@@ -2243,7 +2288,9 @@ unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
     for j in 0..M {
         for i in 0..P {
             let x = affine(c.phi[i][j], of[j], &c.h[i], &gamma[j]);
-            st!(x, v.signature, (i + P * j) * w + s0);
+            if v.keep_signature {
+                st!(x, v.signature, (i + P * j) * w + s0);
+            }
             sig[j][i] = x;
         }
     }
@@ -2270,14 +2317,16 @@ unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
         st!(x, v.score, a * w + s0);
         score[a] = x;
     }
-    let tol = S::splat(c.tol);
-    let (stat, rank) = if M == 2 {
-        quad2(info[0][0], info[1][0], info[1][1], score[0], score[1], tol)
-    } else {
-        ldl_statistic(&info, &score, tol)
-    };
-    st!(stat, v.stat, s0);
-    st!(rank, v.rank, s0);
+    if !split_statistic(M) {
+        let tol = S::splat(c.tol);
+        let (stat, rank) = if M == 2 {
+            quad2(info[0][0], info[1][0], info[1][1], score[0], score[1], tol)
+        } else {
+            ldl_statistic(&info, &score, tol)
+        };
+        st!(stat, v.stat, s0);
+        st!(rank, v.rank, s0);
+    }
     // Γ ← AΓ + b·G (eq. (46)), in place (Γ_k is held above).
     for j in 0..M {
         for i in 0..N {
@@ -2286,6 +2335,48 @@ unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
         }
     }
     st!(lag.add(one), v.lag, s0);
+}
+
+/// Whether the fused pass leaves the statistic to a loop of its own after the main loop
+/// ([`statistic_lanes`], reading back the C and d just stored): for m ≥ 3 the LDLᵀ's m
+/// serial divisions make the statistic a dependency chain at the end of an iteration of
+/// about 400 instructions (n3 p2 m4), too long for the reorder buffer to overlap with
+/// the next register's work (in `perf annotate`, 28 % of the pass's samples sat on the
+/// instructions after the four divisions). In a loop of their own, several registers'
+/// chains run at once. Measured together with the signatures left in registers (the
+/// window's arrays then fit the L1 data cache; neither alone gained): n3 p2 m4 w160 and
+/// LTI general +14–18 % (docs/PERFORMANCE.md). Same operations, same bits.
+const fn split_statistic(m: usize) -> bool {
+    m >= 3
+}
+
+/// The statistic and rank of slots s0 … s0 + L − 1 from the stored C and d
+/// ([`ldl_statistic`]), for the m of [`split_statistic`].
+///
+/// # Safety
+/// `v.sized(N, M, P)` and s0 + L ≤ `v.w`.
+// Index loops over the (a, b) of the packed triangle, as in `fused_lanes`.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+unsafe fn statistic_lanes<const M: usize, S: Lanes>(tol: f64, v: &mut SlotArrays<'_>, s0: usize) {
+    let w = v.w;
+    let zero = S::splat(0.0);
+    let mut info = [[zero; M]; M];
+    let mut score = [zero; M];
+    for a in 0..M {
+        for b in 0..=a {
+            // SAFETY: as in `fused_lanes`.
+            info[a][b] = unsafe { S::load_ptr(v.info.as_ptr().add(tri(a, b) * w + s0)) };
+        }
+        // SAFETY: as above.
+        score[a] = unsafe { S::load_ptr(v.score.as_ptr().add(a * w + s0)) };
+    }
+    let (stat, rank) = ldl_statistic(&info, &score, S::splat(tol));
+    // SAFETY: as above.
+    unsafe {
+        stat.store_ptr(v.stat.as_mut_ptr().add(s0));
+        rank.store_ptr(v.rank.as_mut_ptr().add(s0));
+    }
 }
 
 /// c₀·f + Σ_q row_q·col_q, the sum in q's order with fused multiply-adds: one entry of

@@ -58,3 +58,66 @@ fn fused_window_pass_equals_the_separate_passes_bit_for_bit() {
         }
     }
 }
+
+/// Signatures are kept only on request (`Detector::keep_signatures`), and the fused
+/// pass keeps the same bits as the passes: every onset of the window at every 50th
+/// sample, n = 3, p = 2, m = 4, w = 45. Without the request, and after switching it
+/// on until the next measured step, `signature` says there is none.
+#[test]
+fn kept_signatures_of_the_fused_pass_equal_the_passes_and_are_off_by_default() {
+    use nalgebra::DMatrix;
+    let mut sc = scenarios::lpv_n3_p2_m4();
+    sc.window.window = 45;
+    sc.window.steady_tolerance = 0.0;
+    let (p, m) = (sc.model_outputs(), sc.faults.len());
+    let signatures = |level: VectorLevel, fused: bool| {
+        let mut det = sc.detector().unwrap();
+        assert!(det.set_vector_level(level));
+        det.set_fused_window(fused);
+        let mut sim = sc.faulty_simulator(5, "actuator1_bias", 300, 2.0).unwrap();
+        let mut out = StepOutput::new(p, m);
+        let mut s = DMatrix::zeros(p, m);
+        let mut kept = Vec::new();
+        run_steps(&mut det, &mut sim, &mut out, 100, |_| false, |_, _| ());
+        assert!(!det.signature(99, &mut s), "signatures are off by default");
+        det.keep_signatures(true);
+        assert!(!det.signature(99, &mut s), "switched on after sample 99");
+        let mut count = 0;
+        for k in 100..600_u64 {
+            step_one(&mut det, &mut sim, &mut out, k);
+            if k % 50 == 0 {
+                for onset in k - 44..=k {
+                    assert!(det.signature(onset, &mut s), "onset {onset} at {k}");
+                    kept.extend(s.iter().map(|x| x.to_bits()));
+                    count += 1;
+                }
+            }
+        }
+        assert_eq!(count, 10 * 45);
+        kept
+    };
+    let reference = signatures(VectorLevel::Baseline, false);
+    for level in VectorLevel::supported() {
+        assert!(
+            signatures(level, true) == reference,
+            "fused signatures at {level:?} differ from the passes'"
+        );
+    }
+}
+
+/// Sample k of `sim` through `det`, measured.
+fn step_one(
+    det: &mut glrmon_core::Detector,
+    sim: &mut glrmon_sim::Simulator,
+    out: &mut StepOutput,
+    k: u64,
+) {
+    let x = sim.next_sample();
+    let s = glrmon_core::Sample {
+        k,
+        u: &x.u,
+        y: &x.y,
+        p: &x.p,
+    };
+    det.step(&s, out).unwrap();
+}

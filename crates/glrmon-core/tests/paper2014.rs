@@ -96,6 +96,7 @@ fn run_pair(
     let p0 = DMatrix::identity(dims.states, dims.states);
     let mut clean = Detector::new(model(), faults(), x0.clone(), p0.clone(), settings).unwrap();
     let mut faulty = Detector::new(model(), faults(), x0, p0, settings).unwrap();
+    faulty.keep_signatures(true);
     let mut sim0 = sim(None);
     let mut sim1 = sim(Some(Injection {
         magnitude: theta.clone(),
@@ -227,6 +228,7 @@ fn recursive_c_d_equal_stacked_z_m_r_eqs_38_to_41() {
         },
     )
     .unwrap();
+    det.keep_signatures(true);
     let mut sim = Simulator::new(Box::new(ltv), DVector::zeros(3), 8)
         .unwrap()
         .with_fault(
