@@ -5,7 +5,10 @@
 //! and requires l_k, r̂, rank and θ̂ to agree to 1e-9 relative at every sample, while
 //! checking that the fast path was actually in force (and left when it must be).
 
-use glrmon_core::{Detector, Sample, StepOutput};
+mod common;
+
+use common::run_pair;
+use glrmon_core::{Detector, StepOutput};
 use glrmon_sim::{Simulator, scenarios};
 
 /// Counts of one comparison run.
@@ -46,57 +49,54 @@ fn compare(
     let mut run = Run::default();
     let mut was = false;
     let mut above = false;
-    for k in 0..steps {
-        let x = sim.next_sample();
-        if gap(k) {
-            fast.predict_only(k).unwrap();
-            general.predict_only(k).unwrap();
-        } else {
-            let s = Sample {
-                k,
-                u: &x.u,
-                y: &x.y,
-                p: &x.p,
-            };
-            fast.step(&s, &mut a).unwrap();
-            general.step(&s, &mut b).unwrap();
-            assert!(!general.is_stationary());
-            let mut worst = 0.0_f64;
-            for (x, y) in a.innovation.iter().zip(b.innovation.iter()) {
-                worst = worst.max(close(*x, *y, "innovation", k));
-            }
-            worst = worst.max(close(
-                a.normalized_innovation,
-                b.normalized_innovation,
-                "εᵀΣ⁻¹ε",
-                k,
-            ));
-            match (a.glr, b.glr) {
-                (Some(x), Some(y)) => {
-                    worst = worst.max(close(x, y, "l_k", k));
-                    assert_eq!(a.onset, b.onset, "r̂ at k = {k} (l_k = {y})");
-                    assert_eq!(a.rank, b.rank, "rank at k = {k}");
-                    for (x, y) in a.magnitude.iter().zip(b.magnitude.iter()) {
-                        worst = worst.max(close(*x, *y, "θ̂", k));
-                    }
-                    let now = y > threshold;
-                    if now && !above {
-                        run.alarms_at.push(k);
-                    }
-                    above = now;
+    let pair = [&mut fast, &mut general];
+    run_pair(
+        pair,
+        [&mut a, &mut b],
+        &mut sim,
+        steps,
+        gap,
+        |k, measured, dets, outs| {
+            let ([fast, general], [a, b]) = (dets, outs);
+            if measured {
+                assert!(!general.is_stationary());
+                let mut worst = 0.0_f64;
+                for (x, y) in a.innovation.iter().zip(b.innovation.iter()) {
+                    worst = worst.max(close(*x, *y, "innovation", k));
                 }
-                (x, y) => assert_eq!(x, y, "glr presence at k = {k}"),
+                worst = worst.max(close(
+                    a.normalized_innovation,
+                    b.normalized_innovation,
+                    "εᵀΣ⁻¹ε",
+                    k,
+                ));
+                match (a.glr, b.glr) {
+                    (Some(x), Some(y)) => {
+                        worst = worst.max(close(x, y, "l_k", k));
+                        assert_eq!(a.onset, b.onset, "r̂ at k = {k} (l_k = {y})");
+                        assert_eq!(a.rank, b.rank, "rank at k = {k}");
+                        for (x, y) in a.magnitude.iter().zip(b.magnitude.iter()) {
+                            worst = worst.max(close(*x, *y, "θ̂", k));
+                        }
+                        let now = y > threshold;
+                        if now && !above {
+                            run.alarms_at.push(k);
+                        }
+                        above = now;
+                    }
+                    (x, y) => assert_eq!(x, y, "glr presence at k = {k}"),
+                }
+                if fast.is_stationary() {
+                    run.max_relative = run.max_relative.max(worst);
+                }
             }
-            if fast.is_stationary() {
-                run.max_relative = run.max_relative.max(worst);
-            }
-        }
-        let is = fast.is_stationary();
-        run.stationary += u64::from(is);
-        run.entries += u64::from(is && !was);
-        run.exits += u64::from(!is && was);
-        was = is;
-    }
+            let is = fast.is_stationary();
+            run.stationary += u64::from(is);
+            run.entries += u64::from(is && !was);
+            run.exits += u64::from(!is && was);
+            was = is;
+        },
+    );
     run
 }
 

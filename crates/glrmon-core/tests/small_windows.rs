@@ -9,8 +9,8 @@
 
 mod common;
 
-use common::{bits, run_steps};
-use glrmon_core::{Sample, StepOutput, VectorLevel};
+use common::{bits, run_pair, run_steps};
+use glrmon_core::{StepOutput, VectorLevel};
 use glrmon_sim::scenarios;
 
 /// `steps` samples of the general path (fault at half-time, a gap at a third).
@@ -97,34 +97,30 @@ fn small_windows_stationary_queries_equal_the_general_path() {
             let (p, m) = (sc.model_outputs(), sc.faults.len());
             let (mut a, mut b) = (StepOutput::new(p, m), StepOutput::new(p, m));
             let mut stationary = 0;
-            for k in 0..6000_u64 {
-                let x = sim.next_sample();
-                if k == 4000 {
-                    fast.predict_only(k).unwrap();
-                    general.predict_only(k).unwrap();
-                } else {
-                    let s = Sample {
-                        k,
-                        u: &x.u,
-                        y: &x.y,
-                        p: &x.p,
-                    };
-                    fast.step(&s, &mut a).unwrap();
-                    general.step(&s, &mut b).unwrap();
-                }
-                stationary += u64::from(fast.is_stationary());
-                for r in k.saturating_sub(w as u64 + 1)..=k + 1 {
-                    let (f, g) = (fast.onset_statistic(r), general.onset_statistic(r));
-                    assert_eq!(f.is_some(), g.is_some(), "w = {w}, k = {k}, r = {r}");
-                    if let (Some((x, rx)), Some((y, ry))) = (f, g) {
-                        assert_eq!(rx, ry, "rank: w = {w}, k = {k}, r = {r}");
-                        assert!(
-                            (x - y).abs() <= 1e-9 * (1.0 + y.abs()),
-                            "statistic: w = {w}, k = {k}, r = {r}: {x} vs {y}"
-                        );
+            let pair = [&mut fast, &mut general];
+            let outs = [&mut a, &mut b];
+            run_pair(
+                pair,
+                outs,
+                &mut sim,
+                6000,
+                |k| k == 4000,
+                |k, _, dets, _| {
+                    let [fast, general] = dets;
+                    stationary += u64::from(fast.is_stationary());
+                    for r in k.saturating_sub(w as u64 + 1)..=k + 1 {
+                        let (f, g) = (fast.onset_statistic(r), general.onset_statistic(r));
+                        assert_eq!(f.is_some(), g.is_some(), "w = {w}, k = {k}, r = {r}");
+                        if let (Some((x, rx)), Some((y, ry))) = (f, g) {
+                            assert_eq!(rx, ry, "rank: w = {w}, k = {k}, r = {r}");
+                            assert!(
+                                (x - y).abs() <= 1e-9 * (1.0 + y.abs()),
+                                "statistic: w = {w}, k = {k}, r = {r}: {x} vs {y}"
+                            );
+                        }
                     }
-                }
-            }
+                },
+            );
             assert!(stationary > 1000, "w = {w}: {stationary} stationary steps");
         }
     }

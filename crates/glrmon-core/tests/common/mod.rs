@@ -1,6 +1,9 @@
-//! Helpers shared by the core's bit-identity tests (fused pass, vector levels, small
-//! windows): every output of a step as bits, and a run of a detector over a simulator
-//! with predict-only gaps.
+//! Helpers shared by the core's path-comparison tests (fused pass, vector levels, small
+//! windows, LTI fast path): every output of a step as bits, a run of a detector over a
+//! simulator with predict-only gaps, and a run of two detectors in lockstep.
+
+// Each test crate that includes this module uses a part of it.
+#![allow(dead_code)]
 
 use glrmon_core::{Detector, Sample, StepOutput};
 use glrmon_sim::Simulator;
@@ -43,4 +46,37 @@ pub(crate) fn run_steps<T>(
         all.push(each(det, out));
     }
     all
+}
+
+/// Samples 0 … steps − 1 of `sim` through two detectors in lockstep (predict-only on
+/// both where `gap(k)`), with `each(k, measured, detectors, outputs)` called after
+/// every sample.
+pub(crate) fn run_pair(
+    detectors: [&mut Detector; 2],
+    outputs: [&mut StepOutput; 2],
+    sim: &mut Simulator,
+    steps: u64,
+    gap: impl Fn(u64) -> bool,
+    mut each: impl FnMut(u64, bool, [&Detector; 2], [&StepOutput; 2]),
+) {
+    let [first, second] = detectors;
+    let [a, b] = outputs;
+    for k in 0..steps {
+        let x = sim.next_sample();
+        let measured = !gap(k);
+        if measured {
+            let s = Sample {
+                k,
+                u: &x.u,
+                y: &x.y,
+                p: &x.p,
+            };
+            first.step(&s, a).unwrap();
+            second.step(&s, b).unwrap();
+        } else {
+            first.predict_only(k).unwrap();
+            second.predict_only(k).unwrap();
+        }
+        each(k, measured, [&*first, &*second], [&*a, &*b]);
+    }
 }
