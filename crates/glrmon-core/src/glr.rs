@@ -1014,21 +1014,19 @@ impl WindowBank {
     /// LDLᵀ (computed by [`WindowBank::factor_slot`] unless the passes left it).
     fn solve_factored(&mut self, s: usize, out: &mut [f64]) {
         let (m, w) = (self.m, self.slots);
-        {
-            if !self.factored {
-                self.factor_slot(s);
+        if !self.factored {
+            self.factor_slot(s);
+        }
+        // Back-substitution on the slot's LDLᵀ: θ = L⁻ᵀ D⁻¹ z.
+        for (j, o) in out.iter_mut().enumerate().take(m) {
+            *o = self.solved[j * w + s] * self.inv_pivot[j * w + s];
+        }
+        for j in (0..m).rev() {
+            let mut v = out[j];
+            for (i, o) in out.iter().enumerate().take(m).skip(j + 1) {
+                v -= self.ldl[tri(i, j) * w + s] * o;
             }
-            // Back-substitution on the slot's LDLᵀ: θ = L⁻ᵀ D⁻¹ z.
-            for (j, o) in out.iter_mut().enumerate().take(m) {
-                *o = self.solved[j * w + s] * self.inv_pivot[j * w + s];
-            }
-            for j in (0..m).rev() {
-                let mut v = out[j];
-                for (i, o) in out.iter().enumerate().take(m).skip(j + 1) {
-                    v -= self.ldl[tri(i, j) * w + s] * o;
-                }
-                out[j] = v;
-            }
+            out[j] = v;
         }
     }
 
