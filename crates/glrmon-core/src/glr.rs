@@ -267,7 +267,8 @@ pub(crate) struct WindowBank {
     fused: bool,
     /// Whether `ldl`, `inv_pivot` and `solved` hold the last step's factorisation of
     /// every slot (the passes for m ≠ 2) or of none (the fused pass keeps it in
-    /// registers; m = 2 has none).
+    /// registers; m = 2 has none). θ̂ reads it only for m ≥ 5: for m = 1, 3, 4 it
+    /// factors C(r̂) in registers ([`WindowBank::solve_regular`]).
     factored: bool,
     /// Whether measured steps keep every onset's L_k⁻¹S_k(r) readable
     /// ([`WindowBank::whitened_signature`]); off by default, see
@@ -1126,17 +1127,10 @@ impl WindowBank {
             let src = &self.gamma[n * j * w..n * (j + 1) * w];
             let dst = &mut self.gamma_next[n * j * w..n * (j + 1) * w];
             let g = &self.forcing[n * j..n * (j + 1)];
-            match (n, self.fused_madd) {
-                (1, true) => gamma_column::<1, true>(closed_loop, g, factor, src, dst),
-                (2, true) => gamma_column::<2, true>(closed_loop, g, factor, src, dst),
-                (3, true) => gamma_column::<3, true>(closed_loop, g, factor, src, dst),
-                (4, true) => gamma_column::<4, true>(closed_loop, g, factor, src, dst),
-                (1, false) => gamma_column::<1, false>(closed_loop, g, factor, src, dst),
-                (2, false) => gamma_column::<2, false>(closed_loop, g, factor, src, dst),
-                (3, false) => gamma_column::<3, false>(closed_loop, g, factor, src, dst),
-                (4, false) => gamma_column::<4, false>(closed_loop, g, factor, src, dst),
-                (_, true) => gamma_column_generic::<true>(n, closed_loop, g, factor, src, dst),
-                (_, false) => gamma_column_generic::<false>(n, closed_loop, g, factor, src, dst),
+            if self.fused_madd {
+                gamma_column_of::<true>(n, closed_loop, g, factor, src, dst);
+            } else {
+                gamma_column_of::<false>(n, closed_loop, g, factor, src, dst);
             }
         }
         std::mem::swap(&mut self.gamma, &mut self.gamma_next);
@@ -1815,6 +1809,25 @@ fn gamma_column<const N: usize, const FUSED: bool>(
             }
             out[s] = v;
         }
+    }
+}
+
+/// Column j of eq. (46): [`gamma_column`] for n ≤ 4, [`gamma_column_generic`] beyond.
+#[inline(always)]
+fn gamma_column_of<const FUSED: bool>(
+    n: usize,
+    a: &[f64],
+    forcing: &[f64],
+    factor: &[f64],
+    src: &[f64],
+    dst: &mut [f64],
+) {
+    match n {
+        1 => gamma_column::<1, FUSED>(a, forcing, factor, src, dst),
+        2 => gamma_column::<2, FUSED>(a, forcing, factor, src, dst),
+        3 => gamma_column::<3, FUSED>(a, forcing, factor, src, dst),
+        4 => gamma_column::<4, FUSED>(a, forcing, factor, src, dst),
+        _ => gamma_column_generic::<FUSED>(n, a, forcing, factor, src, dst),
     }
 }
 
