@@ -102,7 +102,7 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     if let Some(p) = &args.output {
         let file = std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?;
         let w = Mutex::new(std::io::BufWriter::new(file));
-        sinks.push(Box::new(FnSink("jsonl", move |o: &Output| {
+        sinks.push(Box::new(FnSink::new("jsonl", move |o: &Output| {
             if let Ok(mut w) = w.lock() {
                 let _ = w
                     .write_all(&o.json)

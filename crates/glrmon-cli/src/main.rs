@@ -16,7 +16,6 @@ mod readahead;
 mod recording;
 mod recover;
 mod replay;
-mod report;
 mod run;
 mod simulate;
 mod status;

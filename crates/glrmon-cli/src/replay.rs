@@ -5,20 +5,20 @@
 //! (inputs and results, self-describing), an HTML report.
 
 use std::collections::HashMap;
-use std::io::{BufRead, IsTerminal as _, Write};
+use std::io::{BufRead, IsTerminal as _};
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
 
 use anyhow::Context as _;
 use clap::Args;
 use glrmon_monitor::Monitor;
 use glrmon_record::{FileHeader, McapFileSink};
-use glrmon_runtime::{InputItem, InputOutput, Output, Sink};
-use glrmon_wire::{
-    DecodeLimits, ErrorRecord, IntakeEvent, Record, Sample, Stage, encode_intake, encode_json,
-    encode_sample,
+use glrmon_report::ReportSink;
+use glrmon_runtime::{
+    ChannelPipeline, Fanout, FnSink, InputItem, Interest, JsonLinesSink, Output, Sink,
 };
+use glrmon_wire::{DecodeLimits, IntakeEvent, Record, Sample};
 
 use crate::csv::CsvReader;
 use crate::mcapin::{McapInput, is_mcap};
@@ -54,205 +54,72 @@ pub(crate) struct ReplayArgs {
     quiet: bool,
 }
 
-/// The result sinks of a replay, fed on this thread in order.
-struct Outputs {
-    sinks: Vec<Box<dyn Sink>>,
-    inputs_wanted: bool,
-    alarm_lines: Vec<String>,
-    records: u64,
-    json: Vec<u8>,
-}
+/// The alarm, end and diagnosis lines of a replay, printed after its summary.
+type AlarmLines = Arc<Mutex<Vec<String>>>;
 
-impl Outputs {
-    fn new(sinks: Vec<Box<dyn Sink>>) -> Self {
-        let inputs_wanted = sinks.iter().any(|s| s.interest().inputs);
-        Self {
-            sinks,
-            inputs_wanted,
-            alarm_lines: Vec::new(),
-            records: 0,
-            json: Vec::with_capacity(512),
-        }
-    }
-
-    /// Whether any output keeps `stat` records (if none does, the monitors need not
-    /// build them).
-    fn wants_stats(&self) -> bool {
-        self.sinks
-            .iter()
-            .any(|s| s.interest().stat_every.unwrap_or(1) != 0)
-    }
-
-    fn input(&mut self, name: &Arc<str>, item: &InputItem, log_time_ns: u64) -> anyhow::Result<()> {
-        if !self.inputs_wanted {
-            return Ok(());
-        }
-        let mut json = Vec::with_capacity(128);
-        match item {
-            InputItem::Sample(s) => encode_sample(name, s, &mut json)?,
-            InputItem::Intake(e) => encode_intake(name, e, &mut json)?,
-        }
-        let input = InputOutput {
-            channel: 0,
-            name: name.clone(),
-            item: item.clone(),
-            json,
-            log_time_ns,
-        };
-        for s in &mut self.sinks {
-            if s.interest().inputs {
-                s.write_input(&input).map_err(|e| anyhow::anyhow!("{e}"))?;
-            }
-        }
-        Ok(())
-    }
-
-    /// Encodes and writes the records of one input; `stats` counts the channel's
-    /// `stat` records so far (the sinks' decimation counts them).
-    fn records(
-        &mut self,
-        stats: &mut u64,
-        records: &mut Vec<Record>,
-        log_time_ns: u64,
-    ) -> anyhow::Result<()> {
-        for record in records.drain(..) {
-            if let Some(line) = print::line(&record) {
-                if !matches!(record, Record::Error(_)) {
-                    self.alarm_lines.push(line);
-                }
-            }
-            let stat_index = if matches!(record, Record::Stat(_)) {
-                *stats += 1;
-                Some(*stats - 1)
-            } else {
-                None
-            };
-            let wanted = |s: &dyn Sink| match stat_index {
-                Some(i) => {
-                    let every = s.interest().stat_every.unwrap_or(1);
-                    every != 0 && i % every == 0
-                }
-                None => true,
-            };
-            if !self.sinks.iter().any(|s| wanted(s.as_ref())) {
-                continue;
-            }
-            self.records += 1;
-            self.json.clear();
-            encode_json(&record, &mut self.json)?;
-            let output = Output {
-                record,
-                json: std::mem::take(&mut self.json),
-                log_time_ns,
-                stat_index,
-            };
-            for s in &mut self.sinks {
-                if wanted(s.as_ref()) {
-                    s.write(&output).map_err(|e| anyhow::anyhow!("{e}"))?;
-                }
-            }
-            self.json = output.json;
-        }
-        Ok(())
-    }
-
-    fn finish(self) -> anyhow::Result<()> {
-        for mut s in self.sinks {
-            s.flush().map_err(|e| anyhow::anyhow!("{e}"))?;
-        }
-        Ok(())
-    }
-}
-
-/// JSON lines of every record (`stat` records decimated: every `.1`-th, 0 for none).
-struct JsonLines<W: Write + Send>(W, u64);
-
-impl<W: Write + Send + 'static> Sink for JsonLines<W> {
-    fn name(&self) -> &str {
-        "jsonl"
-    }
-    fn interest(&self) -> glrmon_runtime::Interest {
-        glrmon_runtime::Interest {
-            inputs: false,
-            stat_every: Some(self.1),
-        }
-    }
-    fn write(&mut self, output: &Output) -> Result<(), glrmon_runtime::SinkError> {
-        self.0
-            .write_all(&output.json)
-            .and_then(|()| self.0.write_all(b"\n"))
-            .map_err(|e| glrmon_runtime::SinkError {
-                sink: "jsonl".into(),
-                message: e.to_string(),
-            })
-    }
-    fn flush(&mut self) -> Result<(), glrmon_runtime::SinkError> {
-        self.0.flush().map_err(|e| glrmon_runtime::SinkError {
-            sink: "jsonl".into(),
-            message: e.to_string(),
-        })
-    }
-}
-
-/// An MCAP output, finished when the replay ends (`stat` records decimated as for
-/// [`JsonLines`]).
-struct McapOut(Option<McapFileSink>, u64);
-
-impl Sink for McapOut {
-    fn name(&self) -> &str {
-        "mcap"
-    }
-    fn interest(&self) -> glrmon_runtime::Interest {
-        glrmon_runtime::Interest {
-            inputs: true,
-            stat_every: Some(self.1),
-        }
-    }
-    fn write(&mut self, output: &Output) -> Result<(), glrmon_runtime::SinkError> {
-        self.0.as_mut().map_or(Ok(()), |s| s.write(output))
-    }
-    fn write_input(&mut self, input: &InputOutput) -> Result<(), glrmon_runtime::SinkError> {
-        self.0.as_mut().map_or(Ok(()), |s| s.write_input(input))
-    }
-    fn flush(&mut self) -> Result<(), glrmon_runtime::SinkError> {
-        match self.0.take() {
-            Some(s) => s
-                .finish()
-                .map(|_| ())
-                .map_err(|e| glrmon_runtime::SinkError {
-                    sink: "mcap".into(),
-                    message: e.to_string(),
-                }),
-            None => Ok(()),
-        }
-    }
-}
-
-fn output_sinks(args: &ReplayArgs, header: &FileHeader) -> anyhow::Result<Vec<Box<dyn Sink>>> {
+/// The output sinks of `args`, and a sink keeping the alarm lines for the summary.
+fn output_sinks(
+    args: &ReplayArgs,
+    header: &FileHeader,
+) -> anyhow::Result<(Vec<Box<dyn Sink>>, AlarmLines)> {
     let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
     match &args.output {
         Some(p) if is_mcap(p) => {
             let sink = McapFileSink::create(p, header)
                 .with_context(|| format!("creating {}", p.display()))?;
-            sinks.push(Box::new(McapOut(Some(sink), args.stat_every)));
+            sinks.push(Box::new(sink.with_stat_every(args.stat_every)));
         }
         Some(p) => {
             let file =
                 std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?;
-            sinks.push(Box::new(JsonLines(
+            sinks.push(Box::new(JsonLinesSink::new(
                 std::io::BufWriter::with_capacity(1 << 16, file),
                 args.stat_every,
             )));
         }
-        None => sinks.push(Box::new(JsonLines(
+        None => sinks.push(Box::new(JsonLinesSink::new(
             std::io::BufWriter::with_capacity(1 << 16, std::io::stdout()),
             args.stat_every,
         ))),
     }
     if let Some(p) = &args.report {
-        sinks.push(Box::new(crate::report::ReportSink::new(p, &args.input)));
+        sinks.push(Box::new(ReportSink::new(p, &args.input)));
     }
-    Ok(sinks)
+    let lines = AlarmLines::default();
+    let kept = lines.clone();
+    let alarm_lines = FnSink::new("alarm-lines", move |o: &Output| {
+        if matches!(o.record, Record::Error(_)) {
+            return;
+        }
+        if let Some(line) = print::line(&o.record) {
+            kept.lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .push(line);
+        }
+    })
+    .with_interest(Interest {
+        inputs: false,
+        stat_every: Some(0),
+    });
+    sinks.push(Box::new(alarm_lines));
+    Ok((sinks, lines))
+}
+
+/// Closes the sinks (files' summaries, the report); the first failure is the error.
+fn close(fanout: Fanout) -> anyhow::Result<()> {
+    let mut first = None;
+    fanout.close(&mut |e| {
+        first.get_or_insert(e);
+    });
+    first.map_or(Ok(()), |e| Err(e.into()))
+}
+
+fn take_lines(lines: &AlarmLines) -> Vec<String> {
+    std::mem::take(
+        &mut *lines
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner),
+    )
 }
 
 pub(crate) fn run(args: &ReplayArgs) -> anyhow::Result<()> {
@@ -278,7 +145,7 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
     let reader = std::io::BufReader::with_capacity(1 << 16, file);
     let csv = CsvReader::new(reader, channel.dims)
         .map_err(|e| InvalidInput(format!("{}: {e}", args.input.display())))?;
-    let mut monitor = Monitor::from_channel(channel)?;
+    let monitor = Monitor::from_channel(channel)?;
     let header = FileHeader {
         config: cfg.source.clone(),
         channels: vec![channel.name.clone()],
@@ -287,19 +154,19 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
             args.input.display().to_string(),
         )]),
     };
-    let mut outputs = Outputs::new(output_sinks(args, &header)?);
-    monitor.set_stat_records(outputs.wants_stats());
-    let (rows, rejected) = replay_csv_into(csv, &mut monitor, &mut outputs)?;
-    let alarm_lines = std::mem::take(&mut outputs.alarm_lines);
-    outputs.finish()?;
-    let c = monitor.counters();
+    let (sinks, lines) = output_sinks(args, &header)?;
+    let mut fanout = Fanout::new(sinks, 1);
+    let mut pipeline = ChannelPipeline::new(0, monitor, fanout.plan());
+    let (rows, rejected) = replay_csv_into(csv, &mut pipeline, &mut fanout)?;
+    close(fanout)?;
+    let c = pipeline.monitor().counters();
     let errors: u64 = c.errors.values().sum::<u64>() + rejected;
     eprintln!(
         "glrmon replay: channel \"{}\": {rows} rows, {} samples, {} alarms, {errors} errors",
         channel.name, c.samples, c.alarms,
     );
     if args.output.is_some() {
-        for line in &alarm_lines {
+        for line in &take_lines(&lines) {
             eprintln!("  {line}");
         }
     }
@@ -311,10 +178,9 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
 /// rows rejected.
 fn replay_csv_into<R: BufRead + Send + 'static>(
     csv: CsvReader<R>,
-    monitor: &mut Monitor,
-    outputs: &mut Outputs,
+    pipeline: &mut ChannelPipeline,
+    fanout: &mut Fanout,
 ) -> anyhow::Result<(u64, u64)> {
-    let name: Arc<str> = Arc::from(monitor.channel());
     let mut rows_ahead = ReadAhead::spawn(csv, |csv, spare| {
         let mut sample = match spare {
             Some(Ok(sample)) => sample,
@@ -326,41 +192,20 @@ fn replay_csv_into<R: BufRead + Send + 'static>(
             Err(e) => Err((e, sample.t)),
         }))
     })?;
-    let mut records = Vec::new();
-    let (mut rows, mut rejected, mut stats) = (0, 0, 0);
+    let (mut rows, mut rejected) = (0, 0);
     while let Some(row) = rows_ahead.next()? {
         rows += 1;
         match row {
             Ok(sample) => {
                 let log_time = glrmon_record::publish_time(sample.t, 0);
-                if outputs.inputs_wanted {
-                    outputs.input(&name, &InputItem::Sample(sample.clone()), log_time)?;
-                }
-                monitor.on_sample(&sample, &mut records);
-                outputs.records(&mut stats, &mut records, log_time)?;
+                pipeline.sample(&sample, log_time, fanout)?;
                 rows_ahead.recycle(Ok(sample));
             }
             Err((e, t)) => {
                 rejected += 1;
                 let log_time = glrmon_record::publish_time(t, 0);
-                let message = format!("channel \"{}\": {}", monitor.channel(), e.message);
-                outputs.input(
-                    &name,
-                    &InputItem::Intake(IntakeEvent::Rejected {
-                        code: e.code,
-                        message: message.clone(),
-                        payload: None,
-                    }),
-                    log_time,
-                )?;
-                records.push(Record::Error(ErrorRecord {
-                    channel: monitor.channel().to_owned(),
-                    k: e.k,
-                    code: e.code,
-                    message,
-                    stage: Stage::Receiving,
-                }));
-                outputs.records(&mut stats, &mut records, log_time)?;
+                let message = format!("channel \"{}\": {}", pipeline.name(), e.message);
+                pipeline.rejected(e.code, message, e.k, None, log_time, fanout)?;
             }
         }
     }
@@ -403,16 +248,16 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
         max_payload_bytes: cfg.daemon.max_payload_bytes,
         ..DecodeLimits::default()
     });
-    // The replayed channels with their `stat` counts, found by name (the last one
-    // looked up is remembered: consecutive inputs of a channel share its name).
-    let mut channels: Vec<(Monitor, u64)> = Vec::new();
+    // The replayed channels' monitors, found by name (the last one looked up is
+    // remembered: consecutive inputs of a channel share its name).
+    let mut monitors: Vec<Monitor> = Vec::new();
     let mut order: Vec<Arc<str>> = Vec::new();
     let mut index: HashMap<Arc<str>, usize> = HashMap::new();
     for c in &cfg.channels {
         if args.channel.as_ref().is_none_or(|n| *n == c.name) {
             let name: Arc<str> = Arc::from(c.name.as_str());
-            index.insert(name.clone(), channels.len());
-            channels.push((Monitor::from_channel(c)?, 0));
+            index.insert(name.clone(), monitors.len());
+            monitors.push(Monitor::from_channel(c)?);
             order.push(name);
         }
     }
@@ -425,10 +270,13 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
             args.input.display().to_string(),
         )]),
     };
-    let mut outputs = Outputs::new(output_sinks(args, &header)?);
-    for (monitor, _) in &mut channels {
-        monitor.set_stat_records(outputs.wants_stats());
-    }
+    let (sinks, lines) = output_sinks(args, &header)?;
+    let mut fanout = Fanout::new(sinks, 1);
+    let mut channels: Vec<ChannelPipeline> = monitors
+        .into_iter()
+        .enumerate()
+        .map(|(i, m)| ChannelPipeline::new(i, m, fanout.plan()))
+        .collect();
     let progress = (!args.quiet && std::io::stderr().is_terminal()).then(|| {
         let bar = indicatif::ProgressBar::new(input.progress.1);
         bar.set_style(
@@ -439,7 +287,6 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
         );
         bar
     });
-    let mut records = Vec::new();
     let mut unknown: HashMap<Arc<str>, u64> = HashMap::new();
     let mut rejected: HashMap<Arc<str>, u64> = HashMap::new();
     let mut inputs = 0u64;
@@ -459,30 +306,20 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
                 last = Some((recorded.channel.clone(), *i));
             }),
         };
-        let Some((monitor, stats)) = found.map(|i| &mut channels[i]) else {
+        let Some(pipeline) = found.and_then(|i| channels.get_mut(i)) else {
             if args.channel.is_none() {
                 *unknown.entry(recorded.channel.clone()).or_insert(0) += 1;
             }
             inputs_ahead.recycle(recorded);
             continue;
         };
-        let log_time = recorded.log_time_ns;
-        outputs.input(&recorded.channel, &recorded.item, log_time)?;
-        match &recorded.item {
-            InputItem::Sample(s) => monitor.on_sample(s, &mut records),
-            InputItem::Intake(IntakeEvent::Dropped { count }) => monitor.note_missing(*count),
-            InputItem::Intake(IntakeEvent::Rejected { code, message, .. }) => {
-                *rejected.entry(recorded.channel.clone()).or_insert(0) += 1;
-                records.push(Record::Error(ErrorRecord {
-                    channel: recorded.channel.to_string(),
-                    k: None,
-                    code: *code,
-                    message: message.clone(),
-                    stage: Stage::Receiving,
-                }));
-            }
+        if matches!(
+            recorded.item,
+            InputItem::Intake(IntakeEvent::Rejected { .. })
+        ) {
+            *rejected.entry(recorded.channel.clone()).or_insert(0) += 1;
         }
-        outputs.records(stats, &mut records, log_time)?;
+        pipeline.feed(&recorded.item, recorded.log_time_ns, &mut fanout)?;
         inputs_ahead.recycle(recorded);
     }
     let input = inputs_ahead.finish()?;
@@ -490,16 +327,15 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
         bar.finish_and_clear();
     }
     let elapsed = started.elapsed().as_secs_f64();
-    let alarm_lines = std::mem::take(&mut outputs.alarm_lines);
-    let written = outputs.records;
-    outputs.finish()?;
+    let written = fanout.records();
+    close(fanout)?;
     eprintln!(
         "glrmon replay: {}: {} messages, {inputs} inputs replayed in {elapsed:.2} s, {written} records written",
         args.input.display(),
         input.messages(),
     );
-    for (name, (monitor, _)) in order.iter().zip(&channels) {
-        let c = monitor.counters();
+    for (name, pipeline) in order.iter().zip(&channels) {
+        let c = pipeline.monitor().counters();
         let errors: u64 = c.errors.values().sum::<u64>() + rejected.get(name).copied().unwrap_or(0);
         eprintln!(
             "  channel \"{name}\": {} samples, {} alarms, {errors} errors",
@@ -510,7 +346,7 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
         eprintln!("  channel \"{name}\": {n} inputs skipped: not in the configuration");
     }
     if args.output.is_some() {
-        for line in &alarm_lines {
+        for line in &take_lines(&lines) {
             eprintln!("  {line}");
         }
     }

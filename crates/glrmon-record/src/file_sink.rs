@@ -13,6 +13,7 @@ use crate::writer::{FileHeader, FileOptions, McapFile, RecordError, publish_time
 #[derive(Debug)]
 pub struct McapFileSink {
     file: Option<McapFile>,
+    stat_every: u64,
 }
 
 impl McapFileSink {
@@ -23,7 +24,16 @@ impl McapFileSink {
     pub fn create(path: &Path, header: &FileHeader) -> Result<Self, RecordError> {
         Ok(Self {
             file: Some(McapFile::create(path, FileOptions::default(), header)?),
+            stat_every: 1,
         })
+    }
+
+    /// The same sink keeping one `stat` record in `stat_every` (0: none; default 1).
+    /// Inputs are always written, so the file can be replayed.
+    #[must_use]
+    pub fn with_stat_every(mut self, stat_every: u64) -> Self {
+        self.stat_every = stat_every;
+        self
     }
 
     /// Writes the summary and footer.
@@ -61,7 +71,7 @@ impl Sink for McapFileSink {
     fn interest(&self) -> Interest {
         Interest {
             inputs: true,
-            stat_every: Some(1),
+            stat_every: Some(self.stat_every),
         }
     }
 
@@ -104,12 +114,28 @@ impl Sink for McapFileSink {
             None => Ok(()),
         }
     }
+
+    /// Writes the summary and footer (a file closed here reports its errors; one
+    /// dropped unclosed is finished silently).
+    fn close(&mut self) -> Result<(), SinkError> {
+        self.close_file()
+    }
+}
+
+impl McapFileSink {
+    fn close_file(&mut self) -> Result<(), SinkError> {
+        match self.file.take() {
+            Some(f) => f.finish().map(|_| ()).map_err(|e| SinkError {
+                sink: "mcap".into(),
+                message: e.to_string(),
+            }),
+            None => Ok(()),
+        }
+    }
 }
 
 impl Drop for McapFileSink {
     fn drop(&mut self) {
-        if let Some(f) = self.file.take() {
-            let _ = f.finish();
-        }
+        let _ = self.close_file();
     }
 }

@@ -5,10 +5,12 @@ mod decimate;
 mod evaluation;
 mod histogram;
 mod html;
+mod sink;
 mod svg;
 
 pub use evaluation::{Evaluation, FaultEvaluation};
 pub use histogram::Histogram;
+pub use sink::ReportSink;
 
 use std::collections::BTreeMap;
 

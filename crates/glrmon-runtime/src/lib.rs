@@ -1,21 +1,40 @@
-//! The daemon's topology, independent of the transport: sources → monitors → sinks.
+//! The daemon's topology, independent of the transport: sources → pipelines → sinks.
 //!
 //! ```text
-//!  source callbacks ──try_send──▶ worker 0 (channels 0, W, 2W, …) ──▶ output stage ──▶ sinks
-//!  (never block)   ──try_send──▶ worker 1 (channels 1, W+1, …)   ──▶ (one thread)  ──▶ …
+//!  source callbacks ──try_send──▶ worker 0 (pipelines 0, W, 2W, …) ──▶ output stage ──▶ sinks
+//!  (never block)   ──try_send──▶ worker 1 (pipelines 1, W+1, …)   ──▶ (one thread,  ──▶ …
+//!                                                                      a Fanout)
+//!  glrmon replay:  recorded inputs ──▶ ChannelPipeline ──▶ Fanout ──▶ sinks (one thread)
 //! ```
 //!
+//! - **Pipeline** ([`ChannelPipeline`]): one channel's decoded input → monitor →
+//!   counted, decimated, encoded records, handed to an [`Emit`]ter. Workers and
+//!   `glrmon replay` drive the same pipeline, so a replay's records equal the live ones
+//!   by construction.
+//! - **Fan-out** ([`Fanout`]): every input to the sinks that asked for inputs, every
+//!   record to each [`Sink`] that keeps it; the one copy, used by the output stage and
+//!   by replay.
 //! - **Intake** ([`Intake::offer`]) never blocks: a full worker queue drops the payload,
 //!   counts it for its channel, and the channel's next sample fills the hole with
 //!   predict-only steps (a `gap`), so a missing sample is never silently skipped.
-//! - **Workers** are threads, each owning the monitors of a fixed shard of channels, so
-//!   a slow channel delays only its shard's queue, never another worker.
-//! - **Output**: every record is encoded once and handed to each [`Sink`]. Records that
-//!   must arrive (alarms, alarm ends, diagnoses, errors) wait for room in the output
-//!   queue; decimated `stat` records are dropped (and counted) when it is full.
+//! - **Workers** are threads, each owning the pipelines of a fixed shard of channels,
+//!   so a slow channel delays only its shard's queue, never another worker.
+//! - **Output**: records that must arrive (alarms, alarm ends, diagnoses, errors) wait
+//!   for room in the output queue; decimated `stat` records are dropped (and counted)
+//!   when it is full, unless a recorder needs every input and record.
 //! - **Shutdown** ([`Runtime::shutdown`]): stop intake, drain every worker queue, then the
-//!   output queue, then flush and close the sinks, within a bounded time.
+//!   output queue, then close the sinks, within a bounded time.
 #![warn(missing_docs)]
+
+mod fanout;
+mod pipeline;
+mod sink;
+mod sinks;
+
+pub use fanout::{DeliveryPlan, Fanout};
+pub use pipeline::{ChannelPipeline, Emit, PipelineError};
+pub use sink::{ChannelIndex, InputItem, InputOutput, Interest, Output, Sink, SinkError};
+pub use sinks::{FnSink, JsonLinesSink, MemorySink};
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, Ordering};
@@ -25,13 +44,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use glrmon_monitor::Monitor;
-use glrmon_wire::{
-    DecodeLimits, ErrorCode, ErrorRecord, IntakeEvent, Record, Sample, Stage, decode_samples,
-    encode_intake, encode_json, encode_sample,
-};
-
-/// Index of a channel in the runtime (its position in the configuration).
-pub type ChannelIndex = usize;
+use glrmon_wire::{DecodeLimits, ErrorCode, Sample, decode_samples};
 
 /// A payload as received from a source.
 #[derive(Debug)]
@@ -43,94 +56,6 @@ pub struct Payload {
     /// The transport's source timestamp (seconds since the Unix epoch), used as the
     /// samples' `t` where they carry none.
     pub source_time: Option<f64>,
-}
-
-/// A record on its way to the sinks, encoded once.
-#[derive(Debug, Clone)]
-pub struct Output {
-    /// The record.
-    pub record: Record,
-    /// Its JSON encoding (INTERFACE.md), without a trailing newline.
-    pub json: Vec<u8>,
-    /// When the payload that produced it was received: nanoseconds since the Unix epoch.
-    pub log_time_ns: u64,
-    /// For a `stat` record, its position among the channel's `stat` records (0, 1, …),
-    /// by which each sink applies its own decimation ([`Interest::stat_every`]).
-    pub stat_index: Option<u64>,
-}
-
-/// What a channel's monitor was fed: a decoded sample or an [`IntakeEvent`].
-#[derive(Debug, Clone, PartialEq)]
-pub enum InputItem {
-    /// A decoded sample, its `t` filled from the transport's timestamp where absent.
-    Sample(Sample),
-    /// Payloads dropped before the next one, or a refused payload.
-    Intake(IntakeEvent),
-}
-
-/// An input on its way to the sinks that asked for inputs (recorders), in the order
-/// the monitor saw it, before the records it produced.
-#[derive(Debug, Clone)]
-pub struct InputOutput {
-    /// The channel's index in the configuration.
-    pub channel: ChannelIndex,
-    /// The channel's name.
-    pub name: Arc<str>,
-    /// What the monitor was fed.
-    pub item: InputItem,
-    /// Its JSON: a sample in the sample format, or the intake event.
-    pub json: Vec<u8>,
-    /// When its payload was received: nanoseconds since the Unix epoch.
-    pub log_time_ns: u64,
-}
-
-/// What a sink wants besides the alarm, end, diagnosis and error records.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct Interest {
-    /// Every input ([`Sink::write_input`]): what recorders need to replay a run.
-    pub inputs: bool,
-    /// One `stat` record in this many per channel (0: none); `None`: the runtime's
-    /// [`RuntimeSettings::stat_every`].
-    pub stat_every: Option<u64>,
-}
-
-/// Errors of a sink; the output stage logs them through [`RuntimeEvents`] and goes on.
-#[derive(Debug, thiserror::Error)]
-#[error("sink {sink}: {message}")]
-pub struct SinkError {
-    /// The sink's name.
-    pub sink: String,
-    /// What failed.
-    pub message: String,
-}
-
-/// Where results go: a Zenoh publisher, a recorder, standard output…
-pub trait Sink: Send + 'static {
-    /// A short name for messages.
-    fn name(&self) -> &str;
-    /// What the sink wants beyond the default (asked once, at start).
-    fn interest(&self) -> Interest {
-        Interest::default()
-    }
-    /// Delivers one input (only to sinks whose [`Interest::inputs`] is set).
-    ///
-    /// # Errors
-    /// [`SinkError`] when the input could not be delivered.
-    fn write_input(&mut self, _input: &InputOutput) -> Result<(), SinkError> {
-        Ok(())
-    }
-    /// Delivers one record.
-    ///
-    /// # Errors
-    /// [`SinkError`] when the record could not be delivered.
-    fn write(&mut self, output: &Output) -> Result<(), SinkError>;
-    /// Flushes buffered records (called at shutdown and when the output queue is idle).
-    ///
-    /// # Errors
-    /// [`SinkError`] when the flush failed.
-    fn flush(&mut self) -> Result<(), SinkError> {
-        Ok(())
-    }
 }
 
 /// Callbacks for events the operator should hear about (the binary logs them).
@@ -230,15 +155,6 @@ impl Clock {
                 .saturating_sub(delta(self.instant.duration_since(at))),
         }
     }
-}
-
-/// What the workers send on, worked out once from the sinks' [`Interest`]s.
-#[derive(Debug, Clone, Copy)]
-struct Forwarding {
-    inputs: bool,
-    /// The smallest non-zero decimation over the sinks (0: no sink wants `stat`).
-    stat_every: u64,
-    clock: Clock,
 }
 
 /// The handle sources use to hand payloads in; cheap to clone, never blocks.
@@ -400,14 +316,6 @@ impl std::fmt::Debug for Runtime {
     }
 }
 
-struct WorkerChannel {
-    index: ChannelIndex,
-    monitor: Monitor,
-    name: Arc<str>,
-    stats: Arc<ChannelStats>,
-    stat_count: u64,
-}
-
 impl Runtime {
     /// Starts the workers and the output stage for `monitors` (in channel index order)
     /// writing to `sinks`.
@@ -429,44 +337,18 @@ impl Runtime {
         let (out_tx, out_rx) = mpsc::sync_channel::<OutMsg>(settings.output_queue.max(16));
         let stat_drops = Arc::new(AtomicU64::new(0));
         let metrics = Arc::new(RuntimeMetrics::default());
-        let interests: Vec<Interest> = sinks.iter().map(|s| s.interest()).collect();
-        let forwarding = Forwarding {
-            inputs: interests.iter().any(|i| i.inputs),
-            stat_every: interests
-                .iter()
-                .map(|i| i.stat_every.unwrap_or(settings.stat_every))
-                .filter(|&e| e > 0)
-                .min()
-                .unwrap_or(0),
-            clock: Clock::now(),
-        };
-        let default_stat_every = settings.stat_every;
+        let fanout = Fanout::new(sinks, settings.stat_every);
+        let plan = fanout.plan();
+        let clock = Clock::now();
         let out_metrics = metrics.clone();
         let output = std::thread::Builder::new()
             .name("glrmon-output".into())
-            .spawn(move || {
-                output_stage(
-                    out_rx,
-                    sinks,
-                    default_stat_every,
-                    events.as_ref(),
-                    &out_metrics,
-                )
-            })
+            .spawn(move || output_stage(out_rx, fanout, events.as_ref(), &out_metrics))
             .ok();
-        let mut shards: Vec<Vec<(ChannelIndex, WorkerChannel)>> =
-            (0..workers_n).map(|_| Vec::new()).collect();
+        let mut shards: Vec<Vec<ChannelPipeline>> = (0..workers_n).map(|_| Vec::new()).collect();
         for (i, m) in monitors.into_iter().enumerate() {
-            shards[i % workers_n].push((
-                i,
-                WorkerChannel {
-                    index: i,
-                    name: Arc::from(m.channel()),
-                    monitor: m,
-                    stats: stats[i].clone(),
-                    stat_count: 0,
-                },
-            ));
+            shards[i % workers_n]
+                .push(ChannelPipeline::new(i, m, plan.clone()).with_stats(stats[i].clone()));
         }
         let mut queues = Vec::new();
         let mut workers = Vec::new();
@@ -474,15 +356,22 @@ impl Runtime {
             let (tx, rx) = mpsc::sync_channel::<Job>(settings.worker_queue.max(1));
             queues.push(tx);
             let out = out_tx.clone();
-            let limits = settings.limits;
-            let drops = stat_drops.clone();
             let m = metrics.clone();
             m.workers_alive.fetch_add(1, Ordering::Relaxed);
+            let context = WorkerContext {
+                emit: QueueEmit {
+                    out,
+                    inputs: plan.inputs,
+                    stat_drops: stat_drops.clone(),
+                },
+                limits: settings.limits,
+                clock,
+            };
             let spawned = std::thread::Builder::new()
                 .name(format!("glrmon-worker-{w}"))
                 .spawn(move || {
                     let _alive = AliveGuard(m.clone());
-                    worker(rx, shard, out, limits, forwarding, drops, &m);
+                    worker(rx, shard, context, &m);
                 });
             match spawned {
                 Ok(h) => workers.push(h),
@@ -602,18 +491,49 @@ const FLUSH_INTERVAL: Duration = Duration::from_secs(1);
 /// Longest refused payload kept, as text, in its [`IntakeEvent::Rejected`].
 const MAX_KEPT_PAYLOAD: usize = 64 * 1024;
 
+/// What a worker needs besides its queue and pipelines.
+struct WorkerContext {
+    emit: QueueEmit,
+    limits: DecodeLimits,
+    clock: Clock,
+}
+
+/// A worker's emitter: hands inputs and records to the output stage's queue.
+struct QueueEmit {
+    out: SyncSender<OutMsg>,
+    /// A sink records every input: then every record must arrive too.
+    inputs: bool,
+    stat_drops: Arc<AtomicU64>,
+}
+
+impl Emit for QueueEmit {
+    /// Inputs wait for room (a recording must hold every input for the replay to be
+    /// exact).
+    fn input(&mut self, input: InputOutput) -> Result<(), SinkError> {
+        let _ = self.out.send(OutMsg::Input(input));
+        Ok(())
+    }
+
+    fn record(&mut self, output: Output) -> Result<(), SinkError> {
+        if output.stat_index.is_some() && !self.inputs {
+            // Without a recorder, decimated statistics may be shed under load.
+            if self.out.try_send(OutMsg::Record(output)).is_err() {
+                self.stat_drops.fetch_add(1, Ordering::Relaxed);
+            }
+        } else {
+            let _ = self.out.send(OutMsg::Record(output));
+        }
+        Ok(())
+    }
+}
+
 fn worker(
     rx: Receiver<Job>,
-    mut shard: Vec<(ChannelIndex, WorkerChannel)>,
-    out: SyncSender<OutMsg>,
-    limits: DecodeLimits,
-    fwd: Forwarding,
-    stat_drops: Arc<AtomicU64>,
+    mut shard: Vec<ChannelPipeline>,
+    mut cx: WorkerContext,
     metrics: &RuntimeMetrics,
 ) {
-    let mut samples = Vec::new();
-    let mut records = Vec::new();
-    let mut inputs: Vec<InputItem> = Vec::new();
+    let mut samples: Vec<Sample> = Vec::new();
     loop {
         let job = match rx.recv() {
             // `Job::Stop`, or every sender gone: all accepted payloads are processed.
@@ -627,205 +547,79 @@ fn worker(
             }
             Job::Reject(c, _, _, at) => (*c, *at),
             Job::Retune(c, tuning) => {
-                if let Some((_, ch)) = shard.iter_mut().find(|(i, _)| i == c) {
-                    ch.monitor.retune(tuning);
+                if let Some(pipeline) = shard.iter_mut().find(|p| p.index() == *c) {
+                    pipeline.monitor_mut().retune(tuning);
                 }
                 continue;
             }
             Job::Stop => return,
         };
-        let Some((_, ch)) = shard.iter_mut().find(|(i, _)| *i == channel) else {
+        let Some(pipeline) = shard.iter_mut().find(|p| p.index() == channel) else {
             continue;
         };
-        let log_time_ns = fwd.clock.unix_ns(received);
+        let log_time_ns = cx.clock.unix_ns(received);
+        // The queue emitter never fails; an input or record that cannot be encoded is
+        // not handed on (the pipeline goes on with the next one).
         match job {
             Job::Payload(_, payload, dropped_before) => {
                 // Payloads dropped at intake just before this one: advance the arrival
                 // count so that this sample is seen after a gap.
                 if dropped_before > 0 {
-                    ch.monitor.note_missing(dropped_before);
-                    if fwd.inputs {
-                        inputs.push(InputItem::Intake(IntakeEvent::Dropped {
-                            count: dropped_before,
-                        }));
-                    }
+                    let _ = pipeline.dropped(dropped_before, log_time_ns, &mut cx.emit);
                 }
-                match decode_samples(ch.monitor.channel(), &payload.bytes, &limits, &mut samples) {
+                let decoded =
+                    decode_samples(pipeline.name(), &payload.bytes, &cx.limits, &mut samples);
+                match decoded {
                     Ok(()) => {
                         for s in &mut samples {
                             if s.t.is_none() {
                                 s.t = payload.source_time;
                             }
-                            if fwd.inputs {
-                                inputs.push(InputItem::Sample(s.clone()));
-                                // Inputs precede the records they produce.
-                                send_inputs(&out, ch, &mut inputs, log_time_ns);
-                            }
-                            ch.monitor.on_sample(s, &mut records);
-                            forward_records(&out, ch, &mut records, fwd, log_time_ns, &stat_drops);
+                            let _ = pipeline.sample(s, log_time_ns, &mut cx.emit);
                         }
                     }
                     Err(e) => {
-                        let record = ErrorRecord::from_decode_error(&e, None, Stage::Receiving);
-                        if fwd.inputs {
-                            let kept = (payload.bytes.len() <= MAX_KEPT_PAYLOAD)
-                                .then(|| String::from_utf8_lossy(&payload.bytes).into_owned());
-                            inputs.push(InputItem::Intake(IntakeEvent::Rejected {
-                                code: record.code,
-                                message: record.message.clone(),
-                                payload: kept,
-                            }));
-                        }
-                        records.push(Record::Error(record));
+                        let kept = (payload.bytes.len() <= MAX_KEPT_PAYLOAD)
+                            .then(|| String::from_utf8_lossy(&payload.bytes).into_owned());
+                        let _ = pipeline.rejected(
+                            e.code(),
+                            e.to_string(),
+                            None,
+                            kept,
+                            log_time_ns,
+                            &mut cx.emit,
+                        );
                     }
                 }
             }
             Job::Reject(_, code, message, _) => {
-                let message = format!("channel \"{}\": {message}", ch.monitor.channel());
-                if fwd.inputs {
-                    inputs.push(InputItem::Intake(IntakeEvent::Rejected {
-                        code,
-                        message: message.clone(),
-                        payload: None,
-                    }));
-                }
-                records.push(Record::Error(ErrorRecord {
-                    channel: ch.monitor.channel().to_owned(),
-                    k: None,
-                    code,
-                    message,
-                    stage: Stage::Receiving,
-                }));
+                let message = format!("channel \"{}\": {message}", pipeline.name());
+                let _ = pipeline.rejected(code, message, None, None, log_time_ns, &mut cx.emit);
             }
             Job::Retune(..) | Job::Stop => return,
         }
-        send_inputs(&out, ch, &mut inputs, log_time_ns);
-        forward_records(&out, ch, &mut records, fwd, log_time_ns, &stat_drops);
         metrics.processing.observe(received.elapsed());
-        let c = ch.monitor.counters();
-        ch.stats.samples.store(c.samples, Ordering::Relaxed);
-        ch.stats.alarms.store(c.alarms, Ordering::Relaxed);
-        ch.stats
-            .alarm_active
-            .store(u64::from(ch.monitor.alarm_active()), Ordering::Relaxed);
-        ch.stats.next_k.store(
-            ch.monitor.detector().next_index().unwrap_or(0),
-            Ordering::Relaxed,
-        );
-    }
-}
-
-/// Sends the pending inputs of a channel; they wait for room (a recording must hold
-/// every input for the replay to be exact).
-fn send_inputs(
-    out: &SyncSender<OutMsg>,
-    ch: &WorkerChannel,
-    inputs: &mut Vec<InputItem>,
-    log_time_ns: u64,
-) {
-    for item in inputs.drain(..) {
-        let mut json = Vec::with_capacity(128);
-        let encoded = match &item {
-            InputItem::Sample(s) => encode_sample(&ch.name, s, &mut json),
-            InputItem::Intake(e) => encode_intake(&ch.name, e, &mut json),
-        };
-        if encoded.is_err() {
-            continue;
-        }
-        let _ = out.send(OutMsg::Input(InputOutput {
-            channel: ch.index,
-            name: ch.name.clone(),
-            item,
-            json,
-            log_time_ns,
-        }));
-    }
-}
-
-/// Counts errors, decimates `stat` records and sends the records of a channel.
-fn forward_records(
-    out: &SyncSender<OutMsg>,
-    ch: &mut WorkerChannel,
-    records: &mut Vec<Record>,
-    fwd: Forwarding,
-    log_time_ns: u64,
-    stat_drops: &AtomicU64,
-) {
-    for r in records.drain(..) {
-        if let Record::Error(e) = &r {
-            let mut errs = ch
-                .stats
-                .errors
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner);
-            *errs.entry(e.code.as_str()).or_insert(0) += 1;
-        }
-        let stat_index = if matches!(r, Record::Stat(_)) {
-            let index = ch.stat_count;
-            ch.stat_count += 1;
-            if fwd.stat_every == 0 || index % fwd.stat_every != 0 {
-                continue;
-            }
-            Some(index)
-        } else {
-            None
-        };
-        let mut json = Vec::with_capacity(256);
-        if encode_json(&r, &mut json).is_err() {
-            continue;
-        }
-        let msg = OutMsg::Record(Output {
-            record: r,
-            json,
-            log_time_ns,
-            stat_index,
-        });
-        if stat_index.is_some() && !fwd.inputs {
-            // Without a recorder, decimated statistics may be shed under load.
-            if out.try_send(msg).is_err() {
-                stat_drops.fetch_add(1, Ordering::Relaxed);
-            }
-        } else {
-            let _ = out.send(msg);
-        }
+        pipeline.publish_counters();
     }
 }
 
 fn output_stage(
     rx: Receiver<OutMsg>,
-    mut sinks: Vec<Box<dyn Sink>>,
-    default_stat_every: u64,
+    mut fanout: Fanout,
     events: &dyn RuntimeEvents,
     metrics: &RuntimeMetrics,
 ) -> Vec<Box<dyn Sink>> {
-    let interests: Vec<Interest> = sinks.iter().map(|s| s.interest()).collect();
-    let flush_all = |sinks: &mut Vec<Box<dyn Sink>>| {
-        for s in sinks.iter_mut() {
-            if let Err(e) = s.flush() {
-                events.sink_error(&e);
-            }
-        }
-    };
+    let mut report = |e: SinkError| events.sink_error(&e);
     let mut last_flush = Instant::now();
     loop {
         // Sinks are flushed when the queue is idle and at least every second under load.
         if last_flush.elapsed() >= FLUSH_INTERVAL {
-            flush_all(&mut sinks);
+            fanout.flush(&mut report);
             last_flush = Instant::now();
         }
         match rx.recv_timeout(Duration::from_millis(200)) {
             Ok(OutMsg::Record(o)) => {
-                for (s, interest) in sinks.iter_mut().zip(&interests) {
-                    if let Some(index) = o.stat_index {
-                        let every = interest.stat_every.unwrap_or(default_stat_every);
-                        if every == 0 || index % every != 0 {
-                            continue;
-                        }
-                    }
-                    if let Err(e) = s.write(&o) {
-                        events.sink_error(&e);
-                    }
-                }
+                fanout.record(&o, &mut report);
                 if o.stat_index.is_none() {
                     let now = SystemTime::now()
                         .duration_since(UNIX_EPOCH)
@@ -835,70 +629,15 @@ fn output_stage(
                         .observe(Duration::from_nanos(now.saturating_sub(o.log_time_ns)));
                 }
             }
-            Ok(OutMsg::Input(i)) => {
-                for (s, interest) in sinks.iter_mut().zip(&interests) {
-                    if interest.inputs {
-                        if let Err(e) = s.write_input(&i) {
-                            events.sink_error(&e);
-                        }
-                    }
-                }
-            }
+            Ok(OutMsg::Input(i)) => fanout.input(&i, &mut report),
             Ok(OutMsg::Flush) | Err(mpsc::RecvTimeoutError::Timeout) => {
-                flush_all(&mut sinks);
+                fanout.flush(&mut report);
                 last_flush = Instant::now();
             }
             Err(mpsc::RecvTimeoutError::Disconnected) => break,
         }
     }
-    flush_all(&mut sinks);
-    sinks
-}
-
-/// A sink that collects records in memory (tests, replay into a buffer).
-#[derive(Debug, Clone, Default)]
-pub struct MemorySink {
-    records: Arc<Mutex<Vec<Output>>>,
-}
-
-impl MemorySink {
-    /// A shared handle to the collected records.
-    #[must_use]
-    pub fn records(&self) -> Arc<Mutex<Vec<Output>>> {
-        self.records.clone()
-    }
-}
-
-impl Sink for MemorySink {
-    fn name(&self) -> &str {
-        "memory"
-    }
-    fn write(&mut self, output: &Output) -> Result<(), SinkError> {
-        self.records
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .push(output.clone());
-        Ok(())
-    }
-}
-
-/// A sink calling a closure for each record (e.g. print alarms).
-pub struct FnSink<F>(pub &'static str, pub F);
-
-impl<F> std::fmt::Debug for FnSink<F> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_tuple("FnSink").field(&self.0).finish()
-    }
-}
-
-impl<F: FnMut(&Output) + Send + 'static> Sink for FnSink<F> {
-    fn name(&self) -> &str {
-        self.0
-    }
-    fn write(&mut self, output: &Output) -> Result<(), SinkError> {
-        (self.1)(output);
-        Ok(())
-    }
+    fanout.close(&mut report)
 }
 
 /// Decodes one sample payload for tests and tools that feed samples directly.

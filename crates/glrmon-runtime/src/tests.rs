@@ -1,5 +1,5 @@
 use super::*;
-use glrmon_wire::encode_sample;
+use glrmon_wire::{Record, encode_sample};
 
 struct NoEvents;
 impl RuntimeEvents for NoEvents {

@@ -1,19 +1,24 @@
-//! The `--report` sink: every record into a [`glrmon_report::Report`], written as one
-//! self-contained HTML file when the replay ends.
+//! The report as a sink: every record into a [`Report`], written as one
+//! self-contained HTML file when the sink is closed (at the end of a replay).
 
 use std::path::{Path, PathBuf};
 
-use glrmon_report::{Report, ReportOptions};
 use glrmon_runtime::{Interest, Output, Sink, SinkError};
 
-/// Collects the records of a replay and writes the HTML report on flush.
-pub(crate) struct ReportSink {
+use crate::{Report, ReportOptions};
+
+/// Collects the records it is handed and writes the HTML report on
+/// [`Sink::close`].
+#[derive(Debug)]
+pub struct ReportSink {
     path: PathBuf,
     report: Option<Report>,
 }
 
 impl ReportSink {
-    pub(crate) fn new(path: &Path, input: &Path) -> Self {
+    /// A report titled after `input` (the replayed file), to be written to `path`.
+    #[must_use]
+    pub fn new(path: &Path, input: &Path) -> Self {
         Self {
             path: path.to_owned(),
             report: Some(Report::new(ReportOptions {
@@ -29,6 +34,7 @@ impl Sink for ReportSink {
         "report"
     }
 
+    /// Every `stat` record: the report decimates its series itself.
     fn interest(&self) -> Interest {
         Interest {
             inputs: false,
@@ -43,8 +49,8 @@ impl Sink for ReportSink {
         Ok(())
     }
 
-    /// Writes the report (once: the replay flushes its sinks only at the end).
-    fn flush(&mut self) -> Result<(), SinkError> {
+    /// Writes the report (once).
+    fn close(&mut self) -> Result<(), SinkError> {
         let Some(report) = self.report.take() else {
             return Ok(());
         };

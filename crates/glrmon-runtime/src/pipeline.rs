@@ -1,0 +1,401 @@
+//! One channel's path: decoded input → monitor → encoded records → an [`Emit`]ter.
+//!
+//! The daemon's workers and `glrmon replay` drive the same [`ChannelPipeline`]; they
+//! differ only in the emitter: a worker sends to the output thread's [`Fanout`], a
+//! replay hands to its [`Fanout`] directly. The records a replay writes therefore equal
+//! the live ones by construction: the same code counts, decimates and encodes them.
+
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+use glrmon_monitor::Monitor;
+use glrmon_wire::{
+    EncodeError, ErrorCode, ErrorRecord, IntakeEvent, Record, Sample, Stage, encode_intake,
+    encode_json, encode_sample,
+};
+
+use crate::ChannelStats;
+use crate::fanout::{DeliveryPlan, Fanout};
+use crate::sink::{ChannelIndex, InputItem, InputOutput, Output, SinkError};
+
+/// Capacity of a fresh buffer for one record's JSON.
+const RECORD_JSON_CAPACITY: usize = 256;
+/// Capacity of a fresh buffer for one input's JSON.
+const INPUT_JSON_CAPACITY: usize = 128;
+
+/// Where a pipeline hands its inputs and records, in order: each input before the
+/// records it produced.
+pub trait Emit {
+    /// Hands over one input (called only when the plan asks for inputs).
+    ///
+    /// # Errors
+    /// [`SinkError`] when a sink failed.
+    fn input(&mut self, input: InputOutput) -> Result<(), SinkError>;
+    /// Hands over one record.
+    ///
+    /// # Errors
+    /// [`SinkError`] when a sink failed.
+    fn record(&mut self, output: Output) -> Result<(), SinkError>;
+    /// An empty buffer to encode the next record into: an emitter that is done with
+    /// the records it was handed gives their buffers back here, so a replay encodes
+    /// without allocating.
+    fn buffer(&mut self) -> Vec<u8> {
+        Vec::with_capacity(RECORD_JSON_CAPACITY)
+    }
+}
+
+/// Hands everything to the sinks at once (a replay): the first sink error is returned
+/// after every sink had its turn.
+impl Emit for Fanout {
+    fn input(&mut self, input: InputOutput) -> Result<(), SinkError> {
+        let mut first = None;
+        Fanout::input(self, &input, &mut |e| {
+            first.get_or_insert(e);
+        });
+        first.map_or(Ok(()), Err)
+    }
+
+    fn record(&mut self, output: Output) -> Result<(), SinkError> {
+        let mut first = None;
+        Fanout::record(self, &output, &mut |e| {
+            first.get_or_insert(e);
+        });
+        self.give_back(output.json);
+        first.map_or(Ok(()), Err)
+    }
+
+    fn buffer(&mut self) -> Vec<u8> {
+        self.take_buffer(RECORD_JSON_CAPACITY)
+    }
+}
+
+/// Why a pipeline could not hand on everything it produced.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum PipelineError {
+    /// A record or input could not be encoded (it was not handed on; the pipeline
+    /// went on with the next one).
+    #[error("channel \"{channel}\": {what} could not be encoded: {source}")]
+    Encode {
+        /// The channel.
+        channel: String,
+        /// `record` or `input`.
+        what: &'static str,
+        /// Why.
+        source: EncodeError,
+    },
+    /// A sink failed (the pipeline stopped handing on this input's records).
+    #[error(transparent)]
+    Sink(#[from] SinkError),
+}
+
+/// One channel's monitor with the bookkeeping around it: the inputs and records it
+/// hands on, the decimation of `stat` records, the channel's counters.
+///
+/// # Examples
+///
+/// A replay of two samples into an in-memory sink:
+///
+/// ```
+/// use glrmon_monitor::Monitor;
+/// use glrmon_runtime::{ChannelPipeline, Fanout, MemorySink, Sink};
+/// use glrmon_wire::Sample;
+///
+/// let cfg = glrmon_spec::parse(include_str!("../../../config/demo.toml")).unwrap();
+/// let monitor = Monitor::from_channel(&cfg.channels[0]).unwrap();
+/// let memory = MemorySink::default();
+/// let records = memory.records();
+/// let mut fanout = Fanout::new(vec![Box::new(memory) as Box<dyn Sink>], 1);
+/// let mut pipeline = ChannelPipeline::new(0, monitor, fanout.plan());
+/// let dims = cfg.channels[0].dims;
+/// for k in 0..2 {
+///     let sample = Sample {
+///         k: Some(k),
+///         t: None,
+///         u: vec![0.0; dims.inputs],
+///         y: vec![0.0; dims.outputs],
+///         p: vec![0.0; dims.signals],
+///     };
+///     pipeline.sample(&sample, 0, &mut fanout).unwrap();
+/// }
+/// fanout.close(&mut |e| panic!("{e}"));
+/// assert_eq!(records.lock().unwrap().len(), 2); // one `stat` per sample
+/// assert_eq!(pipeline.stats().errors.lock().unwrap().len(), 0);
+/// ```
+#[derive(Debug)]
+pub struct ChannelPipeline {
+    index: ChannelIndex,
+    name: Arc<str>,
+    monitor: Monitor,
+    stats: Arc<ChannelStats>,
+    plan: DeliveryPlan,
+    /// `stat` records produced so far (a sink's decimation counts them).
+    stat_count: u64,
+    records: Vec<Record>,
+}
+
+impl ChannelPipeline {
+    /// A pipeline for the channel at `index` feeding sinks with this `plan`
+    /// ([`Fanout::plan`]); the monitor builds `stat` records only if a sink keeps some.
+    #[must_use]
+    pub fn new(index: ChannelIndex, mut monitor: Monitor, plan: DeliveryPlan) -> Self {
+        monitor.set_stat_records(plan.wants_stats());
+        Self {
+            index,
+            name: Arc::from(monitor.channel()),
+            monitor,
+            stats: Arc::new(ChannelStats::default()),
+            plan,
+            stat_count: 0,
+            records: Vec::new(),
+        }
+    }
+
+    /// Uses `stats` as the channel's counters (shared with intake and status queries).
+    #[must_use]
+    pub fn with_stats(mut self, stats: Arc<ChannelStats>) -> Self {
+        self.stats = stats;
+        self
+    }
+
+    /// One decoded sample: the input (if wanted), then the monitor's records.
+    ///
+    /// # Errors
+    /// [`PipelineError`] when something could not be encoded or a sink failed.
+    pub fn sample(
+        &mut self,
+        sample: &Sample,
+        log_time_ns: u64,
+        emit: &mut dyn Emit,
+    ) -> Result<(), PipelineError> {
+        let mut first = None;
+        if self.plan.inputs {
+            keep_first(
+                &mut first,
+                self.input(InputItem::Sample(sample.clone()), log_time_ns, emit),
+            );
+        }
+        self.monitor.on_sample(sample, &mut self.records);
+        keep_first(&mut first, self.hand_on_records(log_time_ns, emit));
+        first.map_or(Ok(()), Err)
+    }
+
+    /// `count` payloads went missing before the next one: the monitor sees the next
+    /// sample after a gap.
+    ///
+    /// # Errors
+    /// As [`ChannelPipeline::sample`].
+    pub fn dropped(
+        &mut self,
+        count: u64,
+        log_time_ns: u64,
+        emit: &mut dyn Emit,
+    ) -> Result<(), PipelineError> {
+        self.monitor.note_missing(count);
+        if self.plan.inputs {
+            self.input(
+                InputItem::Intake(IntakeEvent::Dropped { count }),
+                log_time_ns,
+                emit,
+            )?;
+        }
+        Ok(())
+    }
+
+    /// A payload or row refused before the monitor (undecodable, too large): the
+    /// refusal as an input, then its `error` record (`k` if the refused input named
+    /// one).
+    ///
+    /// # Errors
+    /// As [`ChannelPipeline::sample`].
+    pub fn rejected(
+        &mut self,
+        code: ErrorCode,
+        message: String,
+        k: Option<u64>,
+        payload: Option<String>,
+        log_time_ns: u64,
+        emit: &mut dyn Emit,
+    ) -> Result<(), PipelineError> {
+        let mut first = None;
+        if self.plan.inputs {
+            let event = IntakeEvent::Rejected {
+                code,
+                message: message.clone(),
+                payload,
+            };
+            keep_first(
+                &mut first,
+                self.input(InputItem::Intake(event), log_time_ns, emit),
+            );
+        }
+        self.records.push(Record::Error(ErrorRecord {
+            channel: self.monitor.channel().to_owned(),
+            k,
+            code,
+            message,
+            stage: Stage::Receiving,
+        }));
+        keep_first(&mut first, self.hand_on_records(log_time_ns, emit));
+        first.map_or(Ok(()), Err)
+    }
+
+    /// A recorded input, as the monitor first saw it (replay of a recording).
+    ///
+    /// # Errors
+    /// As [`ChannelPipeline::sample`].
+    pub fn feed(
+        &mut self,
+        item: &InputItem,
+        log_time_ns: u64,
+        emit: &mut dyn Emit,
+    ) -> Result<(), PipelineError> {
+        match item {
+            InputItem::Sample(s) => self.sample(s, log_time_ns, emit),
+            InputItem::Intake(IntakeEvent::Dropped { count }) => {
+                self.dropped(*count, log_time_ns, emit)
+            }
+            InputItem::Intake(IntakeEvent::Rejected {
+                code,
+                message,
+                payload,
+            }) => self.rejected(
+                *code,
+                message.clone(),
+                None,
+                payload.clone(),
+                log_time_ns,
+                emit,
+            ),
+        }
+    }
+
+    /// Copies the monitor's counters into the shared [`ChannelStats`] (the daemon
+    /// does it once per payload, for status queries and metrics).
+    pub fn publish_counters(&self) {
+        let c = self.monitor.counters();
+        self.stats.samples.store(c.samples, Ordering::Relaxed);
+        self.stats.alarms.store(c.alarms, Ordering::Relaxed);
+        self.stats
+            .alarm_active
+            .store(u64::from(self.monitor.alarm_active()), Ordering::Relaxed);
+        self.stats.next_k.store(
+            self.monitor.detector().next_index().unwrap_or(0),
+            Ordering::Relaxed,
+        );
+    }
+
+    /// The channel's index.
+    #[must_use]
+    pub fn index(&self) -> ChannelIndex {
+        self.index
+    }
+
+    /// The channel's name.
+    #[must_use]
+    pub fn name(&self) -> &Arc<str> {
+        &self.name
+    }
+
+    /// The monitor.
+    #[must_use]
+    pub fn monitor(&self) -> &Monitor {
+        &self.monitor
+    }
+
+    /// The monitor, to retune it.
+    pub fn monitor_mut(&mut self) -> &mut Monitor {
+        &mut self.monitor
+    }
+
+    /// The channel's counters; `errors` counts every `error` record by code.
+    #[must_use]
+    pub fn stats(&self) -> &Arc<ChannelStats> {
+        &self.stats
+    }
+
+    fn input(
+        &mut self,
+        item: InputItem,
+        log_time_ns: u64,
+        emit: &mut dyn Emit,
+    ) -> Result<(), PipelineError> {
+        let mut json = Vec::with_capacity(INPUT_JSON_CAPACITY);
+        let encoded = match &item {
+            InputItem::Sample(s) => encode_sample(&self.name, s, &mut json),
+            InputItem::Intake(e) => encode_intake(&self.name, e, &mut json),
+        };
+        encoded.map_err(|source| PipelineError::Encode {
+            channel: self.name.to_string(),
+            what: "input",
+            source,
+        })?;
+        emit.input(InputOutput {
+            channel: self.index,
+            name: self.name.clone(),
+            item,
+            json,
+            log_time_ns,
+        })?;
+        Ok(())
+    }
+
+    /// Counts errors, decimates `stat` records, encodes and hands on the records of
+    /// one input.
+    fn hand_on_records(
+        &mut self,
+        log_time_ns: u64,
+        emit: &mut dyn Emit,
+    ) -> Result<(), PipelineError> {
+        let mut first = None;
+        let mut records = std::mem::take(&mut self.records);
+        for record in records.drain(..) {
+            if let Record::Error(e) = &record {
+                let mut errors = self
+                    .stats
+                    .errors
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner);
+                *errors.entry(e.code.as_str()).or_insert(0) += 1;
+            }
+            let stat_index = if matches!(record, Record::Stat(_)) {
+                let index = self.stat_count;
+                self.stat_count += 1;
+                if !self.plan.wants_stat(index) {
+                    continue;
+                }
+                Some(index)
+            } else {
+                None
+            };
+            let mut json = emit.buffer();
+            if let Err(source) = encode_json(&record, &mut json) {
+                first.get_or_insert(PipelineError::Encode {
+                    channel: self.name.to_string(),
+                    what: "record",
+                    source,
+                });
+                continue;
+            }
+            let handed = emit.record(Output {
+                record,
+                json,
+                log_time_ns,
+                stat_index,
+            });
+            if let Err(e) = handed {
+                first.get_or_insert(e.into());
+                break;
+            }
+        }
+        records.clear();
+        self.records = records;
+        first.map_or(Ok(()), Err)
+    }
+}
+
+fn keep_first(first: &mut Option<PipelineError>, result: Result<(), PipelineError>) {
+    if let Err(e) = result {
+        first.get_or_insert(e);
+    }
+}
