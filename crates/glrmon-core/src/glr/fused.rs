@@ -398,14 +398,14 @@ unsafe fn fused_lanes<const N: usize, const M: usize, const P: usize, S: Lanes>(
             let at = tri(a, b) * w + s0;
             let mut x = ld!(v.info, at);
             for i in 0..P {
-                x = x.mul_add(sig[a][i], sig[b][i]);
+                x = sig[a][i].mul_add(sig[b][i], x);
             }
             st!(x, v.info, at);
             info[a][b] = x;
         }
         let mut x = ld!(v.score, a * w + s0);
         for i in 0..P {
-            x = x.mul_add(sig[a][i], S::splat(c.eps[i]));
+            x = sig[a][i].mul_add(S::splat(c.eps[i]), x);
         }
         st!(x, v.score, a * w + s0);
         score[a] = x;
@@ -479,7 +479,7 @@ unsafe fn statistic_lanes<const M: usize, S: Lanes>(tol: f64, v: &mut SlotArrays
 fn affine<const N: usize, S: Lanes>(c0: f64, f: S, row: &[f64; N], col: &[S; N]) -> S {
     let mut x = S::splat(c0).mul(f);
     for q in 0..N {
-        x = x.mul_add(S::splat(row[q]), col[q]);
+        x = S::splat(row[q]).mul_add(col[q], x);
     }
     x
 }

@@ -1,20 +1,22 @@
-//! The fused multiply-add of the window (one convention, `f64::mul_add`'s) and the
-//! register types of the fused pass, each lane rounded as the scalar operation.
+//! The multiply-add of the window's recursions, in `f64::mul_add`'s argument order
+//! everywhere, and the vector registers of the fused pass, each lane rounded as the
+//! scalar operation so that every width equals the one-onset [`Lanes`] of `f64`.
 
-/// c + a·b as the window's recursions take it: rounded once (`f64::mul_add`), or twice
-/// on an x86-64 processor without AVX2 and FMA (crate::simd).
+/// x·a + b as the window's recursions take it, in the argument order of
+/// `f64::mul_add` (and of [`Lanes::mul_add`]): rounded once if FUSED, else twice, as on
+/// an x86-64 processor without AVX2 and FMA (crate::simd).
 #[inline(always)]
-pub(super) fn madd<const FUSED: bool>(a: f64, b: f64, c: f64) -> f64 {
-    if FUSED { a.mul_add(b, c) } else { a * b + c }
+pub(super) fn mul_add<const FUSED: bool>(x: f64, a: f64, b: f64) -> f64 {
+    if FUSED { x.mul_add(a, b) } else { x * a + b }
 }
 
-/// [`madd`] with the rounding chosen at run time (off the per-sample path).
+/// [`mul_add`] with the rounding chosen at run time (off the per-sample path).
 #[inline(always)]
-pub(super) fn madd_as(fused: bool, a: f64, b: f64, c: f64) -> f64 {
+pub(super) fn mul_add_as(fused: bool, x: f64, a: f64, b: f64) -> f64 {
     if fused {
-        madd::<true>(a, b, c)
+        mul_add::<true>(x, a, b)
     } else {
-        madd::<false>(a, b, c)
+        mul_add::<false>(x, a, b)
     }
 }
 
@@ -42,7 +44,8 @@ pub(super) trait Lanes: Copy {
     fn sub(self, o: Self) -> Self;
     fn mul(self, o: Self) -> Self;
     fn div(self, o: Self) -> Self;
-    /// self + a·b rounded once (`f64::mul_add` per lane): what the passes compute.
+    /// self·a + b rounded once (`f64::mul_add` per lane, same argument order): the
+    /// passes' [`mul_add`] with FUSED.
     fn mul_add(self, a: Self, b: Self) -> Self;
     /// self > o (false for NaN).
     fn gt(self, o: Self) -> Self::Mask;
@@ -90,7 +93,7 @@ impl Lanes for f64 {
     }
     #[inline(always)]
     fn mul_add(self, a: Self, b: Self) -> Self {
-        a.mul_add(b, self)
+        f64::mul_add(self, a, b)
     }
     #[inline(always)]
     fn div(self, o: Self) -> Self {
@@ -158,7 +161,7 @@ impl Lanes for Lanes8 {
     fn mul_add(self, a: Self, b: Self) -> Self {
         let mut r = [0.0; 8];
         for l in 0..8 {
-            r[l] = a.0[l].mul_add(b.0[l], self.0[l]);
+            r[l] = self.0[l].mul_add(a.0[l], b.0[l]);
         }
         Lanes8(r)
     }
@@ -227,7 +230,7 @@ macro_rules! x86_lanes {
             }
             #[inline(always)]
             fn mul_add(self, a: Self, b: Self) -> Self {
-                $ty(unsafe { arch::$fmadd(a.0, b.0, self.0) })
+                $ty(unsafe { arch::$fmadd(self.0, a.0, b.0) })
             }
             #[inline(always)]
             fn div(self, o: Self) -> Self {

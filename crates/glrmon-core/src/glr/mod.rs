@@ -186,9 +186,9 @@ pub(crate) struct WindowBank {
     tables: LagTables,
     /// Vector width of the window loops (same bits at every width).
     level: Level,
-    /// Whether the passes round a·b + c once ([`madd`], crate::simd): always at the AVX
-    /// levels, whose fused pass does.
-    fused_madd: bool,
+    /// Whether the passes round a·b + c once ([`lanes::mul_add`], crate::simd): always
+    /// at the AVX levels, whose fused pass does.
+    fused_mul_add: bool,
     /// Whether a measured step runs the fused single pass ([`WindowBank::step`]); set
     /// when (n, m, p) is one of the fused dimensions, cleared only to compare with the
     /// passes.
@@ -282,7 +282,7 @@ impl WindowBank {
             current: 0,
             steady: false,
             level: Level::detect(),
-            fused_madd: crate::simd::fused_multiply_add(),
+            fused_mul_add: crate::simd::fused_multiply_add(),
             fused: fused_dims(n, m, p),
             factored: false,
             keep_signatures: false,
@@ -465,14 +465,14 @@ impl WindowBank {
     pub(crate) fn set_level(&mut self, level: Level) {
         self.level = level;
         // The AVX levels' fused pass always rounds a·b + c once; their passes must too.
-        self.fused_madd |= level != Level::Baseline;
+        self.fused_mul_add |= level != Level::Baseline;
     }
 
     /// Runs the passes at the baseline level with a·b + c rounded twice, as on a
     /// processor without FMA (for the test of that case).
     pub(crate) fn set_separate_rounding(&mut self) {
         self.level = Level::Baseline;
-        self.fused_madd = false;
+        self.fused_mul_add = false;
     }
 
     /// Keeps (or stops keeping) the signatures of every onset readable after each

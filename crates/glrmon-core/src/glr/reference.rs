@@ -2,7 +2,7 @@
 //! component at a time over the slots, which the fused pass and the stationary tables
 //! must equal bit for bit.
 
-use super::lanes::madd;
+use super::lanes::mul_add;
 use super::statistic::{larger, quad2};
 use super::{WindowBank, WindowMax, forcing, tri};
 use crate::fault::Onset;
@@ -61,7 +61,7 @@ impl WindowBank {
 
     #[inline(always)]
     fn accumulate_body(&mut self, k: u64, h_white: &[f64], phi_white: &[f64], eps_white: &[f64]) {
-        if self.fused_madd {
+        if self.fused_mul_add {
             self.accumulate_in::<true>(k, h_white, phi_white, eps_white);
         } else {
             self.accumulate_in::<false>(k, h_white, phi_white, eps_white);
@@ -91,7 +91,7 @@ impl WindowBank {
                     let h = h_white[at(p, i, l)];
                     let g = &self.gamma[(l + n * j) * w..(l + n * j + 1) * w];
                     for (d, g) in dst.iter_mut().zip(g) {
-                        *d = madd::<FUSED>(h, *g, *d);
+                        *d = mul_add::<FUSED>(h, *g, *d);
                     }
                 }
             }
@@ -107,7 +107,7 @@ impl WindowBank {
                     let sa = &self.signature[(i + p * a) * w..(i + p * a + 1) * w];
                     let sb = &self.signature[(i + p * b) * w..(i + p * b + 1) * w];
                     for ((c, x), y) in c.iter_mut().zip(sa).zip(sb) {
-                        *c = madd::<FUSED>(*x, *y, *c);
+                        *c = mul_add::<FUSED>(*x, *y, *c);
                     }
                 }
             }
@@ -115,7 +115,7 @@ impl WindowBank {
             for (i, e) in eps_white.iter().enumerate().take(p) {
                 let sa = &self.signature[(i + p * a) * w..(i + p * a + 1) * w];
                 for (d, x) in d.iter_mut().zip(sa) {
-                    *d = madd::<FUSED>(*x, *e, *d);
+                    *d = mul_add::<FUSED>(*x, *e, *d);
                 }
             }
         }
@@ -133,11 +133,11 @@ impl WindowBank {
         let (s1, c10, c11, d1) = (&s1[..w], &mut c10[..w], &mut c11[..w], &mut d1[..w]);
         for s in 0..w {
             let (x0, x1) = (s0[s], s1[s]);
-            c00[s] = madd::<FUSED>(x0, x0, c00[s]);
-            c10[s] = madd::<FUSED>(x1, x0, c10[s]);
-            c11[s] = madd::<FUSED>(x1, x1, c11[s]);
-            d0[s] = madd::<FUSED>(x0, e, d0[s]);
-            d1[s] = madd::<FUSED>(x1, e, d1[s]);
+            c00[s] = mul_add::<FUSED>(x0, x0, c00[s]);
+            c10[s] = mul_add::<FUSED>(x1, x0, c10[s]);
+            c11[s] = mul_add::<FUSED>(x1, x1, c11[s]);
+            d0[s] = mul_add::<FUSED>(x0, e, d0[s]);
+            d1[s] = mul_add::<FUSED>(x1, e, d1[s]);
         }
     }
 
@@ -327,7 +327,7 @@ impl WindowBank {
             let src = &self.gamma[n * j * w..n * (j + 1) * w];
             let dst = &mut self.gamma_next[n * j * w..n * (j + 1) * w];
             let g = &self.forcing[n * j..n * (j + 1)];
-            if self.fused_madd {
+            if self.fused_mul_add {
                 gamma_column_of::<true>(n, closed_loop, g, factor, src, dst);
             } else {
                 gamma_column_of::<false>(n, closed_loop, g, factor, src, dst);
@@ -362,7 +362,7 @@ fn gamma_column<const N: usize, const FUSED: bool>(
         for s in 0..w {
             let mut v = g * factor[s];
             for l in 0..N {
-                v = madd::<FUSED>(ci[l], rows[l][s], v);
+                v = mul_add::<FUSED>(ci[l], rows[l][s], v);
             }
             out[s] = v;
         }
@@ -407,7 +407,7 @@ fn gamma_column_generic<const FUSED: bool>(
         for l in 0..n {
             let c = a[at(n, i, l)];
             for (d, x) in out.iter_mut().zip(&src[l * w..(l + 1) * w]) {
-                *d = madd::<FUSED>(c, *x, *d);
+                *d = mul_add::<FUSED>(c, *x, *d);
             }
         }
     }

@@ -1,7 +1,7 @@
 //! The stationary regime of an LTI model (the fast path): per-lag tables of S, C, C⁻
 //! and Γ, which must equal the general recursion's values at every lag.
 
-use super::lanes::{madd, madd_as};
+use super::lanes::{mul_add, mul_add_as};
 use super::statistic::{larger, quad2};
 use super::{WindowBank, WindowMax, forcing, tri};
 use crate::linalg::at;
@@ -84,7 +84,7 @@ impl WindowBank {
             return false;
         }
         let (n, m, p, w) = (self.n, self.m, self.p, self.slots);
-        let (tol, fused) = (self.tolerance, self.fused_madd);
+        let (tol, fused) = (self.tolerance, self.fused_mul_add);
         let tb = &mut self.tables;
         for (j, kind) in self.kinds.iter().enumerate() {
             let f = kind.entry_factor();
@@ -100,7 +100,7 @@ impl WindowBank {
                 for i in 0..p {
                     let mut v = phi_white[at(p, i, j)] * of;
                     for l in 0..n {
-                        v = madd_as(fused, h_white[at(p, i, l)], tb.work_gamma[l + n * j], v);
+                        v = mul_add_as(fused, h_white[at(p, i, l)], tb.work_gamma[l + n * j], v);
                     }
                     tb.signature[(i + p * j) * w + idx] = v;
                 }
@@ -115,7 +115,7 @@ impl WindowBank {
                         tb.info[c * w + idx + 1]
                     };
                     for i in 0..p {
-                        v = madd_as(
+                        v = mul_add_as(
                             fused,
                             tb.signature[(i + p * a) * w + idx],
                             tb.signature[(i + p * b) * w + idx],
@@ -201,7 +201,12 @@ impl WindowBank {
                     let g = forcing(*kind, psi[at(n, i, j)], fk_phi[at(n, i, j)]);
                     let mut v = g * b;
                     for l in 0..n {
-                        v = madd_as(fused, closed_loop[at(n, i, l)], tb.work_gamma[l + n * j], v);
+                        v = mul_add_as(
+                            fused,
+                            closed_loop[at(n, i, l)],
+                            tb.work_gamma[l + n * j],
+                            v,
+                        );
                     }
                     tb.work_next[i + n * j] = v;
                     tb.gamma[(i + n * j) * w + idx] = v;
@@ -225,7 +230,7 @@ impl WindowBank {
 
     #[inline(always)]
     fn steady_4(&mut self, k: u64, eps_white: &[f64]) {
-        if self.fused_madd {
+        if self.fused_mul_add {
             self.accumulate_steady_body::<4, true>(k, eps_white);
         } else {
             self.accumulate_steady_body::<4, false>(k, eps_white);
@@ -238,7 +243,7 @@ impl WindowBank {
     }
 
     /// [`WindowBank::accumulate_steady`] with L onsets per step of the fused loop, a·b + c
-    /// rounded once if FUSED ([`madd`]).
+    /// rounded once if FUSED ([`mul_add`]).
     #[inline(always)]
     fn accumulate_steady_body<const L: usize, const FUSED: bool>(
         &mut self,
@@ -396,7 +401,7 @@ unsafe fn steady_lanes<const M: usize, const P: usize, const L: usize, const FUS
         for (i, e) in eps.iter().enumerate() {
             let x = load(signature, (i + P * a) * w + at_table);
             for l in 0..L {
-                da[l] = madd::<FUSED>(x[l], *e, da[l]);
+                da[l] = mul_add::<FUSED>(x[l], *e, da[l]);
             }
         }
         unsafe {
@@ -413,11 +418,11 @@ unsafe fn steady_lanes<const M: usize, const P: usize, const L: usize, const FUS
         for (b, db) in d.iter().enumerate().take(a + 1) {
             let g = load(inverse, tri(a, b) * w + at_table);
             for l in 0..L {
-                t[l] = madd::<FUSED>(g[l], db[l], t[l]);
+                t[l] = mul_add::<FUSED>(g[l], db[l], t[l]);
             }
         }
         for l in 0..L {
-            st[l] = madd::<FUSED>(d[a][l], t[l], st[l]);
+            st[l] = mul_add::<FUSED>(d[a][l], t[l], st[l]);
         }
     }
     unsafe { std::ptr::write_unaligned(stat.as_mut_ptr().add(at_slot).cast::<[f64; L]>(), st) };
@@ -442,7 +447,7 @@ fn steady_passes<const FUSED: bool>(
         for (i, e) in eps.iter().enumerate().take(p) {
             let c = (i + p * a) * w + idx;
             for (d, x) in d.iter_mut().zip(&signature[c..c + len]) {
-                *d = madd::<FUSED>(*x, *e, *d);
+                *d = mul_add::<FUSED>(*x, *e, *d);
             }
         }
     }
@@ -453,13 +458,13 @@ fn steady_passes<const FUSED: bool>(
         for a in 0..m {
             let mut t = 0.0;
             for b in 0..=a {
-                t = madd::<FUSED>(
+                t = mul_add::<FUSED>(
                     inverse[tri(a, b) * w + idx + s],
                     score[b * w + start + s],
                     t,
                 );
             }
-            st = madd::<FUSED>(score[a * w + start + s], t, st);
+            st = mul_add::<FUSED>(score[a * w + start + s], t, st);
         }
         stat[s] = st;
     }
