@@ -1,5 +1,4 @@
-//! The maximum over admissible onsets (eqs. (35)-(36)), earliest on ties: a lane scan
-//! that must equal a strict `>` scan in onset order.
+//! r̂_k of eq. (36), earliest on ties: a lane scan that must equal a strict `>` scan.
 
 use super::{WindowBank, WindowMax};
 

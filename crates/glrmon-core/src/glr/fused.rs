@@ -1,6 +1,4 @@
-//! The fused pass: one pass over the slots per measured step with each register of
-//! onsets kept in vector registers from eq. (45) to eq. (46); must equal
-//! [`super::reference`] bit for bit.
+//! The fused single pass for small (n, m, p): must equal [`super::reference`] bit for bit.
 
 use super::lanes::Lanes;
 #[cfg(target_arch = "x86_64")]
@@ -11,7 +9,7 @@ use crate::fault::Onset;
 use crate::linalg::at;
 
 /// The fused step at one vector width: an entry compiled with `$feature` that finds the
-/// kernel of the bank's (n, m, p) ([`for_fused_dims!`]) and runs it around
+/// kernel of the bank's (n, m, p) (`for_fused_dims!`) and runs it around
 /// `fused_body`, and the kernels themselves, each a function of its own (not inlined
 /// into the dispatch, which keeps each function small for the compiler). One per
 /// feature: a generic function cannot carry `#[target_feature]`.
@@ -236,15 +234,15 @@ impl WindowBank {
 /// known at compile time, copied out of the column-major matrices once per step.
 #[derive(Debug, Clone, Copy)]
 struct Coefs<const N: usize, const M: usize, const P: usize> {
-    /// (L⁻¹H)_il at [i][l].
+    /// (L⁻¹H)_il at `[i][l]`.
     h: [[f64; N]; P],
-    /// (L⁻¹Φ̃)_ij at [i][j].
+    /// (L⁻¹Φ̃)_ij at `[i][j]`.
     phi: [[f64; M]; P],
     /// L⁻¹ε.
     eps: [f64; P],
-    /// A_il at [i][l].
+    /// A_il at `[i][l]`.
     a: [[f64; N]; N],
-    /// The forcing column G_ij of eq. (46) ([`forcing`]) at [j][i].
+    /// The forcing column G_ij of eq. (46) ([`forcing`]) at `[j][i]`.
     forcing: [[f64; N]; M],
     kinds: [Onset; M],
     tol: f64,

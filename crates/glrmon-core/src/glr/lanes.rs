@@ -1,6 +1,4 @@
-//! The multiply-add of the window's recursions, in `f64::mul_add`'s argument order
-//! everywhere, and the vector registers of the fused pass, each lane rounded as the
-//! scalar operation so that every width equals the one-onset [`Lanes`] of `f64`.
+//! The multiply-add in `f64::mul_add`'s order, and registers whose lanes each equal `f64`.
 
 /// x·a + b as the window's recursions take it, in the argument order of
 /// `f64::mul_add` (and of [`Lanes::mul_add`]): rounded once if FUSED, else twice, as on
@@ -54,6 +52,8 @@ pub(super) trait Lanes: Copy {
 
     /// [`larger`] per lane: one compare and one blend (or one `maxpd`), where
     /// `f64::max`'s NaN rule costs two compares more.
+    ///
+    /// [`larger`]: super::statistic::larger
     #[inline(always)]
     fn max(self, o: Self) -> Self {
         Self::select(o.gt(self), o, self)
@@ -62,6 +62,8 @@ pub(super) trait Lanes: Copy {
 
 /// One onset: the passes' per-slot loops share the fused pass's kernels ([`quad2`]) and
 /// with them its operations.
+///
+/// [`quad2`]: super::statistic::quad2
 impl Lanes for f64 {
     type Mask = bool;
     const L: usize = 1;

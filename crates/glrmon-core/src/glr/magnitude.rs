@@ -1,6 +1,4 @@
-//! θ̂ = C_k(r̂)⁺d_k(r̂) (eq. (34)): C⁻¹d from an LDLᵀ in registers or the slot's stored
-//! factorisation (which must agree bit for bit), the tabulated inverse in the
-//! stationary regime, and the Moore–Penrose pseudo-inverse when C is deficient.
+//! θ̂ = C⁺d at r̂ (eq. (34)); the LDLᵀ in registers must equal the slot's stored one.
 
 use super::statistic::pivot_cutoff;
 use super::{WindowBank, tri};

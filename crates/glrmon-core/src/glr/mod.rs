@@ -56,7 +56,7 @@
 //! general recursion continues exactly where the tables stand.
 //!
 //! # Files
-//! [`reference`] holds the passes, the general recursion one component at a time over
+//! [`mod@reference`] holds the passes, the general recursion one component at a time over
 //! the slots, which every faster path must equal bit for bit: the fused single pass of
 //! small dimensions ([`fused`], on the registers of [`lanes`]) and the stationary
 //! tables ([`steady`]). The statistic of eq. (35) and its rank are written once for all
@@ -319,7 +319,7 @@ impl WindowBank {
     /// C and d, the statistic and rank of every onset, the maximum, and the time update
     /// of Γ to k + 1 with the onset k + 1 announced. For the fused dimensions at the
     /// AVX2 and AVX-512F levels one pass over the slots does it all, four or eight
-    /// onsets at a time in registers ([`fused_lanes`]): no intermediate arrays, and C,
+    /// onsets at a time in registers ([`fused`]): no intermediate arrays, and C,
     /// d and Γ are read and written once. Otherwise (and at the baseline level, where
     /// 2-lane registers spill and the passes measured as fast)
     /// [`WindowBank::accumulate`], [`WindowBank::maximize`] and

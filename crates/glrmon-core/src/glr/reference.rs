@@ -1,6 +1,4 @@
-//! The reference passes: the general recursion (eqs. (45), (32)-(35), (46)) one
-//! component at a time over the slots, which the fused pass and the stationary tables
-//! must equal bit for bit.
+//! The passes of eqs. (45), (32)-(35), (46): the reference every fast path must equal.
 
 use super::lanes::mul_add;
 use super::statistic::{larger, quad2};

@@ -1,6 +1,4 @@
-//! The statistic dᵀC⁻d and rank C of eq. (35) with dropped pivots, written once for
-//! every path (passes, fused pass, stationary tables, θ̂), so all take the same rank
-//! decisions.
+//! dᵀC⁻d and rank C (eq. (35)), written once so that every path decides the same rank.
 
 use super::lanes::Lanes;
 
@@ -8,6 +6,9 @@ use super::lanes::Lanes;
 /// the statistic passes ([`WindowBank::statistic_m2`] for m = 2, else
 /// [`WindowBank::statistic_generic`]; the m = 1 pass compares C > τ·C, which decides
 /// the same for every C).
+///
+/// [`WindowBank::statistic_m2`]: super::WindowBank::statistic_m2
+/// [`WindowBank::statistic_generic`]: super::WindowBank::statistic_generic
 #[inline(always)]
 pub(super) fn pivot_cutoff(m: usize, diag: impl Fn(usize) -> f64, tol: f64) -> f64 {
     if m == 2 {
@@ -28,6 +29,8 @@ pub(super) fn larger(x: f64, y: f64) -> f64 {
 
 /// The dropped-pivot LDLᵀ statistic dᵀC⁻d and rank C of L onsets (eq. (35)), with the
 /// operations of [`WindowBank::statistic_generic`].
+///
+/// [`WindowBank::statistic_generic`]: super::WindowBank::statistic_generic
 #[allow(clippy::needless_range_loop)]
 #[inline(always)]
 pub(super) fn ldl_statistic<const M: usize, S: Lanes>(
@@ -102,6 +105,8 @@ pub(super) fn ldl_statistic<const M: usize, S: Lanes>(
 /// comparisons test δ against τ·max(a, c)·a instead of δ/a against the cut-off, so no
 /// division decides a rank. One division instead of the LDLᵀ's two: division is the
 /// slowest operation of the window pass (issue 9).
+///
+/// [`WindowBank::statistic_generic`]: super::WindowBank::statistic_generic
 #[inline(always)]
 pub(super) fn quad2<S: Lanes>(a: S, b: S, c: S, d1: S, d2: S, tol: S) -> (S, S) {
     let zero = S::splat(0.0);

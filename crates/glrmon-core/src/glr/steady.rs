@@ -1,5 +1,4 @@
-//! The stationary regime of an LTI model (the fast path): per-lag tables of S, C, C⁻
-//! and Γ, which must equal the general recursion's values at every lag.
+//! The LTI stationary tables (fast path): must equal the general recursion at every lag.
 
 use super::lanes::{mul_add, mul_add_as};
 use super::statistic::{larger, quad2};
