@@ -52,15 +52,11 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::error::SparseError;
 use crate::linalg::{cholesky_in_place, gemm, gemv, solve_lower_in_place, symmetrize};
 use crate::model::SystemMatrices;
-use crate::sparse::SparseError;
 
-/// Threshold of the Assumption (iv) check: C_{k+1}E_k has full column rank when every
-/// singular value of C_{k+1}Ê_k exceeds 1e-9·‖C_{k+1}‖_F, Ê_k being E_k with its
-/// columns scaled to unit norm (the filter depends only on the range of E_k, and the
-/// test then does not depend on the units of d_k or of the outputs as a whole).
-pub const UNKNOWN_INPUT_RANK_TOLERANCE: f64 = 1e-9;
+pub use crate::error::UNKNOWN_INPUT_RANK_TOLERANCE;
 
 /// Checks Assumption (iv) of Zhang 2021: C_{k+1}E_k (`c_next`·`e`, p×s) has full
 /// column rank s, with a bounded pseudo-inverse: every singular value of C_{k+1}Ê_k

@@ -32,69 +32,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-/// Errors of the sparse isolation ([`crate::sparse`]) and of its residual generators
-/// ([`crate::kitanidis`]). A failing call leaves the state of its receiver unchanged.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[non_exhaustive]
-pub enum SparseError {
-    /// A matrix or vector has the wrong shape.
-    #[error("{what}: {detail}")]
-    Dimension {
-        /// The matrix or vector concerned (e.g. `"upsilon"`, `"E"`).
-        what: &'static str,
-        /// What disagrees with what.
-        detail: String,
-    },
-    /// An input holds NaN or ±∞.
-    #[error("{what} holds a non-finite value (NaN or infinity)")]
-    NonFinite {
-        /// The input concerned.
-        what: &'static str,
-    },
-    /// A setting is out of range.
-    #[error("{what}: {detail}")]
-    Setting {
-        /// The setting concerned (e.g. `"ratio"`).
-        what: &'static str,
-        /// Why it is rejected.
-        detail: String,
-    },
-    /// Assumption (iv) of Zhang 2021 fails: C_{k+1}E_k does not have full column rank,
-    /// so the Kitanidis filter cannot reject the unknown input (see
-    /// [`crate::kitanidis::unknown_input_rank`]).
-    #[error(
-        "Assumption (iv) of Zhang 2021 fails: C_{{k+1}}E_k ({outputs}×{unknown_inputs}) has \
-         numerical rank {rank}, not full column rank {unknown_inputs} (smallest singular value \
-         {ratio:.3e}·‖C_{{k+1}}‖_F with E_k's columns normalised, limit {limit:.0e}); the unknown \
-         input cannot be decoupled from the residual: the outputs must see every unknown-input \
-         direction independently, so at least as many independent output directions as \
-         unknown-input columns are needed",
-        limit = crate::kitanidis::UNKNOWN_INPUT_RANK_TOLERANCE
-    )]
-    UnknownInputRank {
-        /// p, the rows of C_{k+1}E_k.
-        outputs: usize,
-        /// s, the columns of C_{k+1}E_k (unknown-input directions; d_k ∈ ℝ^s).
-        unknown_inputs: usize,
-        /// The numerical rank found.
-        rank: usize,
-        /// σ_min(C_{k+1}Ê_k)/‖C_{k+1}‖_F, Ê_k being E_k with unit-norm columns (0 when
-        /// s > p or a column of E_k is zero).
-        ratio: f64,
-    },
-    /// A filter covariance lost positive definiteness, or a similar numerical failure.
-    #[error("numerical failure: {what}")]
-    Numerical {
-        /// What failed.
-        what: &'static str,
-    },
-    /// No sample has been accumulated.
-    #[error("no samples accumulated: the regression is empty")]
-    Empty,
-    /// Xᵀy = 0: every Lasso solution is θ̂ = 0, there is no fault to isolate.
-    #[error("Xᵀy = 0: the residuals carry no component along any fault signature")]
-    NoSignal,
-}
+pub use crate::error::SparseError;
 
 fn dim_err(what: &'static str, detail: String) -> SparseError {
     SparseError::Dimension { what, detail }
