@@ -1,4 +1,4 @@
-//! Sample CSV files (INTERFACE.md): a header row, then one sample per row, columns
+//! Sample CSV files (docs/CLI.md): a header row, then one sample per row, columns
 //! `k` (optional), `t` (optional), `u0…`, `y0…`, `p0…`. Numbers only, no quoting.
 
 use std::io::{BufRead, Write};

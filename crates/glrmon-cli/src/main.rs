@@ -67,8 +67,8 @@ enum Command {
     /// Rewrite an unfinished or damaged MCAP recording as a finished file with
     /// everything readable in it.
     Recover(recover::RecoverArgs),
-    /// Batch sparse fault diagnosis (Zhang 2021) over a recorded span of a CSV file;
-    /// prints the isolated faults and their magnitudes (JSON with --json).
+    /// Batch sparse fault diagnosis (Zhang 2021) over a recorded span of a CSV file or
+    /// an MCAP recording; prints the isolated faults and their magnitudes (JSON with --json).
     Diagnose(diagnose::DiagnoseArgs),
     /// The daemon: monitor every configured channel on Zenoh, publish the results.
     Run(run::RunArgs),

@@ -19,7 +19,7 @@ use crate::error::ModelError;
 ///
 /// Letters follow Zhang & Basseville 2014: n states, l inputs, p outputs; q is the
 /// length of the sample's exogenous vector `p` (scheduling parameters and other known
-/// signals, INTERFACE.md).
+/// signals: the `p0…` columns of docs/CLI.md, the `p` field of docs/WIRE.md).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Dims {
     /// n: state dimension.

@@ -1,6 +1,6 @@
-//! The per-sample path allocates nothing (STYLE principle 2): a counting global
-//! allocator around 10⁴ steps after warm-up, for the LPV bench-A channel, the §6.1
-//! plant, and a gap (predict-only) path.
+//! The per-sample path allocates nothing (an invariant of docs/ARCHITECTURE.md): a
+//! counting global allocator around 10⁴ steps after warm-up, for the LPV bench-A
+//! channel, the §6.1 plant, and a gap (predict-only) path.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering};

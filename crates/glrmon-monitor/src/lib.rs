@@ -3,7 +3,8 @@
 //! For each sample the monitor checks its index (duplicates and samples from the past are
 //! rejected; a jump forward is a gap, filled with predict-only steps), runs the channel's
 //! [`Detector`], keeps the alarm episode state, and at an alarm runs the isolation tests.
-//! It never asks where its records go (STYLE principle 3): callers hand them to sinks.
+//! It never asks where its records go (data flows one way, docs/ARCHITECTURE.md):
+//! callers hand them to sinks.
 //!
 //! Isolation runs `isolation_delay` samples after the crossing (default n, the number of
 //! states): at the crossing itself few samples carry the fault, and faults whose

@@ -118,7 +118,7 @@ pub fn topic(channel: &str, kind: TopicKind) -> String {
 
 const SAMPLE: &str = r#"{
   "title": "glrmon sample",
-  "description": "A decoded input sample as the monitor saw it (INTERFACE.md).",
+  "description": "A decoded input sample as the monitor saw it (docs/WIRE.md).",
   "type": "object",
   "properties": {
     "k": {"type": "integer", "description": "sample index (absent: arrival order)"},

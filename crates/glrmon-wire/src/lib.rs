@@ -23,8 +23,8 @@ pub use sample::{DecodeLimits, Sample, decode_samples, encode_sample, encode_sam
 
 #[cfg(test)]
 mod tests {
-    //! Robustness of both decoders against hostile input (STYLE principle 6). The
-    //! cargo-fuzz targets in `fuzz/` run the same checks for longer.
+    //! Robustness of both decoders against hostile input: bad input is a counted event,
+    //! never a panic. The cargo-fuzz targets in `fuzz/` run the same checks for longer.
 
     use super::*;
     use proptest::prelude::*;

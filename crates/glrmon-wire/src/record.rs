@@ -20,13 +20,13 @@ pub struct Stat {
     pub k: u64,
     /// Sample time in seconds, if the sample carried one.
     pub t: Option<f64>,
-    /// GLR statistic l_k = max over the window of θ̂ᵀ C_k(r) θ̂ (Zhang & Basseville 2014,
-    /// eq. (13)); `None` (`null`) while no onset is admissible.
+    /// GLR statistic l_k = max over the window of d_k(r)ᵀ C_k(r)⁺ d_k(r) (Zhang &
+    /// Basseville 2014, eq. (35)); `None` (`null`) while no onset is admissible.
     pub glr: Option<f64>,
-    /// Maximising onset r̂, if any.
+    /// Maximising onset r̂ (eq. (36)), if any.
     pub onset: Option<u64>,
-    /// Magnitude estimate θ̂ at r̂, one value per fault in dictionary order; empty while
-    /// no onset is admissible.
+    /// Magnitude estimate θ̂ = C_k(r̂)⁺ d_k(r̂) (eq. (34)), one value per fault in
+    /// dictionary order; empty while no onset is admissible.
     pub magnitude: Vec<f64>,
     /// Numerical rank of C_k(r̂) (fewer than the number of faults when some are not
     /// separable over the window).
@@ -114,14 +114,14 @@ pub struct Diagnosis {
     pub plateau: [f64; 2],
     /// Residual used: [`Diagnosis::RESIDUAL_KALMAN`] or [`Diagnosis::RESIDUAL_KITANIDIS`].
     pub residual: String,
-    /// Support size at each λ along the regularisation path.
+    /// Support size at each λ along the regularisation path (Zhang 2021, Fig. 2).
     pub path_support_sizes: Vec<usize>,
     /// The fault dictionary, in the order of the columns of `path_coefficients`.
     pub faults: Vec<String>,
     /// The λ values of the regularisation path, decreasing (Zhang 2021, eq. (39)).
     pub path_lambda: Vec<f64>,
     /// The Lasso estimate θ̂(λ) at each λ of `path_lambda`: one row per λ, one value
-    /// per fault of `faults` (the path plotted in Zhang 2021, Fig. 2).
+    /// per fault of `faults`.
     pub path_coefficients: Vec<Vec<f64>>,
 }
 
@@ -198,7 +198,8 @@ impl ErrorRecord {
 }
 
 /// Any result record: one JSON object with `"type"` (`stat`, `alarm`, `alarm_end`,
-/// `diagnosis`, `error`) and `"channel"`, the rest of the fields flattened beside them.
+/// `diagnosis`, `error`, `consistency`) and `"channel"`, the rest of the fields flattened
+/// beside them.
 ///
 /// Letters are those of Zhang & Basseville (2014): l_k the GLR statistic (`glr`), r̂ the
 /// onset, θ̂ the magnitude, ε_k the innovation.
