@@ -30,6 +30,9 @@ use glrmon_wire::{
     encode_intake, encode_json, encode_sample,
 };
 
+mod status;
+pub use status::channel_statuses;
+
 /// Index of a channel in the runtime (its position in the configuration).
 pub type ChannelIndex = usize;
 
