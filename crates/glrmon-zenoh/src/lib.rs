@@ -84,25 +84,24 @@ pub fn build_config(s: &SessionSettings) -> Result<Config, ZenohError> {
         None => Config::default(),
     };
     let from_file = s.config_file.is_some();
-    let json = |v: &Vec<String>| serde_json_list(v);
     if let Some(mode) = &s.mode {
         if !matches!(mode.as_str(), "peer" | "client") {
             return Err(ZenohError::Config(format!(
                 "mode \"{mode}\" is not peer or client"
             )));
         }
-        c.insert_json5("mode", &format!("\"{mode}\""))
+        c.insert_json5("mode", &json_string(mode))
             .map_err(cfg_err)?;
     } else if !from_file {
         c.insert_json5("mode", "\"peer\"").map_err(cfg_err)?;
     }
     if !s.connect.is_empty() {
-        c.insert_json5("connect/endpoints", &json(&s.connect))
+        c.insert_json5("connect/endpoints", &serde_json_list(&s.connect))
             .map_err(cfg_err)?;
     }
     if !s.listen.is_empty() || !from_file {
         // Zenoh's default peer listener is tcp/[::]:0 on every interface: never implicit.
-        c.insert_json5("listen/endpoints", &json(&s.listen))
+        c.insert_json5("listen/endpoints", &serde_json_list(&s.listen))
             .map_err(cfg_err)?;
     }
     match s.multicast_scouting {
@@ -132,12 +131,16 @@ pub fn build_config(s: &SessionSettings) -> Result<Config, ZenohError> {
     Ok(c)
 }
 
+/// A list of strings as JSON (which JSON5 reads as is), escaped by serde_json.
 fn serde_json_list(v: &[String]) -> String {
-    let items: Vec<String> = v
-        .iter()
-        .map(|s| format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\"")))
-        .collect();
-    format!("[{}]", items.join(","))
+    // Serialising strings into a `String` cannot fail; "[]" is never reached.
+    serde_json::to_string(v).unwrap_or_else(|_| "[]".to_owned())
+}
+
+/// A string as JSON (which JSON5 reads as is), escaped by serde_json.
+fn json_string(v: &str) -> String {
+    // As above: cannot fail.
+    serde_json::to_string(v).unwrap_or_else(|_| "\"\"".to_owned())
 }
 
 /// Opens a session.
@@ -698,6 +701,16 @@ mod tests {
                 .to_string()
                 .contains("router-ish")
         );
+    }
+
+    #[test]
+    fn config_values_are_escaped() {
+        assert_eq!(
+            serde_json_list(&["a\"b\\c".into(), "é".into()]),
+            r#"["a\"b\\c","é"]"#
+        );
+        assert_eq!(serde_json_list(&[]), "[]");
+        assert_eq!(json_string("pe\"er"), r#""pe\"er""#);
     }
 
     #[test]
