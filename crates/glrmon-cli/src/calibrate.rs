@@ -15,6 +15,7 @@ use glrmon_core::calibration::{
 use glrmon_monitor::Monitor;
 use glrmon_sim::SimSample;
 use glrmon_wire::{Record, Sample};
+use serde::Serialize;
 
 use crate::diagnose::{Samples, recorded_config};
 use crate::mcapin::is_mcap;
@@ -97,33 +98,16 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         });
     }
     if args.json {
-        let iso: Vec<String> = isolation
-            .iter()
-            .map(|i| {
-                format!(
-                    "{{\"test\":{:?},\"threshold\":{},\"samples\":{},\"current_threshold\":{:?},\"current_rate\":{:?}}}",
-                    i.test,
-                    i.quantile.map_or("null".into(), |q| format!("{:?}", q.value)),
-                    i.quantile.map_or(0, |q| q.samples),
-                    i.current,
-                    i.current_rate
-                )
-            })
-            .collect();
         println!(
-            "{{\"channel\":{:?},\"threshold\":{:?},\"interval\":[{:?},{:?}],\"mtbfa\":{:?},\"mtbfa_interval\":[{:?},{:?}],\"samples\":{},\"episodes\":{},\"expected_episodes\":{:?},\"current_threshold\":{:?},\"current_episodes\":{current_episodes},\"isolation_alpha\":{alpha:?},\"isolation\":[{}]}}",
-            channel.name,
-            c.threshold,
-            c.threshold_interval.0,
-            c.threshold_interval.1,
-            c.mtbfa,
-            c.mtbfa_interval.0,
-            c.mtbfa_interval.1,
-            c.samples,
-            c.episodes,
-            c.expected_episodes,
-            g.threshold,
-            iso.join(",")
+            "{}",
+            serde_json::to_string(&calibration_json(
+                &channel.name,
+                &c,
+                g.threshold,
+                current_episodes,
+                alpha,
+                &isolation
+            ))?
         );
     } else {
         print!(
@@ -139,6 +123,79 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The `--json` line: the calibrated alarm threshold with its intervals, the data's
+/// episode counts, and one entry per isolation test.
+#[derive(Debug, Serialize)]
+struct CalibrationJson<'a> {
+    channel: &'a str,
+    threshold: f64,
+    /// The uncertainty of the threshold (low, high).
+    interval: [Option<f64>; 2],
+    mtbfa: f64,
+    /// The 95 % interval of the mean samples between false alarms; an unbounded end
+    /// (no episode on the data) is `null`, as JSON has no infinity.
+    mtbfa_interval: [Option<f64>; 2],
+    samples: u64,
+    episodes: u64,
+    expected_episodes: f64,
+    current_threshold: f64,
+    current_episodes: u64,
+    isolation_alpha: f64,
+    isolation: Vec<IsolationJson<'a>>,
+}
+
+/// One isolation test in the `--json` line.
+#[derive(Debug, Serialize)]
+struct IsolationJson<'a> {
+    test: &'a str,
+    /// The calibrated threshold; `null` without data for the test.
+    threshold: Option<f64>,
+    samples: u64,
+    current_threshold: f64,
+    current_rate: f64,
+}
+
+/// A float as JSON writes it: `None` (`null`) when it is not finite.
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
+}
+
+fn calibration_json<'a>(
+    channel: &'a str,
+    c: &Calibration,
+    current_threshold: f64,
+    current_episodes: u64,
+    isolation_alpha: f64,
+    isolation: &'a [IsolationCalibration],
+) -> CalibrationJson<'a> {
+    CalibrationJson {
+        channel,
+        threshold: c.threshold,
+        interval: [
+            finite(c.threshold_interval.0),
+            finite(c.threshold_interval.1),
+        ],
+        mtbfa: c.mtbfa,
+        mtbfa_interval: [finite(c.mtbfa_interval.0), finite(c.mtbfa_interval.1)],
+        samples: c.samples,
+        episodes: c.episodes,
+        expected_episodes: c.expected_episodes,
+        current_threshold,
+        current_episodes,
+        isolation_alpha,
+        isolation: isolation
+            .iter()
+            .map(|i| IsolationJson {
+                test: &i.test,
+                threshold: i.quantile.map(|q| q.value),
+                samples: i.quantile.map_or(0, |q| q.samples),
+                current_threshold: i.current,
+                current_rate: i.current_rate,
+            })
+            .collect(),
+    }
 }
 
 /// The isolation threshold of one test.
@@ -421,4 +478,39 @@ fn write(
         .map_err(|e| InvalidInput(format!("the updated configuration would be invalid:\n{e}")))?;
     std::fs::write(path, updated)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_keeps_the_keys_and_writes_an_unbounded_interval_as_null() {
+        let c = Calibration {
+            threshold: 12.5,
+            samples: 1000,
+            episodes: 0,
+            mtbfa: 10000.0,
+            mtbfa_interval: (270.0, f64::INFINITY),
+            threshold_interval: (11.0, 14.0),
+            expected_episodes: 0.1,
+        };
+        let isolation = [IsolationCalibration {
+            test: "a\"b".into(),
+            quantile: None,
+            current: 6.63,
+            current_rate: 0.5,
+        }];
+        let text =
+            serde_json::to_string(&calibration_json("m", &c, 13.0, 2, 0.01, &isolation)).unwrap();
+        assert_eq!(
+            text,
+            concat!(
+                r#"{"channel":"m","threshold":12.5,"interval":[11.0,14.0],"mtbfa":10000.0,"#,
+                r#""mtbfa_interval":[270.0,null],"samples":1000,"episodes":0,"expected_episodes":0.1,"#,
+                r#""current_threshold":13.0,"current_episodes":2,"isolation_alpha":0.01,"#,
+                r#""isolation":[{"test":"a\"b","threshold":null,"samples":0,"current_threshold":6.63,"current_rate":0.5}]}"#
+            )
+        );
+    }
 }

@@ -206,10 +206,11 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     }
     // Wait until every published sample has been processed (a condition, bounded).
     let stats = runtime.stats();
+    let names = runtime.channel_names().to_vec();
     let deadline = Instant::now() + Duration::from_secs(30);
-    while stats
+    while glrmon_runtime::channel_statuses(&names, &stats)
         .iter()
-        .any(|s| s.samples.load(Ordering::Relaxed) + s.dropped.load(Ordering::Relaxed) < samples)
+        .any(|c| c.samples + c.dropped < samples)
         && Instant::now() < deadline
     {
         tokio::time::sleep(Duration::from_millis(5)).await;
@@ -218,23 +219,25 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let (in_time, sinks) =
         tokio::task::spawn_blocking(move || runtime.shutdown(Duration::from_secs(10))).await?;
     drop(sinks);
-    let raised: u64 = stats.iter().map(|s| s.alarms.load(Ordering::Relaxed)).sum();
+    let raised: u64 = glrmon_runtime::channel_statuses(&names, &stats)
+        .iter()
+        .map(|c| c.alarms)
+        .sum();
     let deadline = Instant::now() + Duration::from_secs(5);
     while alarms_seen.load(Ordering::Relaxed) < raised && Instant::now() < deadline {
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
     drop(watcher);
     println!("summary ({:.1} s):", started.elapsed().as_secs_f64());
-    for (name, st) in cfg.channels.iter().map(|c| &c.name).zip(stats.iter()) {
-        let errors: u64 = st.errors.lock().map(|e| e.values().sum()).unwrap_or(0);
+    for c in glrmon_runtime::channel_statuses(&names, &stats) {
         println!(
             "  {:<10} samples={} alarms={} errors={} dropped={} active={}",
-            name,
-            st.samples.load(Ordering::Relaxed),
-            st.alarms.load(Ordering::Relaxed),
-            errors,
-            st.dropped.load(Ordering::Relaxed),
-            st.alarm_active.load(Ordering::Relaxed) != 0
+            c.channel,
+            c.samples,
+            c.alarms,
+            c.error_total(),
+            c.dropped,
+            c.alarm_active
         );
     }
     if let Some(p) = &args.output {

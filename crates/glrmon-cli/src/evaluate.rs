@@ -16,6 +16,7 @@ use glrmon_monitor::Monitor;
 use glrmon_report::{Evaluation, FaultEvaluation};
 use glrmon_sim::SimSample;
 use glrmon_wire::{Record, Sample};
+use serde::Serialize;
 
 use crate::simulate::{pick, simulator};
 use crate::{InvalidInput, load_config};
@@ -54,8 +55,8 @@ pub(crate) struct EvaluateArgs {
     report: Option<PathBuf>,
 }
 
-/// What one run gave.
-#[derive(Debug, Clone, Default)]
+/// What one run gave (an element of `runs` in the `--json` file).
+#[derive(Debug, Clone, Default, Serialize)]
 struct Run {
     /// First crossing of the threshold at or after the onset.
     crossing: Option<u64>,
@@ -63,11 +64,12 @@ struct Run {
     onset_estimate: Option<u64>,
     /// Faults isolated by that alarm.
     isolated: Vec<String>,
+    /// Alarms raised before the onset.
     false_alarms: u64,
 }
 
-/// Results for one injected fault.
-#[derive(Debug, Clone)]
+/// Results for one injected fault (an element of `results` in the `--json` file).
+#[derive(Debug, Clone, Serialize)]
 struct FaultResult {
     fault: String,
     magnitude: f64,
@@ -162,7 +164,7 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.json {
         std::fs::write(
             path,
-            json(&channel.name, &channel.fault_names, &results, onset),
+            json(&channel.name, &channel.fault_names, &results, onset)?,
         )?;
     }
     if let Some(path) = &args.report {
@@ -408,35 +410,65 @@ fn text(
     s
 }
 
-fn json(channel: &str, faults: &[String], results: &[FaultResult], onset: u64) -> String {
-    let mut out =
-        format!("{{\"channel\":{channel:?},\"onset\":{onset},\"faults\":{faults:?},\"results\":[");
-    for (i, r) in results.iter().enumerate() {
-        if i > 0 {
-            out.push(',');
-        }
-        let opt = |v: Option<u64>| v.map_or("null".to_owned(), |v| v.to_string());
-        let runs: Vec<String> = r
-            .runs
-            .iter()
-            .map(|x| {
-                format!(
-                    "{{\"crossing\":{},\"onset_estimate\":{},\"isolated\":{:?},\"false_alarms\":{}}}",
-                    opt(x.crossing),
-                    opt(x.onset_estimate),
-                    x.isolated,
-                    x.false_alarms
-                )
-            })
-            .collect();
-        let _ = write!(
-            out,
-            "{{\"fault\":{:?},\"magnitude\":{:?},\"runs\":[{}]}}",
-            r.fault,
-            r.magnitude,
-            runs.join(",")
+/// The `--json` file: the channel, the onset, the channel's fault dictionary and every
+/// run of every injected fault, `{"channel", "onset", "faults", "results": [{"fault",
+/// "magnitude", "runs": [{"crossing", "onset_estimate", "isolated", "false_alarms"}]}]}`.
+#[derive(Debug, Serialize)]
+struct EvaluationRuns<'a> {
+    channel: &'a str,
+    onset: u64,
+    faults: &'a [String],
+    results: &'a [FaultResult],
+}
+
+/// The `--json` file's text, one line.
+fn json(
+    channel: &str,
+    faults: &[String],
+    results: &[FaultResult],
+    onset: u64,
+) -> serde_json::Result<String> {
+    // Every magnitude is finite (checked when parsed), so no float becomes `null`.
+    let mut out = serde_json::to_string(&EvaluationRuns {
+        channel,
+        onset,
+        faults,
+        results,
+    })?;
+    out.push('\n');
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_keeps_the_keys_and_escapes_names() {
+        let results = [FaultResult {
+            fault: "a\"b".into(),
+            magnitude: 0.5,
+            runs: vec![
+                Run {
+                    crossing: Some(12),
+                    onset_estimate: Some(10),
+                    isolated: vec!["a\"b".into(), "c\\d".into()],
+                    false_alarms: 0,
+                },
+                Run::default(),
+            ],
+        }];
+        let text = json("m\u{1}é", &["a\"b".into()], &results, 10).unwrap();
+        assert_eq!(
+            text,
+            concat!(
+                r#"{"channel":"m\u0001é","onset":10,"faults":["a\"b"],"results":[{"fault":"a\"b","magnitude":0.5,"runs":["#,
+                r#"{"crossing":12,"onset_estimate":10,"isolated":["a\"b","c\\d"],"false_alarms":0},"#,
+                r#"{"crossing":null,"onset_estimate":null,"isolated":[],"false_alarms":0}]}]}"#,
+                "\n"
+            )
         );
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(v["results"][0]["runs"][0]["isolated"][1], "c\\d");
     }
-    out.push_str("]}\n");
-    out
 }

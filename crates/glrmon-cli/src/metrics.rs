@@ -10,12 +10,13 @@ use std::time::Instant;
 
 use glrmon_record::RecorderStats;
 use glrmon_runtime::{ChannelStats, LATENCY_BUCKETS, LatencyHistogram, RuntimeMetrics};
+use glrmon_wire::ChannelStatus;
 use glrmon_zenoh::Connectivity;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpListener;
 
-/// Reads one counter of a channel.
-type ChannelCounter = fn(&ChannelStats) -> u64;
+/// Reads one counter of a channel's status.
+type ChannelCounter = fn(&ChannelStatus) -> u64;
 
 /// What the endpoints report.
 pub(crate) struct MetricsSource {
@@ -53,39 +54,42 @@ impl MetricsSource {
             name.to_owned()
         };
         let mut lines = Vec::new();
+        // One reading of the channels' counters for every family, the same reading as
+        // the status queryable's.
+        let channels = glrmon_runtime::channel_statuses(&self.channels, &self.stats);
         let per_channel: [(&str, &str, &str, ChannelCounter); 4] = [
             (
                 "glrmon_samples_total",
                 "counter",
                 "Samples processed.",
-                |s| s.samples.load(Ordering::Relaxed),
+                |s| s.samples,
             ),
             (
                 "glrmon_dropped_payloads_total",
                 "counter",
                 "Payloads dropped at intake (worker queue full); the gap is filled by predict-only steps.",
-                |s| s.dropped.load(Ordering::Relaxed),
+                |s| s.dropped,
             ),
             (
                 "glrmon_alarms_total",
                 "counter",
                 "Alarm episodes started.",
-                |s| s.alarms.load(Ordering::Relaxed),
+                |s| s.alarms,
             ),
             (
                 "glrmon_alarm_active",
                 "gauge",
                 "1 while an alarm episode is going on.",
-                |s| s.alarm_active.load(Ordering::Relaxed),
+                |s| u64::from(s.alarm_active),
             ),
         ];
         for (name, kind, help, get) in per_channel {
             let n = family(&mut o, name, kind, help);
-            for (ch, st) in self.channels.iter().zip(self.stats.iter()) {
+            for c in &channels {
                 lines.push(format!(
                     "{n}{{instance={inst},channel={}}} {}",
-                    label(ch),
-                    get(st)
+                    label(&c.channel),
+                    get(c)
                 ));
             }
             o.push_str(&lines.join("\n"));
@@ -98,13 +102,12 @@ impl MetricsSource {
             "counter",
             "Rejected input by error code (docs/WIRE.md).",
         );
-        for (ch, st) in self.channels.iter().zip(self.stats.iter()) {
-            let errors = st.errors.lock().map(|e| e.clone()).unwrap_or_default();
-            for (code, count) in errors {
+        for c in &channels {
+            for (code, count) in &c.errors {
                 let _ = writeln!(
                     o,
                     "{n}{{instance={inst},channel={},code={}}} {count}",
-                    label(ch),
+                    label(&c.channel),
                     label(code)
                 );
             }
@@ -302,5 +305,48 @@ fn respond(head: &str, s: &MetricsSource) -> (&'static str, &'static str, String
             text,
             "try /metrics, /healthz or /readyz\n".into(),
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn per_channel_families_read_the_channel_status() {
+        let stats = Arc::new(vec![
+            Arc::new(ChannelStats::default()),
+            Arc::new(ChannelStats::default()),
+        ]);
+        stats[1].samples.store(400, Ordering::Relaxed);
+        stats[1].alarms.store(2, Ordering::Relaxed);
+        stats[1].alarm_active.store(1, Ordering::Relaxed);
+        stats[1].dropped.store(3, Ordering::Relaxed);
+        stats[1].errors.lock().unwrap().insert("gap", 5);
+        let source = MetricsSource {
+            instance: "i\"1".into(),
+            channels: vec!["a".into(), "b\\c".into()],
+            stats,
+            runtime: Arc::new(RuntimeMetrics::default()),
+            workers: 0,
+            connectivity: Arc::new(Connectivity::default()),
+            recorder: None,
+            started: Instant::now(),
+            ready: Arc::new(AtomicBool::new(false)),
+        };
+        let body = source.render();
+        for line in [
+            r#"glrmon_samples_total{instance="i\"1",channel="a"} 0"#,
+            r#"glrmon_samples_total{instance="i\"1",channel="b\\c"} 400"#,
+            r#"glrmon_dropped_payloads_total{instance="i\"1",channel="b\\c"} 3"#,
+            r#"glrmon_alarms_total{instance="i\"1",channel="b\\c"} 2"#,
+            r#"glrmon_alarm_active{instance="i\"1",channel="a"} 0"#,
+            r#"glrmon_alarm_active{instance="i\"1",channel="b\\c"} 1"#,
+            r#"glrmon_rejected_total{instance="i\"1",channel="b\\c",code="gap"} 5"#,
+            "# TYPE glrmon_alarm_active gauge",
+            "# TYPE glrmon_rejected_total counter",
+        ] {
+            assert!(body.lines().any(|l| l == line), "{line} not in\n{body}");
+        }
     }
 }

@@ -5,7 +5,7 @@
 use std::time::Duration;
 
 use clap::Args;
-use serde_json::Value;
+use glrmon_wire::status;
 
 use crate::InvalidInput;
 use crate::net::ZenohArgs;
@@ -81,7 +81,7 @@ fn table(replies: &[(String, String)]) -> String {
     ];
     let (mut channels, mut rate) = (0u64, 0.0);
     for (name, json) in replies {
-        let Ok(v) = serde_json::from_str::<Value>(json) else {
+        let Ok(v) = status::decode(json.as_bytes()) else {
             rows.push([
                 name.clone(),
                 "(unreadable status)".into(),
@@ -96,23 +96,18 @@ fn table(replies: &[(String, String)]) -> String {
             ]);
             continue;
         };
-        let ch = v["channels"].as_array().cloned().unwrap_or_default();
-        let sum = |f: &dyn Fn(&Value) -> u64| ch.iter().map(f).sum::<u64>();
-        let active = sum(&|c| u64::from(c["alarm_active"].as_bool().unwrap_or(false)));
-        let alarms = sum(&|c| c["alarms"].as_u64().unwrap_or(0));
-        let errors = sum(&|c| {
-            c["errors"]
-                .as_object()
-                .map_or(0, |e| e.values().filter_map(Value::as_u64).sum())
-        });
-        let dropped = sum(&|c| c["dropped"].as_u64().unwrap_or(0));
-        let sps = v["samples_per_second"].as_f64().unwrap_or(0.0);
+        let ch = &v.channels;
+        let sum = |f: &dyn Fn(&glrmon_wire::ChannelStatus) -> u64| ch.iter().map(f).sum::<u64>();
+        let active = sum(&|c| u64::from(c.alarm_active));
+        let alarms = sum(&|c| c.alarms);
+        let errors = sum(&glrmon_wire::ChannelStatus::error_total);
+        let dropped = sum(&|c| c.dropped);
+        let sps = v.samples_per_second;
         channels += ch.len() as u64;
         rate += sps;
-        let connected = v["connected"].as_bool().unwrap_or(true);
         rows.push([
             name.clone(),
-            v["shard"].as_str().unwrap_or("-").to_owned(),
+            v.shard.clone().unwrap_or_else(|| "-".to_owned()),
             ch.len().to_string(),
             format!("{sps:.0}"),
             active.to_string(),
@@ -121,10 +116,10 @@ fn table(replies: &[(String, String)]) -> String {
             dropped.to_string(),
             format!(
                 "{}{}",
-                v["reconnections"].as_u64().unwrap_or(0),
-                if connected { "" } else { " (down)" }
+                v.reconnections,
+                if v.connected { "" } else { " (down)" }
             ),
-            uptime(v["uptime"].as_f64().unwrap_or(0.0)),
+            uptime(v.uptime),
         ]);
     }
     let mut widths = [0usize; 10];
@@ -175,9 +170,13 @@ mod tests {
     fn table_sums_channels_and_marks_lost_connections() {
         let a = r#"{"instance":"a","uptime":3725.2,"shard":"0/2","connected":true,"reconnections":1,"overlaps":0,"samples_per_second":1500.0,"channels":[{"channel":"c1","samples":10,"alarms":2,"alarm_active":true,"dropped":3,"last_k":9,"errors":{"non_finite":4}}]}"#;
         let b = r#"{"instance":"b","uptime":5,"shard":null,"connected":false,"reconnections":0,"overlaps":0,"samples_per_second":0.0,"channels":[]}"#;
-        let t = table(&[("a".into(), a.into()), ("b".into(), b.into())]);
+        let t = table(&[
+            ("a".into(), a.into()),
+            ("b".into(), b.into()),
+            ("c".into(), r#"{"instance":"c"}"#.into()),
+        ]);
         let lines: Vec<&str> = t.lines().collect();
-        assert_eq!(lines.len(), 4, "{t}");
+        assert_eq!(lines.len(), 5, "{t}");
         assert!(lines[0].starts_with("INSTANCE"), "{t}");
         let a: Vec<&str> = lines[1].split_whitespace().collect();
         assert_eq!(
@@ -186,6 +185,11 @@ mod tests {
             "{t}"
         );
         assert!(lines[2].contains("0 (down)"), "{t}");
-        assert_eq!(lines[3], "2 instance(s), 1 channel(s), 1500 samples/s");
+        assert_eq!(
+            lines[3].split_whitespace().collect::<Vec<_>>(),
+            ["c", "(unreadable", "status)"],
+            "a status missing fields is not shown as zeros: {t}"
+        );
+        assert_eq!(lines[4], "3 instance(s), 1 channel(s), 1500 samples/s");
     }
 }

@@ -30,11 +30,13 @@ mod fanout;
 mod pipeline;
 mod sink;
 mod sinks;
+mod status;
 
 pub use fanout::{DeliveryPlan, Fanout};
 pub use pipeline::{ChannelPipeline, Emit, PipelineError};
 pub use sink::{ChannelIndex, InputItem, InputOutput, Interest, Output, Sink, SinkError};
 pub use sinks::{FnSink, JsonLinesSink, MemorySink};
+pub use status::channel_statuses;
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, Ordering};

@@ -5,6 +5,7 @@ mod intake;
 mod key;
 mod record;
 mod sample;
+pub mod status;
 
 pub use error::{
     ChannelNameError, ChannelNameErrorKind, DecodeError, DecodeErrorKind, EncodeError,
@@ -20,6 +21,7 @@ pub use record::{
     Stat, decode_record, encode_json,
 };
 pub use sample::{DecodeLimits, Sample, decode_samples, encode_sample, encode_samples};
+pub use status::{ChannelStatus, InstanceStatus, StatusError};
 
 #[cfg(test)]
 mod tests {

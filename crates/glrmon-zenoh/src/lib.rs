@@ -17,7 +17,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use glrmon_runtime::{ChannelStats, Intake, Output, Payload, Sink, SinkError};
-use glrmon_wire::Record;
+use glrmon_wire::{InstanceStatus, Record, status};
 use zenoh::bytes::Encoding;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
@@ -84,25 +84,24 @@ pub fn build_config(s: &SessionSettings) -> Result<Config, ZenohError> {
         None => Config::default(),
     };
     let from_file = s.config_file.is_some();
-    let json = |v: &Vec<String>| serde_json_list(v);
     if let Some(mode) = &s.mode {
         if !matches!(mode.as_str(), "peer" | "client") {
             return Err(ZenohError::Config(format!(
                 "mode \"{mode}\" is not peer or client"
             )));
         }
-        c.insert_json5("mode", &format!("\"{mode}\""))
+        c.insert_json5("mode", &json_string(mode))
             .map_err(cfg_err)?;
     } else if !from_file {
         c.insert_json5("mode", "\"peer\"").map_err(cfg_err)?;
     }
     if !s.connect.is_empty() {
-        c.insert_json5("connect/endpoints", &json(&s.connect))
+        c.insert_json5("connect/endpoints", &serde_json_list(&s.connect))
             .map_err(cfg_err)?;
     }
     if !s.listen.is_empty() || !from_file {
         // Zenoh's default peer listener is tcp/[::]:0 on every interface: never implicit.
-        c.insert_json5("listen/endpoints", &json(&s.listen))
+        c.insert_json5("listen/endpoints", &serde_json_list(&s.listen))
             .map_err(cfg_err)?;
     }
     match s.multicast_scouting {
@@ -132,12 +131,16 @@ pub fn build_config(s: &SessionSettings) -> Result<Config, ZenohError> {
     Ok(c)
 }
 
+/// A list of strings as JSON (which JSON5 reads as is), escaped by serde_json.
 fn serde_json_list(v: &[String]) -> String {
-    let items: Vec<String> = v
-        .iter()
-        .map(|s| format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\"")))
-        .collect();
-    format!("[{}]", items.join(","))
+    // Serialising strings into a `String` cannot fail; "[]" is never reached.
+    serde_json::to_string(v).unwrap_or_else(|_| "[]".to_owned())
+}
+
+/// A string as JSON (which JSON5 reads as is), escaped by serde_json.
+fn json_string(v: &str) -> String {
+    // As above: cannot fail.
+    serde_json::to_string(v).unwrap_or_else(|_| "\"\"".to_owned())
 }
 
 /// Opens a session.
@@ -335,68 +338,31 @@ impl StatusSource {
 }
 
 impl StatusSource {
-    /// The status as JSON: instance, uptime, and per channel samples, alarms, active
-    /// alarm, errors by code, drops and last k.
+    /// The status now: instance, uptime, connection, and every channel's counters (read
+    /// by [`glrmon_runtime::channel_statuses`], as the other views of them are).
+    /// Uptime is rounded to the millisecond and the rate to 0.1 sample/s.
     #[must_use]
-    pub fn to_json(&self) -> String {
-        let mut channels = Vec::new();
-        for (name, st) in self.channels.iter().zip(self.stats.iter()) {
-            let errors = st.errors.lock().map(|e| e.clone()).unwrap_or_default();
-            let errs: Vec<String> = errors.iter().map(|(k, v)| format!("\"{k}\":{v}")).collect();
-            let next = st.next_k.load(Ordering::Relaxed);
-            let last_k = if next == 0 {
-                "null".to_owned()
-            } else {
-                (next - 1).to_string()
-            };
-            channels.push(format!(
-                "{{\"channel\":{},\"samples\":{},\"alarms\":{},\"alarm_active\":{},\"dropped\":{},\"last_k\":{},\"errors\":{{{}}}}}",
-                json_string(name),
-                st.samples.load(Ordering::Relaxed),
-                st.alarms.load(Ordering::Relaxed),
-                st.alarm_active.load(Ordering::Relaxed) != 0,
-                st.dropped.load(Ordering::Relaxed),
-                last_k,
-                errs.join(",")
-            ));
-        }
-        let total: u64 = self
-            .stats
-            .iter()
-            .map(|s| s.samples.load(Ordering::Relaxed))
-            .sum();
+    pub fn snapshot(&self) -> InstanceStatus {
+        let channels = glrmon_runtime::channel_statuses(&self.channels, &self.stats);
+        let total: u64 = channels.iter().map(|c| c.samples).sum();
         let (connected, reconnections) = self.connectivity.as_ref().map_or((true, 0), |c| {
             (
                 c.connected.load(Ordering::Relaxed),
                 c.reconnections.load(Ordering::Relaxed),
             )
         });
-        format!(
-            "{{\"instance\":{},\"uptime\":{:.3},\"shard\":{},\"connected\":{},\"reconnections\":{},\"overlaps\":{},\"samples_per_second\":{:.1},\"channels\":[{}]}}",
-            json_string(&self.instance),
-            self.started.elapsed().as_secs_f64(),
-            self.shard.as_deref().map_or("null".to_owned(), json_string),
+        let round = |v: f64, scale: f64| (v * scale).round() / scale;
+        InstanceStatus {
+            instance: self.instance.clone(),
+            uptime: round(self.started.elapsed().as_secs_f64(), 1e3),
+            shard: self.shard.clone(),
             connected,
             reconnections,
-            self.overlaps.load(Ordering::Relaxed),
-            self.samples_per_second(total),
-            channels.join(",")
-        )
-    }
-}
-
-fn json_string(s: &str) -> String {
-    let mut out = String::from("\"");
-    for c in s.chars() {
-        match c {
-            '"' => out.push_str("\\\""),
-            '\\' => out.push_str("\\\\"),
-            c if c.is_control() => out.push_str(&format!("\\u{:04x}", c as u32)),
-            c => out.push(c),
+            overlaps: self.overlaps.load(Ordering::Relaxed),
+            samples_per_second: round(self.samples_per_second(total), 10.0),
+            channels,
         }
     }
-    out.push('"');
-    out
 }
 
 /// The status queryable and the liveliness token of an instance; dropping undeclares.
@@ -429,10 +395,15 @@ impl Presence {
         let queryable = session
             .declare_queryable(key.as_str())
             .callback(move |query| {
-                let _ = query
-                    .reply(reply_key.as_str(), status.to_json())
-                    .encoding(Encoding::APPLICATION_JSON)
-                    .wait();
+                // Encoding fails only for a non-finite float, which the snapshot never
+                // holds; the querier is then told why rather than left waiting.
+                let _ = match status::encode(&status.snapshot()) {
+                    Ok(json) => query
+                        .reply(reply_key.as_str(), json)
+                        .encoding(Encoding::APPLICATION_JSON)
+                        .wait(),
+                    Err(e) => query.reply_err(e.to_string()).wait(),
+                };
             })
             .await
             .map_err(session_err("declare queryable"))?;
@@ -733,14 +704,34 @@ mod tests {
     }
 
     #[test]
-    fn status_json_escapes_names() {
-        let st = StatusSource::new(
-            "a\"b".into(),
-            vec!["c1".into()],
-            Arc::new(vec![Arc::new(ChannelStats::default())]),
+    fn config_values_are_escaped() {
+        assert_eq!(
+            serde_json_list(&["a\"b\\c".into(), "é".into()]),
+            r#"["a\"b\\c","é"]"#
         );
-        let j = st.to_json();
+        assert_eq!(serde_json_list(&[]), "[]");
+        assert_eq!(json_string("pe\"er"), r#""pe\"er""#);
+    }
+
+    #[test]
+    fn status_reply_is_the_typed_status_with_names_escaped() {
+        let stats = Arc::new(vec![
+            Arc::new(ChannelStats::default()),
+            Arc::new(ChannelStats::default()),
+        ]);
+        stats[1].samples.store(5, Ordering::Relaxed);
+        stats[1].next_k.store(5, Ordering::Relaxed);
+        let st = StatusSource::new("a\"b".into(), vec!["c1".into(), "c\\2".into()], stats);
+        let j = status::encode(&st.snapshot()).unwrap();
         assert!(j.starts_with("{\"instance\":\"a\\\"b\""), "{j}");
         assert!(j.contains("\"last_k\":null"), "{j}");
+        assert!(j.contains("{\"channel\":\"c\\\\2\",\"samples\":5,"), "{j}");
+        let back = status::decode(j.as_bytes()).unwrap();
+        assert_eq!(back.instance, "a\"b");
+        assert_eq!(back.shard, None);
+        assert!(back.connected);
+        assert_eq!(back.channels[1].channel, "c\\2");
+        assert_eq!(back.channels[1].last_k, Some(4));
+        assert_eq!(back.uptime, (back.uptime * 1e3).round() / 1e3);
     }
 }
