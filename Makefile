@@ -4,7 +4,7 @@ CARGO ?= cargo
 
 .DEFAULT_GOAL := help
 
-.PHONY: help deps deps-zenohd build test fmt fmt-check lint unit doc check-deps check-config demo bench bench-e2e bench-replay
+.PHONY: help deps deps-zenohd build test fmt fmt-check lint unit doc check-deps check-config fuzz-build fuzz msrv demo bench bench-e2e bench-replay
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-11s %s\n", $$1, $$2}'
@@ -23,7 +23,7 @@ deps-zenohd: ## zenohd (the Zenoh router) from crates.io, built once (~7 min on 
 build: deps ## build everything (release)
 	$(CARGO) build --release --workspace
 
-test: deps fmt-check lint unit doc check-deps check-config ## everything CI runs: fmt, clippy, all tests, docs, dependency rules, configs
+test: deps fmt-check lint unit doc check-deps check-config fuzz-build ## everything CI runs: fmt, clippy, all tests, docs, dependency rules, configs, fuzz targets build
 
 fmt: ## format the code
 	$(CARGO) fmt --all
@@ -51,11 +51,25 @@ check-config: ## glrmon validate every file in config/
 	@$(CARGO) build -q -p glrmon-cli
 	@for f in config/*.toml config/examples/*.toml; do ./target/debug/glrmon validate $$f >/dev/null || { ./target/debug/glrmon validate $$f; exit 1; }; echo "valid: $$f"; done
 
+fuzz-build: ## build the fuzz targets (fuzz/: sample, record, status, config and MCAP decoders) so they keep compiling
+	$(CARGO) build --manifest-path fuzz/Cargo.toml --target-dir target --locked
+
+FUZZ_TARGET ?= samples
+FUZZ_SECONDS ?= 60
+fuzz: ## run one fuzz target with cargo-fuzz (nightly): make fuzz FUZZ_TARGET=config FUZZ_SECONDS=600
+	@command -v cargo-fuzz >/dev/null || $(CARGO) install cargo-fuzz --locked
+	cd fuzz && $(CARGO) +nightly fuzz run $(FUZZ_TARGET) -- -max_total_time=$(FUZZ_SECONDS)
+
+MSRV := $(shell sed -n 's/^rust-version = "\(.*\)"/\1/p' Cargo.toml)
+msrv: ## check the workspace on the declared rust-version (installs that toolchain with rustup; std APIs newer than it are already refused by clippy's incompatible_msrv in make lint)
+	@rustup run $(MSRV) cargo --version >/dev/null 2>&1 || rustup toolchain install $(MSRV) --profile minimal
+	$(CARGO) +$(MSRV) check --workspace --all-targets --locked
+
 demo: ## the main job on built-in simulated channels with an injected fault
 	$(CARGO) run --release -q -p glrmon-cli -- demo
 
-bench: ## criterion benchmarks of the per-sample step (figures in docs/PERFORMANCE.md)
-	$(CARGO) bench -p glrmon-core --bench step
+bench: ## every criterion benchmark: the per-sample step and the sparse diagnosis (figures in docs/PERFORMANCE.md)
+	$(CARGO) bench --workspace
 
 bench-e2e: ## end-to-end load through Zenoh on loopback, 100 and 1000 channels (figures in docs/PERFORMANCE.md)
 	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 100 --samples 2000 --batch 10
