@@ -19,7 +19,7 @@ use glrmon_wire::{Record, Sample, decode_record, encode_sample};
 use glrmon_zenoh::{SessionSettings, ZenohSink, ZenohSource};
 use zenoh::Wait as _;
 
-use crate::run::{LogEvents, runtime_settings};
+use crate::log::LogEvents;
 use crate::{print, simulate};
 
 /// The demo's channels, embedded so the demo needs no file.
@@ -126,13 +126,13 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
             ..glrmon_record::RecorderSettings::default()
         };
         let recorder =
-            glrmon_record::Recorder::start(settings, crate::recording::file_header(&cfg, "demo"))
+            glrmon_record::Recorder::start(settings, glrmon_record::file_header(&cfg, "demo"))
                 .map_err(|e| anyhow::anyhow!("starting the recorder: {e}"))?;
         let stats = recorder.stats();
         sinks.push(Box::new(recorder));
         Some(stats)
     };
-    let mut settings = runtime_settings(&cfg);
+    let mut settings = glrmon_runtime::RuntimeSettings::from_spec(&cfg.daemon);
     settings.stat_every = 1;
     let runtime = Runtime::start(monitors, sinks, &settings, Arc::new(LogEvents));
     let keys: Vec<String> = cfg.channels.iter().map(|c| c.key.clone()).collect();

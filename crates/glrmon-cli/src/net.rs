@@ -27,6 +27,23 @@ pub(crate) struct ZenohArgs {
 }
 
 impl ZenohArgs {
+    /// Settings for a tool that talks to a daemon: client mode (a peer's `open` can
+    /// wait for the 500 ms scouting delay, a client's does not; the daemon, a peer,
+    /// routes for its clients) connecting to the local default endpoint, unless told
+    /// otherwise.
+    pub(crate) fn client_settings(&self) -> glrmon_zenoh::SessionSettings {
+        let mut s = self.settings(None);
+        if s.config_file.is_none() {
+            if s.mode.is_none() {
+                s.mode = Some("client".into());
+            }
+            if s.connect.is_empty() && s.listen.is_empty() {
+                s.connect = vec![crate::DEFAULT_ENDPOINT.to_owned()];
+            }
+        }
+        s
+    }
+
     /// Command-line flags over the configuration file's section.
     pub(crate) fn settings(
         &self,

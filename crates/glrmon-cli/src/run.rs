@@ -9,14 +9,15 @@ use std::time::{Duration, Instant};
 
 use clap::Args;
 use glrmon_monitor::Monitor;
-use glrmon_runtime::{Output, Runtime, RuntimeEvents, RuntimeSettings, Sink, SinkError};
-use glrmon_wire::{DecodeLimits, Record};
+use glrmon_runtime::{Output, Runtime, RuntimeSettings, Sink, SinkError};
+use glrmon_wire::Record;
 use glrmon_zenoh::{ConnectivityWatch, Ownership, Presence, StatusSource, ZenohSink, ZenohSource};
 
-use glrmon_record::Recorder;
+use glrmon_record::{Recorder, RecorderSettings};
 
+use crate::log::LogEvents;
 use crate::net::ZenohArgs;
-use crate::{load_config, print, recording};
+use crate::{load_config, print};
 
 #[derive(Debug, Args)]
 pub(crate) struct RunArgs {
@@ -40,15 +41,6 @@ pub(crate) struct RunArgs {
     /// (e.g. 127.0.0.1:9464), overriding `daemon.metrics`.
     #[arg(long, value_name = "ADDR")]
     metrics: Option<String>,
-}
-
-/// Logs sink failures (data lost: ERROR).
-pub(crate) struct LogEvents;
-
-impl RuntimeEvents for LogEvents {
-    fn sink_error(&self, error: &SinkError) {
-        tracing::error!(error = %error, "A result could not be delivered.");
-    }
 }
 
 /// Logs alarms (INFO) and rejected input (WARN, at most one line per channel and code
@@ -102,22 +94,6 @@ impl Sink for LogSink {
             _ => {}
         }
         Ok(())
-    }
-}
-
-pub(crate) fn runtime_settings(cfg: &glrmon_spec::Config) -> RuntimeSettings {
-    let d = &cfg.daemon;
-    RuntimeSettings {
-        workers: d.workers.unwrap_or_else(|| {
-            std::thread::available_parallelism().map_or(2, std::num::NonZero::get)
-        }),
-        worker_queue: d.worker_queue,
-        output_queue: d.output_queue,
-        stat_every: d.stat_every,
-        limits: DecodeLimits {
-            max_payload_bytes: d.max_payload_bytes,
-            ..DecodeLimits::default()
-        },
     }
 }
 
@@ -216,8 +192,8 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     ];
     let mut recorder_stats = None;
     if cfg.recording.enabled {
-        let settings = recording::recorder_settings(&cfg.recording);
-        for f in recording::leftovers(&settings.directory) {
+        let settings = RecorderSettings::from_spec(&cfg.recording);
+        for f in glrmon_record::leftovers(&settings.directory) {
             tracing::warn!(
                 file = %f.display(),
                 "An unfinished recording from an earlier run: `glrmon recover {}` rewrites it as a finished file.",
@@ -225,7 +201,7 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
             );
         }
         let directory = settings.directory.clone();
-        let recorder = Recorder::start(settings, recording::file_header(&cfg, &instance))
+        let recorder = Recorder::start(settings, glrmon_record::file_header(&cfg, &instance))
             .map_err(|e| anyhow::anyhow!("starting the recorder: {e}"))?;
         recorder_stats = Some(recorder.stats());
         tracing::info!(directory = %directory.display(), "Recording inputs and results (MCAP).");
@@ -234,7 +210,7 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     let runtime = Runtime::start(
         monitors,
         sinks,
-        &runtime_settings(&cfg),
+        &RuntimeSettings::from_spec(&cfg.daemon),
         Arc::new(LogEvents),
     );
     let ready = Arc::new(std::sync::atomic::AtomicBool::new(false));

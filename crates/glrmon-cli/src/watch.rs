@@ -31,24 +31,8 @@ pub(crate) fn run(args: &WatchArgs) -> anyhow::Result<()> {
     rt.block_on(watch(args))
 }
 
-/// Settings for a tool that talks to a daemon: client mode (a peer's `open` can wait
-/// for the 500 ms scouting delay, a client's does not; the daemon, a peer, routes for its
-/// clients) connecting to the local default endpoint, unless told otherwise.
-pub(crate) fn client_settings(z: &ZenohArgs) -> glrmon_zenoh::SessionSettings {
-    let mut s = z.settings(None);
-    if s.config_file.is_none() {
-        if s.mode.is_none() {
-            s.mode = Some("client".into());
-        }
-        if s.connect.is_empty() && s.listen.is_empty() {
-            s.connect = vec![crate::DEFAULT_ENDPOINT.to_owned()];
-        }
-    }
-    s
-}
-
 async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
-    let session = glrmon_zenoh::open(&client_settings(&args.zenoh)).await?;
+    let session = glrmon_zenoh::open(&args.zenoh.client_settings()).await?;
     let sub = session
         .declare_subscriber(args.key.as_str())
         .await
@@ -85,4 +69,10 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
     }
     let _ = session.close().await;
     Ok(())
+}
+
+/// The client settings of `z` (kept for `simulate --publish` until it calls
+/// [`ZenohArgs::client_settings`] itself).
+pub(crate) fn client_settings(z: &ZenohArgs) -> glrmon_zenoh::SessionSettings {
+    z.client_settings()
 }

@@ -15,6 +15,7 @@
 //!   a file as a finished one.
 #![warn(missing_docs)]
 
+mod config;
 mod file_sink;
 mod reader;
 mod recorder;
@@ -24,6 +25,7 @@ mod writer;
 use std::collections::BTreeMap;
 use std::path::Path;
 
+pub use config::{file_header, leftovers};
 pub use file_sink::McapFileSink;
 pub use reader::{Damage, Event, McapReader, Message, ReadEnd, ReadError, Topic};
 pub use recorder::{

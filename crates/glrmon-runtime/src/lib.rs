@@ -101,6 +101,26 @@ pub struct RuntimeSettings {
     pub limits: DecodeLimits,
 }
 
+impl RuntimeSettings {
+    /// The settings a configuration's `[daemon]` table asks for; `workers` defaults
+    /// to the machine's available parallelism.
+    #[must_use]
+    pub fn from_spec(d: &glrmon_spec::schema::DaemonSpec) -> Self {
+        Self {
+            workers: d.workers.unwrap_or_else(|| {
+                std::thread::available_parallelism().map_or(2, std::num::NonZero::get)
+            }),
+            worker_queue: d.worker_queue,
+            output_queue: d.output_queue,
+            stat_every: d.stat_every,
+            limits: DecodeLimits {
+                max_payload_bytes: d.max_payload_bytes,
+                ..DecodeLimits::default()
+            },
+        }
+    }
+}
+
 impl Default for RuntimeSettings {
     fn default() -> Self {
         Self {
