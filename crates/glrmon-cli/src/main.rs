@@ -10,7 +10,6 @@ mod diagnose;
 mod evaluate;
 mod log;
 mod mcapin;
-mod metrics;
 mod net;
 mod print;
 mod readahead;

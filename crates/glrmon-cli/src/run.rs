@@ -217,7 +217,7 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     let metrics_server = match args.metrics.as_ref().or(cfg.daemon.metrics.as_ref()) {
         Some(addr) => {
             let runtime_metrics = runtime.metrics();
-            let source = crate::metrics::MetricsSource {
+            let source = glrmon_metrics::MetricsSource {
                 instance: instance.clone(),
                 channels: runtime.channel_names().to_vec(),
                 stats: runtime.stats(),
@@ -230,7 +230,11 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
                 started: Instant::now(),
                 ready: Arc::clone(&ready),
             };
-            Some(crate::metrics::serve(addr, Arc::new(source)).await?)
+            {
+                let (bound, task) = glrmon_metrics::serve(addr, Arc::new(source)).await?;
+                tracing::info!(address = %bound, "Serving /metrics, /healthz and /readyz.");
+                Some(task)
+            }
         }
         None => None,
     };

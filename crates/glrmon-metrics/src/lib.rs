@@ -1,7 +1,8 @@
-//! `/metrics` (Prometheus text format 0.0.4), `/healthz` and `/readyz` of `glrmon run`
-//! on a local address (`--metrics ADDR` or `[daemon] metrics`; off unless set, and off
-//! in `demo`). A minimal HTTP/1.1 responder: one GET per connection, no keep-alive,
-//! bounded request size; it reads only the daemon's counters.
+#![doc = include_str!("../README.md")]
+//! `/metrics` (Prometheus text format 0.0.4), `/healthz` and `/readyz` of a glrmon
+//! daemon (`glrmon run --metrics ADDR` or `[daemon] metrics`). A minimal HTTP/1.1
+//! responder: one GET per connection, no keep-alive, bounded request size and time;
+//! it reads only the daemon's counters ([`MetricsSource`]), never the data path.
 
 use std::fmt::Write as _;
 use std::sync::Arc;
@@ -19,17 +20,26 @@ use tokio::net::TcpListener;
 type ChannelCounter = fn(&ChannelStatus) -> u64;
 
 /// What the endpoints report.
-pub(crate) struct MetricsSource {
-    pub(crate) instance: String,
-    pub(crate) channels: Vec<String>,
-    pub(crate) stats: Arc<Vec<Arc<ChannelStats>>>,
-    pub(crate) runtime: Arc<RuntimeMetrics>,
-    pub(crate) workers: u64,
-    pub(crate) connectivity: Arc<Connectivity>,
-    pub(crate) recorder: Option<Arc<RecorderStats>>,
-    pub(crate) started: Instant,
+#[derive(Debug)]
+pub struct MetricsSource {
+    /// The instance's name (the `instance` label).
+    pub instance: String,
+    /// Channel names, by index.
+    pub channels: Vec<String>,
+    /// The channels' counters ([`glrmon_runtime::Runtime::stats`]).
+    pub stats: Arc<Vec<Arc<ChannelStats>>>,
+    /// Queue, worker and latency metrics of the runtime.
+    pub runtime: Arc<RuntimeMetrics>,
+    /// Worker threads started: fewer alive means unhealthy.
+    pub workers: u64,
+    /// Whether the Zenoh session reaches a router or peer.
+    pub connectivity: Arc<Connectivity>,
+    /// The recorder's counters, when recording.
+    pub recorder: Option<Arc<RecorderStats>>,
+    /// When the instance started (uptime).
+    pub started: Instant,
     /// Set once intake is open (subscribers declared, channels claimed).
-    pub(crate) ready: Arc<AtomicBool>,
+    pub ready: Arc<AtomicBool>,
 }
 
 impl MetricsSource {
@@ -46,7 +56,8 @@ impl MetricsSource {
     }
 
     /// The Prometheus exposition.
-    pub(crate) fn render(&self) -> String {
+    #[must_use]
+    pub fn render(&self) -> String {
         let mut o = String::new();
         let inst = label(&self.instance);
         let family = |o: &mut String, name: &str, kind: &str, help: &str| {
@@ -223,51 +234,71 @@ fn label(s: &str) -> String {
     out
 }
 
-/// Binds `addr` and serves until the task is aborted.
-pub(crate) async fn serve(
+/// The endpoint could not be started.
+#[derive(Debug, thiserror::Error)]
+#[error("metrics endpoint {addr}: {source}")]
+pub struct MetricsError {
+    /// The address asked for.
+    pub addr: String,
+    /// Why binding it failed.
+    pub source: std::io::Error,
+}
+
+/// Binds `addr` and serves on the current tokio runtime until the returned task is
+/// aborted; returns the bound address (the port, if `addr` asked for port 0) and the
+/// task.
+///
+/// # Errors
+/// [`MetricsError`] when `addr` cannot be bound.
+pub async fn serve(
     addr: &str,
     source: Arc<MetricsSource>,
-) -> anyhow::Result<tokio::task::JoinHandle<()>> {
-    let listener = TcpListener::bind(addr)
-        .await
-        .map_err(|e| anyhow::anyhow!("metrics endpoint {addr}: {e}"))?;
-    tracing::info!(address = %listener.local_addr()?, "Serving /metrics, /healthz and /readyz.");
-    Ok(tokio::spawn(async move {
-        loop {
-            let Ok((mut stream, _)) = listener.accept().await else {
-                continue;
-            };
-            let source = source.clone();
-            tokio::spawn(async move {
-                let mut buf = vec![0u8; 4096];
-                let mut len = 0;
-                // Read up to the end of the request head (or 4 KiB, or 2 s).
-                let read = tokio::time::timeout(std::time::Duration::from_secs(2), async {
-                    while len < buf.len() {
-                        match stream.read(&mut buf[len..]).await {
-                            Ok(0) | Err(_) => break,
-                            Ok(n) => len += n,
+) -> Result<(std::net::SocketAddr, tokio::task::JoinHandle<()>), MetricsError> {
+    let error = |source| MetricsError {
+        addr: addr.to_owned(),
+        source,
+    };
+    let listener = TcpListener::bind(addr).await.map_err(error)?;
+    let bound = listener.local_addr().map_err(error)?;
+    Ok((
+        bound,
+        tokio::spawn(async move {
+            loop {
+                let Ok((mut stream, _)) = listener.accept().await else {
+                    continue;
+                };
+                let source = source.clone();
+                tokio::spawn(async move {
+                    let mut buf = vec![0u8; 4096];
+                    let mut len = 0;
+                    // Read up to the end of the request head (or 4 KiB, or 2 s).
+                    let read = tokio::time::timeout(std::time::Duration::from_secs(2), async {
+                        while len < buf.len() {
+                            match stream.read(&mut buf[len..]).await {
+                                Ok(0) | Err(_) => break,
+                                Ok(n) => len += n,
+                            }
+                            if buf[..len].windows(4).any(|w| w == b"\r\n\r\n") {
+                                break;
+                            }
                         }
-                        if buf[..len].windows(4).any(|w| w == b"\r\n\r\n") {
-                            break;
-                        }
+                    })
+                    .await;
+                    if read.is_err() {
+                        return;
                     }
-                })
-                .await;
-                if read.is_err() {
-                    return;
-                }
-                let head = String::from_utf8_lossy(&buf[..len]);
-                let (status, ctype, body) = respond(&head, &source);
-                let reply = format!(
-                    "HTTP/1.1 {status}\r\nContent-Type: {ctype}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
-                    body.len()
-                );
-                let _ = stream.write_all(reply.as_bytes()).await;
-                let _ = stream.shutdown().await;
-            });
-        }
-    }))
+                    let head = String::from_utf8_lossy(&buf[..len]);
+                    let (status, ctype, body) = respond(&head, &source);
+                    let reply = format!(
+                        "HTTP/1.1 {status}\r\nContent-Type: {ctype}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+                        body.len()
+                    );
+                    let _ = stream.write_all(reply.as_bytes()).await;
+                    let _ = stream.shutdown().await;
+                });
+            }
+        }),
+    ))
 }
 
 /// (status line, content type, body) for a request head.
