@@ -315,6 +315,33 @@ impl Detector {
     /// [`Detector::predict_only`] for missing samples), [`StepError::Numerical`] when
     /// the model at this sample gives a non-finite matrix or a singular Σ_k. On error
     /// the detector's state is unchanged.
+    ///
+    /// # Examples
+    ///
+    /// A wrong index is refused and changes nothing (the [`Detector`] example runs a
+    /// whole fault):
+    ///
+    /// ```
+    /// use glrmon_core::detector::{Detector, Sample, StepOutput, WindowSettings};
+    /// use glrmon_core::fault::{Column, Fault, FaultDictionary, Onset};
+    /// use glrmon_core::model::{Lpv, StateSpace};
+    /// use glrmon_core::StepError;
+    /// use nalgebra::{DMatrix, DVector};
+    ///
+    /// let one = |x| DMatrix::from_element(1, 1, x);
+    /// let model = Lpv::lti(one(0.9), DMatrix::zeros(1, 0), one(1.0), DMatrix::zeros(1, 0), one(0.01), one(0.01)).unwrap();
+    /// let faults = FaultDictionary::new(model.dims(), vec![
+    ///     Fault::output("bias", Onset::Step, Column::Constant(DVector::from_vec(vec![1.0]))),
+    /// ]).unwrap();
+    /// let mut det = Detector::new(Box::new(model), faults, DVector::zeros(1), DMatrix::identity(1, 1),
+    ///     WindowSettings { window: 10, min_lag: 0, ..Default::default() }).unwrap();
+    /// let mut out = StepOutput::new(1, 1);
+    /// det.step(&Sample { k: 0, u: &[], y: &[0.1], p: &[] }, &mut out).unwrap();
+    /// assert_eq!(out.k, 0);
+    /// let late = det.step(&Sample { k: 5, u: &[], y: &[0.1], p: &[] }, &mut out);
+    /// assert!(matches!(late, Err(StepError::OutOfOrder { .. })));
+    /// assert_eq!(det.next_index(), Some(1));
+    /// ```
     pub fn step(&mut self, sample: &Sample<'_>, out: &mut StepOutput) -> Result<(), StepError> {
         self.check(sample)?;
         let signals = Signals {

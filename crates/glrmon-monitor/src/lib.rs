@@ -338,6 +338,26 @@ impl Monitor {
     /// Processes one decoded sample and appends the resulting records: a `stat` per
     /// processed sample, `alarm` / `alarm_end` at episode edges, `error` for a rejected
     /// sample (the channel's state is then unchanged) and for each filled gap.
+    ///
+    /// # Examples
+    ///
+    /// ```
+    /// use glrmon_monitor::Monitor;
+    /// use glrmon_wire::{Record, Sample};
+    ///
+    /// let cfg = glrmon_spec::parse(include_str!("../../../config/demo.toml")).unwrap();
+    /// let channel = &cfg.channels[0];
+    /// let mut monitor = Monitor::from_channel(channel).unwrap();
+    /// let (l, p, q) = (channel.dims.inputs, channel.dims.outputs, channel.dims.signals);
+    /// let mut records = Vec::new();
+    /// let sample = |k| Sample { k: Some(k), t: None, u: vec![0.0; l], y: vec![0.0; p], p: vec![0.0; q] };
+    /// monitor.on_sample(&sample(0), &mut records);
+    /// monitor.on_sample(&sample(0), &mut records); // the same index again
+    /// assert!(matches!(records[0], Record::Stat(_)));
+    /// let Record::Error(e) = &records[1] else { panic!("{:?}", records[1]) };
+    /// assert_eq!(e.code.as_str(), "duplicate");
+    /// assert_eq!(monitor.counters().samples, 1);
+    /// ```
     pub fn on_sample(&mut self, sample: &Sample, records: &mut Vec<Record>) {
         let k = sample.k.unwrap_or(self.arrivals);
         self.arrivals = self.arrivals.max(k + 1);

@@ -125,7 +125,24 @@ impl std::fmt::Debug for Recorder {
 }
 
 impl Recorder {
-    /// Creates the directory and the first file, and starts the file thread.
+    /// Creates the directory and the first file, and starts the file thread. The
+    /// recorder is a [`glrmon_runtime::Sink`]: hand it to the runtime (or a
+    /// [`glrmon_runtime::Fanout`]); [`Recorder::finish`] closes the last file.
+    ///
+    /// # Examples
+    ///
+    /// ```
+    /// use glrmon_record::{FileHeader, Recorder, RecorderSettings};
+    ///
+    /// let dir = std::env::temp_dir().join(format!("glrmon-doc-recorder-{}", std::process::id()));
+    /// let settings = RecorderSettings { directory: dir.clone(), ..RecorderSettings::default() };
+    /// let header = FileHeader { config: String::new(), channels: vec!["pump3".into()], extra: Default::default() };
+    /// let recorder = Recorder::start(settings, header).unwrap();
+    /// let files = recorder.finish();
+    /// assert_eq!(files.len(), 1);
+    /// assert!(files[0].extension().is_some_and(|e| e == "mcap"));
+    /// std::fs::remove_dir_all(dir).unwrap();
+    /// ```
     ///
     /// # Errors
     /// [`RecordError`] when the directory or the first file cannot be created.
