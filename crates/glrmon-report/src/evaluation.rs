@@ -7,7 +7,8 @@ use std::fmt::Write as _;
 use std::io::{self, Write};
 
 use crate::Histogram;
-use crate::html::{CSS, escape};
+use crate::escape::escape;
+use crate::html::CSS;
 use crate::svg::{Axis, Figure, ONSET, PALETTE, RED, Swatch, fmt_num};
 
 /// Most bins per histogram: one per sample while delays and errors span at most this

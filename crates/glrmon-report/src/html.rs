@@ -9,6 +9,7 @@ use glrmon_wire::{Alarm, Diagnosis};
 use crate::Report;
 use crate::channel::{ChannelState, MAX_ALARMS, MAX_COMPONENTS, MAX_DIAGNOSES, MAX_ERRORS};
 use crate::decimate::ColumnId;
+use crate::escape::escape;
 use crate::svg::{Axis, Category, Figure, ONSET, PALETTE, RED, Swatch, fmt_num};
 
 /// Lines drawn per figure of vector components (ε_k, θ̂); the rest are named in the caption.
@@ -31,24 +32,6 @@ th{background:#f2f2f2}td.num{text-align:right;font-variant-numeric:tabular-nums;
 figure{margin:14px 0 22px}figcaption{font-size:13px;color:#555;margin-top:2px}svg.fig{max-width:100%;height:auto;display:block}\
 .isolated{color:#b11;font-weight:bold}.note{color:#666;font-size:13px}code{background:#f4f4f4;padding:0 3px}\
 nav a{margin-right:12px}details{margin:6px 0 12px}summary{cursor:pointer}";
-
-/// Escapes text for HTML and SVG, in content and in quoted attributes.
-pub(crate) fn escape(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            // Control characters are not allowed in XML (inline SVG) text.
-            c if c.is_control() && c != '\n' && c != '\t' => out.push('\u{FFFD}'),
-            c => out.push(c),
-        }
-    }
-    out
-}
 
 pub(crate) fn write_page<W: Write>(report: &Report, mut out: W) -> io::Result<()> {
     let title = escape(&report.options.title);

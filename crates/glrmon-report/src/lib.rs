@@ -2,6 +2,7 @@
 
 mod channel;
 mod decimate;
+mod escape;
 mod evaluation;
 mod histogram;
 mod html;

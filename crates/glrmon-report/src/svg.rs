@@ -5,7 +5,7 @@
 
 use std::fmt::Write as _;
 
-use crate::html::escape;
+use crate::escape::escape;
 
 /// Series colours: Tableau 10 without red (kept for alarms), then three dark tones, so
 /// that up to 12 series (`MAX_LINES`, `MAX_PATH_LEGEND`) get distinct colours.

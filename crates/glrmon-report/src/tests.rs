@@ -8,7 +8,7 @@ use glrmon_wire::{
 };
 
 use super::*;
-use crate::html::escape;
+use crate::escape::escape;
 
 const CHANNEL: &str = "pump<3>&co";
 const THRESHOLD: f64 = 23.5;
