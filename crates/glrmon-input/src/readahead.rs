@@ -152,6 +152,10 @@ impl<S: Send + 'static, T: Send + 'static, E: Send + 'static> ReadAhead<S, T, E>
     /// it; [`ReadAheadError::Stopped`] when the reader stopped without reaching the end
     /// (it panicked), so that input is never cut short silently. After an error, `next`
     /// returns `Ok(None)`.
+    #[allow(
+        clippy::should_implement_trait,
+        reason = "not an Iterator: the end after an error is part of the contract"
+    )]
     pub fn next(&mut self) -> Result<Option<T>, ReadAheadError<E>> {
         loop {
             if let Some(item) = self.batch.pop_front() {
