@@ -17,10 +17,10 @@ use glrmon_sim::SimSample;
 use glrmon_wire::{Record, Sample};
 use serde::Serialize;
 
-use crate::diagnose::{Samples, recorded_config};
-use crate::mcapin::is_mcap;
+use glrmon_input::{Samples, is_mcap, recorded_config};
+
 use crate::simulate::{pick, simulator};
-use crate::{InvalidInput, load_config};
+use crate::{InvalidInput, input_error, load_config};
 
 #[derive(Debug, Args)]
 pub(crate) struct CalibrateArgs {
@@ -55,7 +55,7 @@ pub(crate) struct CalibrateArgs {
 pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let cfg = match (&args.config, &args.input) {
         (Some(path), _) => load_config(path)?,
-        (None, Some(input)) if is_mcap(input) => recorded_config(input)?,
+        (None, Some(input)) if is_mcap(input) => recorded_config(input).map_err(input_error)?,
         _ => {
             return Err(InvalidInput(
                 "give --config (only an MCAP recording carries its configuration)".into(),
@@ -396,12 +396,12 @@ fn simulated(channel: &glrmon_spec::Channel, n: u64, seed: u64) -> anyhow::Resul
 }
 
 fn recorded(channel: &glrmon_spec::Channel, input: &Path) -> anyhow::Result<Statistics> {
-    let mut samples = Samples::open(input, &channel.name, channel.dims)?;
+    let mut samples = Samples::open(input, &channel.name, channel.dims).map_err(input_error)?;
     let progress = bar(0);
     let stats = monitor_glr(
         channel,
         |s| loop {
-            match samples.next_into(s)? {
+            match samples.next_into(s).map_err(input_error)? {
                 None => return Ok(false),
                 Some(Ok(())) => return Ok(true),
                 // A row or payload the monitor never saw: skipped, as live.

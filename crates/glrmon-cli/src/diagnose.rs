@@ -11,18 +11,15 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::Context as _;
 use clap::{Args, ValueEnum};
 use glrmon_monitor::{DiagnosisEngine, SpanDiagnosis};
 use glrmon_spec::ResidualKind;
 use glrmon_wire::{Record, Sample, encode_json};
 
-use crate::csv::CsvReader;
-use crate::mcapin::{McapInput, is_mcap};
+use glrmon_input::{Samples, is_mcap, recorded_config};
+
 use crate::simulate::pick;
-use crate::{InvalidInput, load_config};
-use glrmon_runtime::InputItem;
-use glrmon_wire::IntakeEvent;
+use crate::{InvalidInput, input_error, load_config};
 
 #[derive(Debug, Args)]
 pub(crate) struct DiagnoseArgs {
@@ -66,89 +63,6 @@ struct Extent {
     last: u64,
 }
 
-/// The samples of one channel from a CSV file or an MCAP recording.
-pub(crate) enum Samples {
-    Csv(CsvReader<std::io::BufReader<std::fs::File>>),
-    Mcap(Box<McapInput>, String),
-}
-
-impl Samples {
-    pub(crate) fn open(
-        path: &Path,
-        channel: &str,
-        dims: glrmon_core::Dims,
-    ) -> anyhow::Result<Self> {
-        if is_mcap(path) {
-            return Ok(Self::Mcap(
-                Box::new(McapInput::open(path)?),
-                channel.to_owned(),
-            ));
-        }
-        let file =
-            std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-        let reader = std::io::BufReader::with_capacity(1 << 16, file);
-        Ok(Self::Csv(CsvReader::new(reader, dims).map_err(|e| {
-            InvalidInput(format!("{}: {e}", path.display()))
-        })?))
-    }
-
-    /// The next sample; `Some(Err)` for a sample that cannot be used (a bad row, a
-    /// refused or dropped payload in the recording).
-    pub(crate) fn next_into(
-        &mut self,
-        sample: &mut Sample,
-    ) -> anyhow::Result<Option<Result<(), String>>> {
-        match self {
-            Self::Csv(csv) => Ok(csv
-                .next_into(sample)
-                .map(|r| r.map_err(|e| format!("{} ({})", e.message, e.code.as_str())))),
-            Self::Mcap(input, channel) => loop {
-                let Some(recorded) = input.next_input(None)? else {
-                    let (lines, damaged) = input.damage_report();
-                    if damaged {
-                        return Err(InvalidInput(lines.join("; ")).into());
-                    }
-                    return Ok(None);
-                };
-                if *recorded.channel != **channel {
-                    continue;
-                }
-                return Ok(Some(match recorded.item {
-                    InputItem::Sample(s) => {
-                        *sample = s;
-                        Ok(())
-                    }
-                    InputItem::Intake(IntakeEvent::Dropped { count }) => Err(format!(
-                        "{count} payload(s) of channel \"{channel}\" were dropped at intake here"
-                    )),
-                    InputItem::Intake(IntakeEvent::Rejected { message, .. }) => {
-                        Err(format!("a refused payload: {message}"))
-                    }
-                }));
-            },
-        }
-    }
-}
-
-/// The configuration recorded in an MCAP file.
-pub(crate) fn recorded_config(path: &Path) -> anyhow::Result<glrmon_spec::Config> {
-    let input = McapInput::open(path)?;
-    match input.header {
-        Some(h) if !h.config.is_empty() => glrmon_spec::parse(&h.config).map_err(|e| {
-            InvalidInput(format!(
-                "{}: the recorded configuration is invalid:\n{e}",
-                path.display()
-            ))
-            .into()
-        }),
-        _ => Err(InvalidInput(format!(
-            "{}: no glrmon configuration is recorded in this file: give --config",
-            path.display()
-        ))
-        .into()),
-    }
-}
-
 /// Calls `visit` with every sample of the file and its index k (the row's `k`, or its
 /// position). Bad rows and gaps are errors: the regression needs consecutive samples.
 fn for_each_sample(
@@ -157,11 +71,11 @@ fn for_each_sample(
     dims: glrmon_core::Dims,
     mut visit: impl FnMut(u64, &Sample) -> anyhow::Result<bool>,
 ) -> anyhow::Result<Option<Extent>> {
-    let mut samples = Samples::open(path, channel, dims)?;
+    let mut samples = Samples::open(path, channel, dims).map_err(input_error)?;
     let mut sample = Sample::default();
     let mut extent: Option<Extent> = None;
     let mut position = 0u64;
-    while let Some(row) = samples.next_into(&mut sample)? {
+    while let Some(row) = samples.next_into(&mut sample).map_err(input_error)? {
         if let Err(e) = row {
             return Err(InvalidInput(format!("{}: {e}", path.display())).into());
         }
@@ -190,7 +104,7 @@ fn for_each_sample(
 pub(crate) fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     let cfg = match &args.config {
         Some(path) => load_config(path)?,
-        None if is_mcap(&args.input) => recorded_config(&args.input)?,
+        None if is_mcap(&args.input) => recorded_config(&args.input).map_err(input_error)?,
         None => {
             return Err(InvalidInput(format!(
                 "{}: a CSV file needs --config (only MCAP recordings carry their configuration)",

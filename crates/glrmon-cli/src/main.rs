@@ -4,15 +4,12 @@
 //! failure.
 
 mod calibrate;
-mod csv;
 mod demo;
 mod diagnose;
 mod evaluate;
 mod log;
-mod mcapin;
 mod net;
 mod print;
-mod readahead;
 mod recover;
 mod replay;
 mod run;
@@ -92,6 +89,27 @@ impl std::fmt::Display for InvalidInput {
 }
 
 impl std::error::Error for InvalidInput {}
+
+/// An input file's error with its exit code: [`InvalidInput`] (1) when the user's file
+/// is at fault, a runtime failure (3) otherwise.
+pub(crate) fn input_error(e: glrmon_input::InputError) -> anyhow::Error {
+    if e.is_invalid_input() {
+        InvalidInput(e.to_string()).into()
+    } else {
+        e.into()
+    }
+}
+
+/// An error of reading ahead: the source's as [`input_error`], the reader thread's a
+/// runtime failure.
+pub(crate) fn read_ahead_error(
+    e: glrmon_input::ReadAheadError<glrmon_input::InputError>,
+) -> anyhow::Error {
+    match e {
+        glrmon_input::ReadAheadError::Source(e) => input_error(e),
+        e => e.into(),
+    }
+}
 
 /// Loads a configuration; every problem becomes one line of an [`InvalidInput`].
 pub(crate) fn load_config(path: &Path) -> anyhow::Result<glrmon_spec::Config> {

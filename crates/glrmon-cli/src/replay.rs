@@ -20,11 +20,10 @@ use glrmon_runtime::{
 };
 use glrmon_wire::{DecodeLimits, IntakeEvent, Record, Sample};
 
-use crate::csv::CsvReader;
-use crate::mcapin::{McapInput, is_mcap};
-use crate::readahead::ReadAhead;
+use glrmon_input::{CsvReader, McapInput, ReadAhead, is_mcap};
+
 use crate::simulate::pick;
-use crate::{InvalidInput, load_config, print};
+use crate::{InvalidInput, input_error, load_config, print, read_ahead_error};
 
 #[derive(Debug, Args)]
 pub(crate) struct ReplayArgs {
@@ -140,11 +139,7 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
     };
     let cfg = load_config(config)?;
     let channel = pick(&cfg, args.channel.as_deref())?;
-    let file = std::fs::File::open(&args.input)
-        .with_context(|| format!("opening {}", args.input.display()))?;
-    let reader = std::io::BufReader::with_capacity(1 << 16, file);
-    let csv = CsvReader::new(reader, channel.dims)
-        .map_err(|e| InvalidInput(format!("{}: {e}", args.input.display())))?;
+    let csv = CsvReader::open(&args.input, channel.dims).map_err(input_error)?;
     let monitor = Monitor::from_channel(channel)?;
     let header = FileHeader {
         config: cfg.source.clone(),
@@ -187,7 +182,7 @@ fn replay_csv_into<R: BufRead + Send + 'static>(
             _ => Sample::default(),
         };
         // A bad row keeps the time it may have carried, for the record's log time.
-        Ok(csv.next_into(&mut sample).map(|row| match row {
+        Ok::<_, std::convert::Infallible>(csv.next_into(&mut sample).map(|row| match row {
             Ok(()) => Ok(sample),
             Err(e) => Err((e, sample.t)),
         }))
@@ -214,22 +209,10 @@ fn replay_csv_into<R: BufRead + Send + 'static>(
 }
 
 fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
-    let mut input = McapInput::open(&args.input)?;
-    let cfg = match (&args.config, &input.header) {
-        (Some(path), _) => load_config(path)?,
-        (None, Some(h)) if !h.config.is_empty() => glrmon_spec::parse(&h.config).map_err(|e| {
-            InvalidInput(format!(
-                "{}: the recorded configuration is invalid:\n{e}",
-                args.input.display()
-            ))
-        })?,
-        _ => {
-            return Err(InvalidInput(format!(
-                "{}: no glrmon configuration is recorded in this file: give --config",
-                args.input.display()
-            ))
-            .into());
-        }
+    let mut input = McapInput::open(&args.input).map_err(input_error)?;
+    let cfg = match &args.config {
+        Some(path) => load_config(path)?,
+        None => input.recorded_config().map_err(input_error)?,
     };
     if let Some(name) = &args.channel {
         if cfg.channel(name).is_none() {
@@ -293,7 +276,7 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
     let progress_bytes = input.progress.0.clone();
     let mut inputs_ahead = ReadAhead::spawn(input, |input, spare| input.next_input(spare))?;
-    while let Some(recorded) = inputs_ahead.next()? {
+    while let Some(recorded) = inputs_ahead.next().map_err(read_ahead_error)? {
         inputs += 1;
         if inputs % 65_536 == 0 {
             if let Some(bar) = &progress {
@@ -322,7 +305,7 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
         pipeline.feed(&recorded.item, recorded.log_time_ns, &mut fanout)?;
         inputs_ahead.recycle(recorded);
     }
-    let input = inputs_ahead.finish()?;
+    let input = inputs_ahead.finish().map_err(read_ahead_error)?;
     if let Some(bar) = progress {
         bar.finish_and_clear();
     }

@@ -11,7 +11,7 @@ use glrmon_spec::Channel;
 use glrmon_spec::expr::{Env, Expr, RandomSource, SignalHistory};
 use nalgebra::DVector;
 
-use crate::{InvalidInput, csv, load_config};
+use crate::{InvalidInput, load_config};
 
 #[derive(Debug, Args)]
 pub(crate) struct SimulateArgs {
@@ -198,7 +198,7 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     // An MCAP output holds the samples as a recording's inputs, with the configuration:
     // `glrmon replay OUT.mcap` needs nothing else.
     let mut mcap_out = match &args.output {
-        Some(path) if crate::mcapin::is_mcap(path) => Some(
+        Some(path) if glrmon_input::is_mcap(path) => Some(
             glrmon_record::McapFile::create(
                 path,
                 glrmon_record::FileOptions::default(),
@@ -221,7 +221,7 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
             let file = std::fs::File::create(path)
                 .with_context(|| format!("creating {}", path.display()))?;
             let mut out = std::io::BufWriter::new(file);
-            csv::write_header(&mut out, channel.dims, channel.period.is_some())?;
+            glrmon_input::write_header(&mut out, channel.dims, channel.period.is_some())?;
             Some(out)
         }
         _ => None,
@@ -237,7 +237,7 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         sim.next_into(&mut x);
         let t = channel.period.map(|dt| x.k as f64 * dt);
         if let Some(out) = &mut csv_out {
-            csv::write_row(out, x.k, t, &x.u, &x.y, &x.p)?;
+            glrmon_input::write_row(out, x.k, t, &x.u, &x.y, &x.p)?;
         }
         if let Some(out) = &mut mcap_out {
             let sample = glrmon_wire::Sample {

@@ -16,11 +16,54 @@ const BATCH: usize = 1024;
 /// Batches queued ahead of the consumer.
 const AHEAD: usize = 4;
 
+/// Why [`ReadAhead`] could not go on.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReadAheadError<E> {
+    /// The source's own error, after every item read before it.
+    #[error("{0}")]
+    Source(E),
+    /// The reader thread ended without reaching the end of the source (it panicked):
+    /// the input would otherwise be cut short silently.
+    #[error("the replay reader thread stopped before the end of the input")]
+    Stopped,
+    /// The reader thread panicked ([`ReadAhead::finish`]).
+    #[error("the replay reader thread panicked")]
+    Panicked,
+}
+
 /// A source read on another thread: [`ReadAhead::next`] yields its items in order,
 /// [`ReadAhead::finish`] gives the source back (for its end-of-file report).
-pub(crate) struct ReadAhead<S, T> {
+///
+/// # Examples
+///
+/// ```
+/// use glrmon_input::ReadAhead;
+///
+/// // A source of 10 000 numbers, then an error.
+/// let mut ahead = ReadAhead::spawn(0_u32, |n, _spare: Option<u32>| {
+///     *n += 1;
+///     if *n > 10_000 { Err("no more") } else { Ok(Some(*n)) }
+/// })?;
+/// let mut sum = 0_u64;
+/// let err = loop {
+///     match ahead.next() {
+///         Ok(Some(x)) => {
+///             sum += u64::from(x);
+///             ahead.recycle(x);
+///         }
+///         Ok(None) => unreachable!("the source ends with an error"),
+///         Err(e) => break e,
+///     }
+/// };
+/// assert_eq!(sum, 10_000 * 10_001 / 2);
+/// assert_eq!(err.to_string(), "no more");
+/// assert_eq!(ahead.finish().unwrap(), 10_001);
+/// # Ok::<(), std::io::Error>(())
+/// ```
+pub struct ReadAhead<S, T, E> {
     /// Batches in order, then `Ok(None)` at a clean end or the source's error.
-    full: Receiver<anyhow::Result<Option<VecDeque<T>>>>,
+    full: Receiver<Result<Option<VecDeque<T>>, E>>,
     empty: SyncSender<VecDeque<T>>,
     batch: VecDeque<T>,
     /// Items handed back by the consumer, sent to the reader with the next empty batch.
@@ -29,15 +72,28 @@ pub(crate) struct ReadAhead<S, T> {
     reader: JoinHandle<S>,
 }
 
-impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
+impl<S, T, E> std::fmt::Debug for ReadAhead<S, T, E> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ReadAhead")
+            .field("buffered", &self.batch.len())
+            .field("spent", &self.spent.len())
+            .field("done", &self.done)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<S: Send + 'static, T: Send + 'static, E: Send + 'static> ReadAhead<S, T, E> {
     /// Starts reading `source` with `next` (`Ok(None)` at the end; an error ends the
     /// reading and is returned by [`ReadAhead::next`] after the items before it). `next`
     /// gets a recycled item when there is one, to decode into instead of allocating.
-    pub(crate) fn spawn(
+    ///
+    /// # Errors
+    /// When the reader thread cannot be started.
+    pub fn spawn(
         mut source: S,
-        mut next: impl FnMut(&mut S, Option<T>) -> anyhow::Result<Option<T>> + Send + 'static,
+        mut next: impl FnMut(&mut S, Option<T>) -> Result<Option<T>, E> + Send + 'static,
     ) -> std::io::Result<Self> {
-        let (full_tx, full) = sync_channel::<anyhow::Result<Option<VecDeque<T>>>>(AHEAD);
+        let (full_tx, full) = sync_channel::<Result<Option<VecDeque<T>>, E>>(AHEAD);
         let (empty, empty_rx) = sync_channel::<VecDeque<T>>(AHEAD + 2);
         let reader = std::thread::Builder::new()
             .name("replay-reader".into())
@@ -92,10 +148,15 @@ impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
     /// The next item in source order; `Ok(None)` at the end.
     ///
     /// # Errors
-    /// The source's error, after every item read before it; an error too when the
-    /// reader stopped without reaching the end (it panicked), so that input is never
-    /// cut short silently.
-    pub(crate) fn next(&mut self) -> anyhow::Result<Option<T>> {
+    /// [`ReadAheadError::Source`] with the source's error, after every item read before
+    /// it; [`ReadAheadError::Stopped`] when the reader stopped without reaching the end
+    /// (it panicked), so that input is never cut short silently. After an error, `next`
+    /// returns `Ok(None)`.
+    #[allow(
+        clippy::should_implement_trait,
+        reason = "not an Iterator: the end after an error is part of the contract"
+    )]
+    pub fn next(&mut self) -> Result<Option<T>, ReadAheadError<E>> {
         loop {
             if let Some(item) = self.batch.pop_front() {
                 return Ok(Some(item));
@@ -112,13 +173,11 @@ impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
                 Ok(Ok(None)) => self.done = true,
                 Ok(Err(e)) => {
                     self.done = true;
-                    return Err(e);
+                    return Err(ReadAheadError::Source(e));
                 }
                 Err(_) => {
                     self.done = true;
-                    return Err(anyhow::anyhow!(
-                        "the replay reader thread stopped before the end of the input"
-                    ));
+                    return Err(ReadAheadError::Stopped);
                 }
             }
         }
@@ -126,23 +185,22 @@ impl<S: Send + 'static, T: Send + 'static> ReadAhead<S, T> {
 
     /// Hands an item back for the reader to decode a later one into (its allocations
     /// are reused; at most a batch is kept).
-    pub(crate) fn recycle(&mut self, item: T) {
+    pub fn recycle(&mut self, item: T) {
         if self.spent.len() < BATCH {
             self.spent.push_back(item);
         }
     }
 
-    /// Waits for the reader and returns the source.
+    /// Waits for the reader and returns the source. Items not yet taken are dropped
+    /// and a reader still reading stops at its next batch.
     ///
     /// # Errors
-    /// When the reader thread panicked.
-    pub(crate) fn finish(self) -> anyhow::Result<S> {
+    /// [`ReadAheadError::Panicked`] when the reader thread panicked.
+    pub fn finish(self) -> Result<S, ReadAheadError<E>> {
         let Self { full, reader, .. } = self;
         // Unblock a reader still waiting to hand over a batch.
         drop(full);
-        reader
-            .join()
-            .map_err(|_| anyhow::anyhow!("the replay reader thread panicked"))
+        reader.join().map_err(|_| ReadAheadError::Panicked)
     }
 }
 
@@ -158,7 +216,7 @@ mod tests {
             *n += 1;
             match *n {
                 n if n <= 5000 => Ok(Some(n)),
-                _ => Err(anyhow::anyhow!("bad record after 5000")),
+                _ => Err("bad record after 5000"),
             }
         })
         .unwrap();
@@ -186,7 +244,7 @@ mod tests {
         let mut ahead = ReadAhead::spawn(0_u64, |n, _| {
             *n += 1;
             assert!(*n <= 3000, "reader fails at item 3001");
-            Ok(Some(*n))
+            Ok::<_, &str>(Some(*n))
         })
         .unwrap();
         let mut seen = 0;
@@ -212,7 +270,7 @@ mod tests {
         let mut ahead =
             ReadAhead::spawn((0_usize, 0_usize), |(n, reused), spare: Option<Vec<u8>>| {
                 if *n == 20 * BATCH {
-                    return Ok(None);
+                    return Ok::<_, &str>(None);
                 }
                 *n += 1;
                 let mut item = match spare {
@@ -243,7 +301,7 @@ mod tests {
     fn finishing_early_stops_the_reader() {
         let mut ahead = ReadAhead::spawn(0_u64, |n, _| {
             *n += 1;
-            Ok(Some(*n))
+            Ok::<_, &str>(Some(*n))
         })
         .unwrap();
         assert_eq!(ahead.next().unwrap(), Some(1));

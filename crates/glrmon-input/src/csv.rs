@@ -1,0 +1,521 @@
+//! Sample CSV files: a header row, then one sample per row, columns `k` (optional),
+//! `t` (optional), `u0…`, `y0…`, `p0…`. Numbers only, no quoting.
+
+use std::fs::File;
+use std::io::{BufRead, BufReader, Write};
+use std::path::Path;
+
+use glrmon_core::Dims;
+use glrmon_wire::{ErrorCode, Sample};
+
+use crate::{InputError, InputErrorKind};
+
+/// Where each column of the file goes.
+#[derive(Debug, Clone, Copy)]
+enum Slot {
+    K,
+    T,
+    U(usize),
+    Y(usize),
+    P(usize),
+}
+
+impl std::fmt::Display for Slot {
+    /// The column's header name.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Slot::K => write!(f, "k"),
+            Slot::T => write!(f, "t"),
+            Slot::U(i) => write!(f, "u{i}"),
+            Slot::Y(i) => write!(f, "y{i}"),
+            Slot::P(i) => write!(f, "p{i}"),
+        }
+    }
+}
+
+/// A streaming reader of sample rows; memory stays flat in the file size.
+///
+/// The header is checked against the channel's dimensions once, in
+/// [`CsvReader::new`]; each row is then parsed into a caller's [`Sample`], so that a
+/// long file is read without an allocation per row. A bad row is reported and
+/// skipped: the next call goes on with the following row, as a live monitor goes on
+/// after a refused payload.
+///
+/// # Examples
+///
+/// ```
+/// use glrmon_core::Dims;
+/// use glrmon_input::CsvReader;
+/// use glrmon_wire::Sample;
+///
+/// let dims = Dims { states: 1, inputs: 0, outputs: 1, signals: 0 };
+/// let file = "k,y0\n0,1.5\n1,oops\n2,2.5\n";
+/// let mut rows = CsvReader::new(file.as_bytes(), dims)?;
+/// let mut sample = Sample::default();
+/// let mut good = Vec::new();
+/// while let Some(row) = rows.next_into(&mut sample) {
+///     match row {
+///         Ok(()) => good.push((sample.k, sample.y[0])),
+///         Err(bad) => assert_eq!(bad.message, r#"row 3: column y0: "oops" is not a number"#),
+///     }
+/// }
+/// assert_eq!(good, [(Some(0), 1.5), (Some(2), 2.5)]);
+/// # Ok::<(), glrmon_input::HeaderError>(())
+/// ```
+#[derive(Debug)]
+pub struct CsvReader<R> {
+    input: R,
+    slots: Vec<Slot>,
+    line: String,
+    row: u64,
+    dims: Dims,
+}
+
+/// A row that could not be turned into a sample: the monitor's answer to it is an
+/// `error` record with this code and message, as for a refused live payload.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{message}")]
+pub struct RowError {
+    /// The row's `k`, when it was read before the problem was found.
+    pub k: Option<u64>,
+    /// The wire's classification of the problem.
+    pub code: ErrorCode,
+    /// What is wrong and where: `row <n>: column <name>: …` (rows count from 1, the
+    /// header being row 1).
+    pub message: String,
+}
+
+/// A header that does not fit the channel: nothing can be read from such a file.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum HeaderError {
+    /// The header row could not be read.
+    #[error("cannot read the header: {0}")]
+    Read(std::io::Error),
+    /// The file has no header row.
+    #[error("the file is empty: expected a header row (k, t, u0…, y0…, p0…)")]
+    Empty,
+    /// A column name appears twice: the row's value would be ambiguous.
+    #[error("column \"{0}\" appears twice in the header")]
+    Duplicate(String),
+    /// A column name that is none of `k`, `t`, `u<i>`, `y<i>`, `p<i>`.
+    #[error("column \"{0}\" is not one of k, t, u<i>, y<i>, p<i>")]
+    Unknown(String),
+    /// A column beyond the channel's dimension (say `y3` for two outputs).
+    #[error("column \"{column}\": the channel has {count} {what}")]
+    OutOfRange {
+        /// The column's name.
+        column: String,
+        /// How many of its kind the channel has.
+        count: usize,
+        /// Its kind: `inputs`, `outputs` or `signals`.
+        what: &'static str,
+    },
+    /// A column the channel needs is absent.
+    #[error("column \"{0}\" is missing from the header")]
+    Missing(String),
+}
+
+impl CsvReader<BufReader<File>> {
+    /// Opens a file and reads its header (see [`CsvReader::new`]).
+    ///
+    /// # Errors
+    /// [`InputErrorKind::OpenCsv`] when the file cannot be opened,
+    /// [`InputErrorKind::Header`] when its header does not fit `dims`.
+    pub fn open(path: &Path, dims: Dims) -> Result<Self, InputError> {
+        let file =
+            File::open(path).map_err(|e| InputError::new(path, InputErrorKind::OpenCsv(e)))?;
+        let reader = BufReader::with_capacity(1 << 16, file);
+        Self::new(reader, dims).map_err(|e| InputError::new(path, InputErrorKind::Header(e)))
+    }
+}
+
+impl<R: BufRead> CsvReader<R> {
+    /// Reads the header and maps it onto the channel's dimensions: every `u<i>`,
+    /// `y<i>` and `p<i>` of the channel must be there, in any order; `k` and `t` are
+    /// optional.
+    ///
+    /// # Errors
+    /// A [`HeaderError`] when the header cannot be read or does not fit `dims`.
+    ///
+    /// # Examples
+    ///
+    /// ```
+    /// use glrmon_core::Dims;
+    /// use glrmon_input::{CsvReader, HeaderError};
+    ///
+    /// let dims = Dims { states: 1, inputs: 0, outputs: 2, signals: 0 };
+    /// let err = CsvReader::new("k,y0\n".as_bytes(), dims).unwrap_err();
+    /// assert!(matches!(err, HeaderError::Missing(ref c) if c == "y1"));
+    /// assert_eq!(err.to_string(), r#"column "y1" is missing from the header"#);
+    /// ```
+    pub fn new(mut input: R, dims: Dims) -> Result<Self, HeaderError> {
+        let mut header = String::new();
+        input.read_line(&mut header).map_err(HeaderError::Read)?;
+        let header = header.trim_end_matches(['\n', '\r']);
+        if header.is_empty() {
+            return Err(HeaderError::Empty);
+        }
+        let mut slots = Vec::new();
+        let mut seen = std::collections::HashSet::new();
+        for name in header.split(',').map(str::trim) {
+            if !seen.insert(name.to_owned()) {
+                return Err(HeaderError::Duplicate(name.to_owned()));
+            }
+            let index = |prefix: &str, count: usize, what: &'static str| {
+                let i: usize = name[prefix.len()..]
+                    .parse()
+                    .map_err(|_| HeaderError::Unknown(name.to_owned()))?;
+                if i >= count {
+                    return Err(HeaderError::OutOfRange {
+                        column: name.to_owned(),
+                        count,
+                        what,
+                    });
+                }
+                Ok(i)
+            };
+            let slot = match name {
+                "k" => Slot::K,
+                "t" => Slot::T,
+                n if n.starts_with('u') => Slot::U(index("u", dims.inputs, "inputs")?),
+                n if n.starts_with('y') => Slot::Y(index("y", dims.outputs, "outputs")?),
+                n if n.starts_with('p') => Slot::P(index("p", dims.signals, "signals")?),
+                n => return Err(HeaderError::Unknown(n.to_owned())),
+            };
+            slots.push(slot);
+        }
+        for (prefix, count) in [("u", dims.inputs), ("y", dims.outputs), ("p", dims.signals)] {
+            for i in 0..count {
+                if !seen.contains(&format!("{prefix}{i}")) {
+                    return Err(HeaderError::Missing(format!("{prefix}{i}")));
+                }
+            }
+        }
+        Ok(Self {
+            input,
+            slots,
+            line: String::new(),
+            row: 1,
+            dims,
+        })
+    }
+
+    /// The next row into `sample`: `None` at the end of the file, `Some(Err)` for a bad
+    /// row (the next call continues with the following row). Blank lines are skipped;
+    /// `sample`'s vectors are resized to the channel's dimensions and overwritten, so
+    /// one sample can be reused for the whole file.
+    ///
+    /// A read error of the underlying input is a bad row too (`cannot read: …`).
+    ///
+    /// # Examples
+    ///
+    /// ```
+    /// use glrmon_core::Dims;
+    /// use glrmon_input::CsvReader;
+    /// use glrmon_wire::{ErrorCode, Sample};
+    ///
+    /// let dims = Dims { states: 1, inputs: 1, outputs: 1, signals: 0 };
+    /// let mut rows = CsvReader::new("t,u0,y0\n0.1,1,nan\n".as_bytes(), dims)?;
+    /// let mut sample = Sample::default();
+    /// let bad = rows.next_into(&mut sample).unwrap().unwrap_err();
+    /// assert_eq!(bad.code, ErrorCode::NonFinite);
+    /// assert_eq!(bad.message, r#"row 2: column y0: "nan" is not finite"#);
+    /// assert!(rows.next_into(&mut sample).is_none());
+    /// # Ok::<(), glrmon_input::HeaderError>(())
+    /// ```
+    pub fn next_into(&mut self, sample: &mut Sample) -> Option<Result<(), RowError>> {
+        loop {
+            self.line.clear();
+            match self.input.read_line(&mut self.line) {
+                Ok(0) => return None,
+                Ok(_) => {}
+                Err(e) => {
+                    self.row += 1;
+                    return Some(Err(self.err(
+                        None,
+                        ErrorCode::InvalidJson,
+                        format!("cannot read: {e}"),
+                    )));
+                }
+            }
+            self.row += 1;
+            if !self.line.trim().is_empty() {
+                break;
+            }
+        }
+        sample.k = None;
+        sample.t = None;
+        sample.u.resize(self.dims.inputs, 0.0);
+        sample.y.resize(self.dims.outputs, 0.0);
+        sample.p.resize(self.dims.signals, 0.0);
+        let line = self.line.trim_end_matches(['\n', '\r']);
+        let fields = line.split(',').count();
+        if fields != self.slots.len() {
+            let msg = format!("has {fields} columns, the header has {}", self.slots.len());
+            return Some(Err(self.err(None, ErrorCode::WrongDimension, msg)));
+        }
+        // k first, so that errors in other columns can name it.
+        let mut k = None;
+        for (text, slot) in line.split(',').zip(&self.slots) {
+            if let Slot::K = slot {
+                match text.trim().parse::<u64>() {
+                    Ok(v) => k = Some(v),
+                    Err(_) => {
+                        let msg = format!(
+                            "column k: \"{}\" is not a non-negative integer",
+                            text.trim()
+                        );
+                        return Some(Err(self.err(None, ErrorCode::WrongType, msg)));
+                    }
+                }
+            }
+        }
+        sample.k = k;
+        for (text, slot) in line.split(',').zip(&self.slots) {
+            let target: &mut f64 = match *slot {
+                Slot::K => continue,
+                Slot::T => sample.t.insert(0.0),
+                Slot::U(i) => &mut sample.u[i],
+                Slot::Y(i) => &mut sample.y[i],
+                Slot::P(i) => &mut sample.p[i],
+            };
+            // The column's name is only formatted for an error (not for every value).
+            match text.trim().parse::<f64>() {
+                Ok(v) if v.is_finite() => *target = v,
+                Ok(_) => {
+                    let msg = format!("column {slot}: \"{}\" is not finite", text.trim());
+                    return Some(Err(self.err(k, ErrorCode::NonFinite, msg)));
+                }
+                Err(_) => {
+                    let msg = format!("column {slot}: \"{}\" is not a number", text.trim());
+                    return Some(Err(self.err(k, ErrorCode::WrongType, msg)));
+                }
+            }
+        }
+        Some(Ok(()))
+    }
+
+    fn err(&self, k: Option<u64>, code: ErrorCode, message: String) -> RowError {
+        RowError {
+            k,
+            code,
+            message: format!("row {}: {message}", self.row),
+        }
+    }
+}
+
+/// Writes the header for a channel: `k`, then `t` when a period is known, then
+/// `u0…`, `y0…`, `p0…` — the layout [`CsvReader`] reads.
+///
+/// # Errors
+/// The writer's error.
+pub fn write_header(out: &mut impl Write, dims: Dims, with_t: bool) -> std::io::Result<()> {
+    let mut cols = vec!["k".to_owned()];
+    if with_t {
+        cols.push("t".into());
+    }
+    cols.extend((0..dims.inputs).map(|i| format!("u{i}")));
+    cols.extend((0..dims.outputs).map(|i| format!("y{i}")));
+    cols.extend((0..dims.signals).map(|i| format!("p{i}")));
+    writeln!(out, "{}", cols.join(","))
+}
+
+/// Writes one row under a [`write_header`] header; floats in their shortest exactly
+/// round-tripping form, so that reading the file back gives the same bits.
+///
+/// # Errors
+/// The writer's error.
+pub fn write_row(
+    out: &mut impl Write,
+    k: u64,
+    t: Option<f64>,
+    u: &[f64],
+    y: &[f64],
+    p: &[f64],
+) -> std::io::Result<()> {
+    write!(out, "{k}")?;
+    if let Some(t) = t {
+        write!(out, ",{t:?}")?;
+    }
+    for v in u.iter().chain(y).chain(p) {
+        write!(out, ",{v:?}")?;
+    }
+    writeln!(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    const DIMS: Dims = Dims {
+        states: 2,
+        inputs: 1,
+        outputs: 2,
+        signals: 1,
+    };
+
+    fn read_all(text: &[u8]) -> Result<Vec<Result<Sample, RowError>>, HeaderError> {
+        let mut reader = CsvReader::new(text, DIMS)?;
+        let mut rows = Vec::new();
+        let mut sample = Sample::default();
+        while let Some(row) = reader.next_into(&mut sample) {
+            rows.push(row.map(|()| sample.clone()));
+        }
+        Ok(rows)
+    }
+
+    /// What `write_header`/`write_row` write reads back to the same bits.
+    #[test]
+    fn written_rows_read_back_exactly() {
+        let mut out = Vec::new();
+        write_header(&mut out, DIMS, true).unwrap();
+        let values = [0.1, -1e-300, 1e300, 1.0 / 3.0, -0.0];
+        for (k, v) in values.iter().enumerate() {
+            let k = k as u64;
+            write_row(
+                &mut out,
+                k,
+                Some(k as f64 * 0.5),
+                &[*v],
+                &[v * 2.0, -v],
+                &[*v],
+            )
+            .unwrap();
+        }
+        let rows = read_all(&out).unwrap();
+        assert_eq!(rows.len(), values.len());
+        for (k, (row, v)) in rows.into_iter().zip(values).enumerate() {
+            let s = row.unwrap();
+            assert_eq!(s.k, Some(k as u64));
+            assert_eq!(s.t.map(f64::to_bits), Some((k as f64 * 0.5).to_bits()));
+            assert_eq!(s.u[0].to_bits(), v.to_bits());
+            assert_eq!(s.y[0].to_bits(), (v * 2.0).to_bits());
+            assert_eq!(s.y[1].to_bits(), (-v).to_bits());
+            assert_eq!(s.p[0].to_bits(), v.to_bits());
+        }
+    }
+
+    /// Each header problem, with its message.
+    #[test]
+    fn header_problems() {
+        let cases = [
+            (
+                "",
+                "the file is empty: expected a header row (k, t, u0…, y0…, p0…)",
+            ),
+            (
+                "k,u0,y0,y1,p0,y0",
+                "column \"y0\" appears twice in the header",
+            ),
+            (
+                "k,u0,y0,y1,p0,x",
+                "column \"x\" is not one of k, t, u<i>, y<i>, p<i>",
+            ),
+            (
+                "k,u0,y0,yy,p0",
+                "column \"yy\" is not one of k, t, u<i>, y<i>, p<i>",
+            ),
+            ("u0,y0,y1,y2,p0", "column \"y2\": the channel has 2 outputs"),
+            ("u0,y1,p0", "column \"y0\" is missing from the header"),
+        ];
+        for (header, message) in cases {
+            let err = read_all(format!("{header}\n").as_bytes()).unwrap_err();
+            assert_eq!(err.to_string(), message);
+        }
+    }
+
+    /// Bad rows are reported with their row, column and code, and skipped.
+    #[test]
+    fn bad_rows_are_reported_and_skipped() {
+        let text =
+            "k,u0,y0,y1,p0\n0,1,2,3,4\n\n1,1,2\n-1,1,2,3,4\n2,1,inf,3,4\n3,1,x,3,4\n4,1,2,3,4\n";
+        let rows = read_all(text.as_bytes()).unwrap();
+        let errs: Vec<_> = rows
+            .iter()
+            .filter_map(|r| r.as_ref().err())
+            .map(|e| (e.k, e.code, e.message.as_str()))
+            .collect();
+        assert_eq!(
+            errs,
+            [
+                (
+                    None,
+                    ErrorCode::WrongDimension,
+                    "row 4: has 3 columns, the header has 5"
+                ),
+                (
+                    None,
+                    ErrorCode::WrongType,
+                    "row 5: column k: \"-1\" is not a non-negative integer"
+                ),
+                (
+                    Some(2),
+                    ErrorCode::NonFinite,
+                    "row 6: column y0: \"inf\" is not finite"
+                ),
+                (
+                    Some(3),
+                    ErrorCode::WrongType,
+                    "row 7: column y0: \"x\" is not a number"
+                ),
+            ]
+        );
+        let good: Vec<_> = rows.iter().filter_map(|r| r.as_ref().ok()?.k).collect();
+        assert_eq!(good, [0, 4]);
+    }
+
+    proptest! {
+        /// Arbitrary bytes, after a valid header or as a whole file, never panic: every
+        /// row is a sample of the channel's dimensions or a row error, and reading ends.
+        #[test]
+        fn arbitrary_bytes_never_panic(
+            body in proptest::collection::vec(any::<u8>(), 0..2048),
+            with_header in any::<bool>(),
+        ) {
+            let mut text = Vec::new();
+            if with_header {
+                text.extend_from_slice(b"k,t,u0,y0,y1,p0\n");
+            }
+            text.extend_from_slice(&body);
+            if let Ok(rows) = read_all(&text) {
+                prop_assert!(rows.len() <= text.len());
+                for row in rows {
+                    match row {
+                        Ok(s) => {
+                            prop_assert_eq!((s.u.len(), s.y.len(), s.p.len()), (1, 2, 1));
+                            prop_assert!(s.y.iter().chain(&s.u).chain(&s.p).all(|v| v.is_finite()));
+                        }
+                        Err(e) => prop_assert!(e.message.starts_with("row ")),
+                    }
+                }
+            }
+        }
+
+        /// Rows of numbers and junk fields mixed: good rows read back exactly.
+        #[test]
+        fn mixed_rows_read_back(values in proptest::collection::vec((any::<f64>(), any::<bool>()), 1..64)) {
+            let mut out = Vec::new();
+            write_header(&mut out, DIMS, false).unwrap();
+            for (k, (v, junk)) in values.iter().enumerate() {
+                if *junk {
+                    out.extend_from_slice(format!("{k},1,?,2,3\n").as_bytes());
+                } else {
+                    write_row(&mut out, k as u64, None, &[*v], &[*v, *v], &[*v]).unwrap();
+                }
+            }
+            let rows = read_all(&out).unwrap();
+            prop_assert_eq!(rows.len(), values.len());
+            for (row, (v, junk)) in rows.iter().zip(&values) {
+                match row {
+                    Ok(s) => {
+                        prop_assert!(!junk && v.is_finite());
+                        prop_assert_eq!(s.y[1].to_bits(), v.to_bits());
+                    }
+                    Err(_) => prop_assert!(*junk || !v.is_finite()),
+                }
+            }
+        }
+    }
+}

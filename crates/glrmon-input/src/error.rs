@@ -1,0 +1,161 @@
+//! The error of opening and reading an input file.
+
+use std::path::{Path, PathBuf};
+
+use crate::HeaderError;
+
+/// An input file that could not be opened or read: the file, and what went wrong
+/// ([`InputErrorKind`]). Its message names the file, and the row, channel or
+/// column where there is one.
+#[derive(Debug)]
+pub struct InputError {
+    path: PathBuf,
+    kind: InputErrorKind,
+}
+
+/// What went wrong with an input file.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum InputErrorKind {
+    /// An MCAP recording could not be opened (missing, not permitted). Invalid input.
+    #[error("cannot open: {0}")]
+    OpenRecording(std::io::Error),
+    /// A CSV file could not be opened. Not counted as invalid input: the message is
+    /// `opening <file>: <why>`, like other failures to open a file.
+    #[error("cannot open: {0}")]
+    OpenCsv(std::io::Error),
+    /// The file is not an MCAP recording (no MCAP magic), or its first bytes cannot
+    /// be read. Invalid input.
+    #[error("{0}")]
+    NotRecording(glrmon_record::ReadError),
+    /// An I/O error while reading a recording's records (damage is not an error: it
+    /// is skipped and reported by [`crate::McapInput::damage_report`]).
+    #[error("cannot read: {0}")]
+    Read(std::io::Error),
+    /// A CSV header that does not fit the channel. Invalid input.
+    #[error("{0}")]
+    Header(HeaderError),
+    /// A recording without a `glrmon` configuration, read where one is needed.
+    /// Invalid input.
+    #[error("no glrmon configuration is recorded in this file: give --config")]
+    NoRecordedConfig,
+    /// The configuration recorded in the file is not valid (any more). Invalid input.
+    #[error("the recorded configuration is invalid:\n{0}")]
+    RecordedConfig(glrmon_spec::SpecErrors),
+    /// Data of the recording was lost to damage: the lines of
+    /// [`crate::McapInput::damage_report`], for readers that need every sample
+    /// ([`crate::Samples`]). Invalid input.
+    #[error("{}", .0.join("; "))]
+    Damaged(Vec<String>),
+}
+
+impl InputError {
+    /// An error of the file at `path`.
+    #[must_use]
+    pub fn new(path: &Path, kind: InputErrorKind) -> Self {
+        Self {
+            path: path.to_owned(),
+            kind,
+        }
+    }
+
+    /// The file.
+    #[must_use]
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// What went wrong.
+    #[must_use]
+    pub fn kind(&self) -> &InputErrorKind {
+        &self.kind
+    }
+
+    /// What went wrong, by value (to take out an I/O error).
+    #[must_use]
+    pub fn into_kind(self) -> InputErrorKind {
+        self.kind
+    }
+
+    /// Whether the user's input is at fault (a missing recording, a file that is not
+    /// MCAP, a bad header or configuration, damage), as opposed to a failure of the
+    /// machine (an I/O error while reading, a CSV file that cannot be opened). The
+    /// `glrmon` binary exits with code 1 for the former and 3 for the latter.
+    #[must_use]
+    pub fn is_invalid_input(&self) -> bool {
+        match self.kind {
+            InputErrorKind::OpenRecording(_)
+            | InputErrorKind::NotRecording(_)
+            | InputErrorKind::Header(_)
+            | InputErrorKind::NoRecordedConfig
+            | InputErrorKind::RecordedConfig(_)
+            | InputErrorKind::Damaged(_) => true,
+            InputErrorKind::OpenCsv(_) | InputErrorKind::Read(_) => false,
+        }
+    }
+}
+
+impl std::fmt::Display for InputError {
+    /// `<file>: <what and why>`; a CSV file that cannot be opened reads
+    /// `opening <file>: <why>`, and damage lists the damaged parts alone.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let path = self.path.display();
+        match &self.kind {
+            InputErrorKind::OpenCsv(e) => write!(f, "opening {path}: {e}"),
+            InputErrorKind::Damaged(_) => write!(f, "{}", self.kind),
+            kind => write!(f, "{path}: {kind}"),
+        }
+    }
+}
+
+impl std::error::Error for InputError {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn io() -> std::io::Error {
+        std::io::Error::new(std::io::ErrorKind::NotFound, "gone")
+    }
+
+    /// The messages users see, and which kinds are the user's fault.
+    #[test]
+    fn messages_and_classes() {
+        let p = Path::new("d/x");
+        let cases = [
+            (
+                InputErrorKind::OpenRecording(io()),
+                "d/x: cannot open: gone",
+                true,
+            ),
+            (InputErrorKind::OpenCsv(io()), "opening d/x: gone", false),
+            (InputErrorKind::Read(io()), "d/x: cannot read: gone", false),
+            (
+                InputErrorKind::NotRecording(glrmon_record::ReadError::NotMcap),
+                "d/x: not an MCAP file: the first 8 bytes are not the MCAP magic",
+                true,
+            ),
+            (
+                InputErrorKind::Header(HeaderError::Duplicate("y0".into())),
+                "d/x: column \"y0\" appears twice in the header",
+                true,
+            ),
+            (
+                InputErrorKind::NoRecordedConfig,
+                "d/x: no glrmon configuration is recorded in this file: give --config",
+                true,
+            ),
+            (
+                InputErrorKind::Damaged(vec!["damaged: a".into(), "damaged: b".into()]),
+                "damaged: a; damaged: b",
+                true,
+            ),
+        ];
+        for (kind, message, invalid) in cases {
+            let e = InputError::new(p, kind);
+            assert_eq!(e.to_string(), message);
+            assert_eq!(e.is_invalid_input(), invalid, "{message}");
+            assert_eq!(e.path(), p);
+        }
+    }
+}

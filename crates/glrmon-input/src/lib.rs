@@ -1,0 +1,13 @@
+#![doc = include_str!("../README.md")]
+
+mod csv;
+mod error;
+mod mcap;
+mod readahead;
+mod samples;
+
+pub use csv::{CsvReader, HeaderError, RowError, write_header, write_row};
+pub use error::{InputError, InputErrorKind};
+pub use mcap::{McapInput, RecordedInput, is_mcap};
+pub use readahead::{ReadAhead, ReadAheadError};
+pub use samples::{Samples, recorded_config};

@@ -1,0 +1,120 @@
+//! One channel's samples from a CSV file or an MCAP recording, for the batch tools
+//! (diagnosis, calibration) that read a channel from start to end.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::Path;
+
+use glrmon_core::Dims;
+use glrmon_runtime::InputItem;
+use glrmon_wire::{IntakeEvent, Sample};
+
+use crate::{CsvReader, InputError, InputErrorKind, McapInput, is_mcap};
+
+/// The samples of one channel from a CSV file or an MCAP recording (chosen by
+/// [`is_mcap`]), one at a time, with the problems of each in the order they occur.
+///
+/// # Examples
+///
+/// ```
+/// use glrmon_core::Dims;
+/// use glrmon_input::Samples;
+/// use glrmon_wire::Sample;
+///
+/// let path = std::env::temp_dir().join(format!("glrmon-input-doc-{}.csv", std::process::id()));
+/// std::fs::write(&path, "k,y0\n0,1\n1,x\n2,3\n")?;
+/// let dims = Dims { states: 1, inputs: 0, outputs: 1, signals: 0 };
+/// let mut samples = Samples::open(&path, "plant", dims)?;
+/// let mut sample = Sample::default();
+/// let mut seen = Vec::new();
+/// while let Some(row) = samples.next_into(&mut sample)? {
+///     seen.push(row.map(|()| sample.y[0]));
+/// }
+/// assert_eq!(seen[0], Ok(1.0));
+/// assert_eq!(seen[1], Err(r#"row 3: column y0: "x" is not a number (wrong_type)"#.to_owned()));
+/// assert_eq!(seen[2], Ok(3.0));
+/// # std::fs::remove_file(&path)?;
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Debug)]
+pub struct Samples {
+    source: Source,
+}
+
+#[derive(Debug)]
+enum Source {
+    Csv(CsvReader<BufReader<File>>),
+    Mcap(Box<McapInput>, String),
+}
+
+impl Samples {
+    /// Opens `path`: a CSV file of `channel`'s samples (its header checked against
+    /// `dims`), or an MCAP recording, of which `channel`'s inputs are read.
+    ///
+    /// # Errors
+    /// An [`InputError`] when the file cannot be opened, is not a recording, or its
+    /// CSV header does not fit `dims`.
+    pub fn open(path: &Path, channel: &str, dims: Dims) -> Result<Self, InputError> {
+        let source = if is_mcap(path) {
+            Source::Mcap(Box::new(McapInput::open(path)?), channel.to_owned())
+        } else {
+            Source::Csv(CsvReader::open(path, dims)?)
+        };
+        Ok(Self { source })
+    }
+
+    /// The next sample into `sample`; `Ok(None)` at the end, `Ok(Some(Err))` for a
+    /// sample that cannot be used — a bad row (`row <n>: … (<code>)`), a refused or
+    /// dropped payload in the recording — after which reading goes on.
+    ///
+    /// # Errors
+    /// [`InputErrorKind::Read`] on an I/O error of a recording, and
+    /// [`InputErrorKind::Damaged`] at the end of a recording that lost data to damage
+    /// (its samples would not be the channel's consecutive samples).
+    pub fn next_into(
+        &mut self,
+        sample: &mut Sample,
+    ) -> Result<Option<Result<(), String>>, InputError> {
+        match &mut self.source {
+            Source::Csv(csv) => Ok(csv
+                .next_into(sample)
+                .map(|r| r.map_err(|e| format!("{} ({})", e.message, e.code.as_str())))),
+            Source::Mcap(input, channel) => loop {
+                let Some(recorded) = input.next_input(None)? else {
+                    let (lines, damaged) = input.damage_report();
+                    if damaged {
+                        return Err(InputError::new(
+                            input.path(),
+                            InputErrorKind::Damaged(lines),
+                        ));
+                    }
+                    return Ok(None);
+                };
+                if *recorded.channel != **channel {
+                    continue;
+                }
+                return Ok(Some(match recorded.item {
+                    InputItem::Sample(s) => {
+                        *sample = s;
+                        Ok(())
+                    }
+                    InputItem::Intake(IntakeEvent::Dropped { count }) => Err(format!(
+                        "{count} payload(s) of channel \"{channel}\" were dropped at intake here"
+                    )),
+                    InputItem::Intake(IntakeEvent::Rejected { message, .. }) => {
+                        Err(format!("a refused payload: {message}"))
+                    }
+                }));
+            },
+        }
+    }
+}
+
+/// The configuration recorded in an MCAP file (see [`McapInput::recorded_config`]).
+///
+/// # Errors
+/// An [`InputError`] when the file cannot be opened or read, or carries no valid
+/// configuration.
+pub fn recorded_config(path: &Path) -> Result<glrmon_spec::Config, InputError> {
+    McapInput::open(path)?.recorded_config()
+}
