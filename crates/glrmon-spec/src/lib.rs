@@ -253,6 +253,50 @@ impl Config {
     pub fn channel(&self, name: &str) -> Option<&Channel> {
         self.channels.iter().find(|c| c.name == name)
     }
+
+    /// The channel a tool works on: the one named, or the only one when no name is
+    /// given.
+    ///
+    /// # Errors
+    /// [`ChannelChoiceError`] when the name is not a channel of the configuration,
+    /// or no name is given and there are several channels (or none).
+    ///
+    /// # Examples
+    /// ```
+    /// let cfg = glrmon_spec::parse(include_str!("../../../config/demo.toml")).unwrap();
+    /// assert_eq!(cfg.pick_channel(Some("unstable")).unwrap().name, "unstable");
+    /// let err = cfg.pick_channel(None).unwrap_err();
+    /// assert_eq!(err.to_string(), "the configuration has several channels: choose one with --channel");
+    /// ```
+    pub fn pick_channel(&self, name: Option<&str>) -> Result<&Channel, ChannelChoiceError> {
+        match name {
+            Some(n) => self.channel(n).ok_or_else(|| ChannelChoiceError::Unknown {
+                name: n.to_owned(),
+                channels: self.channels.iter().map(|c| c.name.clone()).collect(),
+            }),
+            None => match self.channels.as_slice() {
+                [only] => Ok(only),
+                _ => Err(ChannelChoiceError::Ambiguous),
+            },
+        }
+    }
+}
+
+/// Why [`Config::pick_channel`] found no channel.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ChannelChoiceError {
+    /// No channel has that name.
+    #[error("no channel \"{name}\" in the configuration (channels: {})", channels.join(", "))]
+    Unknown {
+        /// The name asked for.
+        name: String,
+        /// The configuration's channels.
+        channels: Vec<String>,
+    },
+    /// No name was given and the configuration does not have exactly one channel.
+    #[error("the configuration has several channels: choose one with --channel")]
+    Ambiguous,
 }
 
 /// How a fault column is computed.

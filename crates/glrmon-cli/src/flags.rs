@@ -38,7 +38,7 @@ impl ZenohArgs {
                 s.mode = Some("client".into());
             }
             if s.connect.is_empty() && s.listen.is_empty() {
-                s.connect = vec![crate::DEFAULT_ENDPOINT.to_owned()];
+                s.connect = vec![crate::common::DEFAULT_ENDPOINT.to_owned()];
             }
         }
         s

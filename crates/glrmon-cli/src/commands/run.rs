@@ -15,9 +15,10 @@ use glrmon_zenoh::{ConnectivityWatch, Ownership, Presence, StatusSource, ZenohSi
 
 use glrmon_record::{Recorder, RecorderSettings};
 
+use crate::common::load_config;
+use crate::flags::ZenohArgs;
 use crate::log::LogEvents;
-use crate::net::ZenohArgs;
-use crate::{load_config, print};
+use crate::print;
 
 #[derive(Debug, Args)]
 pub(crate) struct RunArgs {
@@ -142,7 +143,7 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         .unwrap_or_else(|| format!("glrmon-{}", std::process::id()));
     let mut settings = args.zenoh.settings(Some(&cfg.zenoh));
     if settings.config_file.is_none() && settings.listen.is_empty() && settings.connect.is_empty() {
-        settings.listen = vec![crate::DEFAULT_ENDPOINT.to_owned()];
+        settings.listen = vec![crate::common::DEFAULT_ENDPOINT.to_owned()];
     }
     let session = open_session(&settings).await?;
     let status_overlaps = Arc::new(std::sync::atomic::AtomicU64::new(0));

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use clap::Args;
 use glrmon_record::ReadEnd;
 
-use crate::InvalidInput;
+use crate::common::InvalidInput;
 
 #[derive(Debug, Args)]
 pub(crate) struct RecoverArgs {

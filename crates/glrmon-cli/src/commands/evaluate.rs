@@ -18,8 +18,9 @@ use glrmon_sim::SimSample;
 use glrmon_wire::{Record, Sample};
 use serde::Serialize;
 
-use crate::simulate::{pick, simulator};
-use crate::{InvalidInput, load_config};
+use crate::common::pick;
+use crate::common::{InvalidInput, load_config};
+use crate::simulate::simulator;
 
 #[derive(Debug, Args)]
 pub(crate) struct EvaluateArgs {

@@ -23,7 +23,7 @@ use crate::log::LogEvents;
 use crate::{print, simulate};
 
 /// The demo's channels, embedded so the demo needs no file.
-pub(crate) const DEMO_CONFIG: &str = include_str!("../../../config/demo.toml");
+pub(crate) const DEMO_CONFIG: &str = include_str!("../../../../config/demo.toml");
 
 /// The injected fault: channel, fault, onset, magnitude.
 const FAULT: (&str, &str, u64, f64) = ("unstable", "x0_jump", 201, 4.0);

@@ -3,7 +3,7 @@
 use clap::Args;
 use glrmon_wire::{Record, decode_record};
 
-use crate::net::ZenohArgs;
+use crate::flags::ZenohArgs;
 use crate::print;
 
 #[derive(Debug, Args)]

@@ -7,8 +7,8 @@ use std::time::Duration;
 use clap::Args;
 use glrmon_wire::status;
 
-use crate::InvalidInput;
-use crate::net::ZenohArgs;
+use crate::common::InvalidInput;
+use crate::flags::ZenohArgs;
 
 #[derive(Debug, Args)]
 pub(crate) struct StatusArgs {

@@ -18,8 +18,8 @@ use glrmon_wire::{Record, Sample, encode_json};
 
 use glrmon_input::{Samples, is_mcap, recorded_config};
 
-use crate::simulate::pick;
-use crate::{InvalidInput, input_error, load_config};
+use crate::common::pick;
+use crate::common::{InvalidInput, input_error, load_config};
 
 #[derive(Debug, Args)]
 pub(crate) struct DiagnoseArgs {

@@ -22,8 +22,9 @@ use glrmon_wire::{DecodeLimits, IntakeEvent, Record, Sample};
 
 use glrmon_input::{CsvReader, McapInput, ReadAhead, is_mcap};
 
-use crate::simulate::pick;
-use crate::{InvalidInput, input_error, load_config, print, read_ahead_error};
+use crate::common::pick;
+use crate::common::{InvalidInput, input_error, load_config, read_ahead_error};
+use crate::print;
 
 #[derive(Debug, Args)]
 pub(crate) struct ReplayArgs {

@@ -1,0 +1,53 @@
+//! The command line: the `glrmon` parser and its subcommands (each parsed into the
+//! `Args` of its module under `commands/`).
+
+use clap::{Parser, Subcommand};
+
+use crate::commands::{calibrate, demo, diagnose, evaluate, recover, replay, run, status, watch};
+use crate::{simulate, validate};
+
+/// Model-based fault detection and isolation (GLR, Zhang & Basseville 2014) on plant data.
+#[derive(Debug, Parser)]
+#[command(
+    name = "glrmon",
+    version,
+    about,
+    after_help = "Exit codes: 0 success, 1 invalid input or configuration, 2 usage error, 3 runtime failure."
+)]
+pub(crate) struct Cli {
+    #[command(subcommand)]
+    pub(crate) command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub(crate) enum Command {
+    /// The main job on an embedded default: an in-process Zenoh session, simulated
+    /// channels with an injected fault, the monitor; alarms printed.
+    Demo(demo::DemoArgs),
+    /// Validate a configuration; print each channel's summary and isolability report.
+    Validate(validate::ValidateArgs),
+    /// Simulate a channel's model, optionally with a fault, to a CSV or MCAP file or to Zenoh.
+    Simulate(simulate::SimulateArgs),
+    /// Run the monitors over recorded samples (CSV, or an MCAP recording with its
+    /// configuration) to the same numbers as live; JSON lines, MCAP, HTML report.
+    Replay(replay::ReplayArgs),
+    /// Find a channel's detection threshold for a target mean time between false
+    /// alarms, on fault-free data (recorded or simulated).
+    Calibrate(calibrate::CalibrateArgs),
+    /// Monte-Carlo fault injection through the simulator and the monitor: detection
+    /// rate, delay, onset error, false alarms and the isolation confusion matrix.
+    Evaluate(evaluate::EvaluateArgs),
+    /// Rewrite an unfinished or damaged MCAP recording as a finished file with
+    /// everything readable in it.
+    Recover(recover::RecoverArgs),
+    /// Batch sparse fault diagnosis (Zhang 2021) over a recorded span of a CSV file or
+    /// an MCAP recording; prints the isolated faults and their magnitudes (JSON with --json).
+    Diagnose(diagnose::DiagnoseArgs),
+    /// The daemon: monitor every configured channel on Zenoh, publish the results.
+    Run(run::RunArgs),
+    /// Subscribe to alarms and diagnoses and print them.
+    Watch(watch::WatchArgs),
+    /// Ask every running instance for its status and print a table (instance, shard,
+    /// channels, samples/s, alarms, errors, drops, reconnections, uptime).
+    Status(status::StatusArgs),
+}

@@ -1,0 +1,12 @@
+//! One module per subcommand: each parses its flags (`…Args`) and calls the
+//! libraries; none imports another.
+
+pub(crate) mod calibrate;
+pub(crate) mod demo;
+pub(crate) mod diagnose;
+pub(crate) mod evaluate;
+pub(crate) mod recover;
+pub(crate) mod replay;
+pub(crate) mod run;
+pub(crate) mod status;
+pub(crate) mod watch;

@@ -1,0 +1,55 @@
+//! What every subcommand shares: the user-error type behind exit code 1, loading a
+//! configuration, choosing its channel, and the default endpoint.
+
+use std::path::Path;
+
+/// Where `run` listens and `watch`/`simulate --publish` connect when nothing is given.
+pub(crate) const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7447";
+
+/// A user's input or configuration is at fault (exit code 1).
+#[derive(Debug)]
+pub(crate) struct InvalidInput(pub(crate) String);
+
+impl std::fmt::Display for InvalidInput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for InvalidInput {}
+
+/// An input file's error with its exit code: [`InvalidInput`] (1) when the user's file
+/// is at fault, a runtime failure (3) otherwise.
+pub(crate) fn input_error(e: glrmon_input::InputError) -> anyhow::Error {
+    if e.is_invalid_input() {
+        InvalidInput(e.to_string()).into()
+    } else {
+        e.into()
+    }
+}
+
+/// An error of reading ahead: the source's as [`input_error`], the reader thread's a
+/// runtime failure.
+pub(crate) fn read_ahead_error(
+    e: glrmon_input::ReadAheadError<glrmon_input::InputError>,
+) -> anyhow::Error {
+    match e {
+        glrmon_input::ReadAheadError::Source(e) => input_error(e),
+        e => e.into(),
+    }
+}
+
+/// Loads a configuration; every problem becomes one line of an [`InvalidInput`].
+pub(crate) fn load_config(path: &Path) -> anyhow::Result<glrmon_spec::Config> {
+    glrmon_spec::load(path)
+        .map_err(|e| InvalidInput(format!("{} is invalid:\n{e}", path.display())).into())
+}
+
+/// The channel a command works on (`--channel`, or the only one).
+pub(crate) fn pick<'a>(
+    cfg: &'a glrmon_spec::Config,
+    name: Option<&str>,
+) -> anyhow::Result<&'a glrmon_spec::Channel> {
+    cfg.pick_channel(name)
+        .map_err(|e| InvalidInput(e.to_string()).into())
+}
