@@ -10,9 +10,9 @@
 //! 99.5, 98.0, 95.4, 90.0 and 81.7 % for q = 5…9 (1000 trials each).
 //!
 //! The data come from the shipped configuration config/examples/paper2021-example1.toml
-//! through the same path as `glrmon simulate` (the channel's model, its simulation
-//! expressions for the signals p0…p152 and d_k, its fault dictionary: fault j's column
-//! is (p[3+j], p[53+j], p[103+j])), and the diagnosis is the monitor's
+//! through [`glrmon_sim::from_channel`], as in `glrmon simulate` (the channel's model,
+//! its simulation expressions for the signals p0…p152 and d_k, its fault dictionary:
+//! fault j's column is (p[3+j], p[53+j], p[103+j])), and the diagnosis is the monitor's
 //! [`glrmon_monitor::DiagnosisEngine`], the one behind `glrmon diagnose`. Samples
 //! k = 0…100 are simulated (X_0 = 0; filter prior X̂ = 0, P = I) and the regression runs
 //! over k = 1…100, as in the paper.
@@ -30,8 +30,7 @@ use std::path::PathBuf;
 
 use clap::Parser;
 use glrmon_monitor::DiagnosisEngine;
-use glrmon_sim::{Injection, Rng, SignalFn, SimSample, Simulator};
-use glrmon_spec::expr::{Env, Expr, RandomSource, SignalHistory};
+use glrmon_sim::{Injection, Rng, SimSample};
 use glrmon_spec::{Channel, ResidualKind};
 use nalgebra::DVector;
 
@@ -83,38 +82,6 @@ pub(crate) fn example1_channel(
     Ok(channel)
 }
 
-/// The simulator's random draws for expressions (`uniform`, `normal`).
-struct ExprRandom(Rng);
-
-impl RandomSource for ExprRandom {
-    fn uniform(&mut self) -> f64 {
-        self.0.uniform()
-    }
-    fn normal(&mut self) -> f64 {
-        self.0.normal()
-    }
-}
-
-/// A list of expressions of k as a signal source with its own seeded stream (as in
-/// `glrmon simulate`).
-fn expression_source(exprs: Vec<Expr>, seed: u64) -> SignalFn {
-    let mut random = ExprRandom(Rng::new(seed));
-    let history = SignalHistory::new(0, 0, 0);
-    Box::new(move |k, out: &mut [f64]| {
-        for (i, o) in out.iter_mut().enumerate() {
-            *o = exprs.get(i).map_or(0.0, |e| {
-                e.eval(&mut Env {
-                    k,
-                    u: &[],
-                    p: &[],
-                    history: &history,
-                    random: Some(&mut random),
-                })
-            });
-        }
-    })
-}
-
 /// One trial: q faults of magnitude 1 drawn with `seed`, samples k = 0…100 simulated
 /// from the channel's configuration, diagnosis over k = 1…100. Returns the true and
 /// the estimated support (dictionary indices, increasing).
@@ -137,35 +104,15 @@ pub(crate) fn trial(
     for &j in &truth {
         theta[j] = 1.0;
     }
-    let plan = &channel.simulation;
-    let e = channel
-        .unknown_input
-        .clone()
-        .ok_or("the channel has no unknown-input matrix E")?;
-    let dictionary = channel.dictionary().map_err(|e| e.to_string())?;
-    let mut sim = Simulator::new(Box::new(channel.model.clone()), channel.x0.clone(), seed)
-        .map_err(|e| e.to_string())?
-        .with_inputs(expression_source(
-            plan.inputs.clone(),
-            seed ^ 0x1111_1111_1111_1111,
-        ))
-        .with_signals(expression_source(
-            plan.signals.clone(),
-            seed ^ 0x2222_2222_2222_2222,
-        ))
-        .with_unknown_input(
-            e,
-            expression_source(plan.unknown_input.clone(), seed ^ 0x3333_3333_3333_3333),
-        )
-        .map_err(|e| e.to_string())?
-        .with_fault(
-            dictionary,
-            Injection {
-                magnitude: theta,
-                onset: 0,
-            },
-        )
-        .map_err(|e| e.to_string())?;
+    if channel.unknown_input.is_none() {
+        return Err("the channel has no unknown-input matrix E".into());
+    }
+    let sim = glrmon_sim::from_channel(channel, seed).map_err(|e| e.to_string())?;
+    let injection = Injection {
+        magnitude: theta,
+        onset: 0,
+    };
+    let mut sim = glrmon_sim::inject(sim, channel, injection).map_err(|e| e.to_string())?;
     let n_samples = 101;
     let mut engine = DiagnosisEngine::new(channel, n_samples).map_err(|e| e.to_string())?;
     engine.set_whitening(whiten);

@@ -6,10 +6,8 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use clap::Args;
-use glrmon_sim::{Injection, PiController, Rng, SignalFn, SimSample, Simulator};
+use glrmon_sim::{Injection, SimSample, Simulator};
 use glrmon_spec::Channel;
-use glrmon_spec::expr::{Env, Expr, RandomSource, SignalHistory};
-use nalgebra::DVector;
 
 use crate::{InvalidInput, load_config};
 
@@ -54,42 +52,8 @@ pub(crate) struct SimulateArgs {
     zenoh: crate::net::ZenohArgs,
 }
 
-/// The simulator's random draws for expressions (`uniform`, `normal`).
-struct ExprRandom(Rng);
-
-impl RandomSource for ExprRandom {
-    fn uniform(&mut self) -> f64 {
-        self.0.uniform()
-    }
-    fn normal(&mut self) -> f64 {
-        self.0.normal()
-    }
-}
-
-/// Evaluates a list of expressions of k into a signal vector, with its own seeded stream.
-fn expression_source(exprs: Vec<Expr>, seed: u64) -> SignalFn {
-    let mut random = ExprRandom(Rng::new(seed));
-    let history = SignalHistory::new(0, 0, 0);
-    Box::new(move |k, out: &mut [f64]| {
-        for (o, e) in out
-            .iter_mut()
-            .zip(exprs.iter().map(Some).chain(std::iter::repeat(None)))
-        {
-            *o = match e {
-                Some(e) => e.eval(&mut Env {
-                    k,
-                    u: &[],
-                    p: &[],
-                    history: &history,
-                    random: Some(&mut random),
-                }),
-                None => 0.0,
-            };
-        }
-    })
-}
-
-/// The channel's simulator, started at X_0 = x̂_0, with the fault(s) injected.
+/// The channel's simulator ([`glrmon_sim::from_channel`]) with the fault(s) named by
+/// `--fault` injected at `--onset` with the `--magnitude`s.
 pub(crate) fn simulator(
     channel: &Channel,
     seed: u64,
@@ -97,32 +61,7 @@ pub(crate) fn simulator(
     onset: u64,
     magnitudes: &[f64],
 ) -> anyhow::Result<Simulator> {
-    let plan = &channel.simulation;
-    // Independent streams: noise, inputs, signals, unknown input.
-    let mut sim = Simulator::new(Box::new(channel.model.clone()), channel.x0.clone(), seed)?
-        .with_inputs(expression_source(
-            plan.inputs.clone(),
-            seed ^ 0x1111_1111_1111_1111,
-        ))
-        .with_signals(expression_source(
-            plan.signals.clone(),
-            seed ^ 0x2222_2222_2222_2222,
-        ));
-    if let Some(c) = plan.controller {
-        sim = sim.with_controller(PiController {
-            output: c.output,
-            input: c.input,
-            setpoint: c.setpoint,
-            kp: c.kp,
-            ki: c.ki,
-        })?;
-    }
-    if let Some(e) = &channel.unknown_input {
-        sim = sim.with_unknown_input(
-            e.clone(),
-            expression_source(plan.unknown_input.clone(), seed ^ 0x3333_3333_3333_3333),
-        )?;
-    }
+    let sim = glrmon_sim::from_channel(channel, seed)?;
     if faults.is_empty() {
         if !magnitudes.is_empty() {
             return Err(InvalidInput("--magnitude given without --fault".into()).into());
@@ -137,27 +76,12 @@ pub(crate) fn simulator(
         ))
         .into());
     }
-    let mut theta = DVector::zeros(channel.fault_names.len());
-    for (name, v) in faults.iter().zip(magnitudes) {
-        let j = channel
-            .fault_names
-            .iter()
-            .position(|n| n == name)
-            .ok_or_else(|| {
-                InvalidInput(format!(
-                    "channel \"{}\" has no fault \"{name}\" (faults: {})",
-                    channel.name,
-                    channel.fault_names.join(", ")
-                ))
-            })?;
-        theta[j] = *v;
-    }
-    Ok(sim.with_fault(
-        channel.dictionary()?,
-        Injection {
-            magnitude: theta,
-            onset,
-        },
+    let magnitude = glrmon_sim::fault_magnitudes(channel, faults, magnitudes)
+        .map_err(|e| InvalidInput(e.to_string()))?;
+    Ok(glrmon_sim::inject(
+        sim,
+        channel,
+        Injection { magnitude, onset },
     )?)
 }
 

@@ -5,11 +5,11 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use clap::Args;
+use glrmon_core::Onset;
+use glrmon_core::information::window_information;
 use glrmon_core::isolability::{DEFAULT_CORRELATION_LIMIT, isolability};
-use glrmon_core::{Onset, Sample, StepOutput};
-use glrmon_sim::SimSample;
 use glrmon_spec::{Channel, ThresholdSource};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 
 use crate::InvalidInput;
 use crate::simulate::simulator;
@@ -61,51 +61,21 @@ fn fmt_matrix(m: &DMatrix<f64>) -> String {
     format!("[{}]", rows.join(", "))
 }
 
-/// The Fisher information C_k(r) of the dictionary over one window: the detector run
-/// on the channel's simulated inputs (noise-free data would do: C does not depend on
-/// the outputs), warmed up so that P_k has converged, read at the oldest onset.
-fn window_information(
+/// The Fisher information C_k(r) of the dictionary over one window
+/// ([`window_information`]), on the channel's simulated inputs and signals, with the
+/// steady-state Σ when the model is LTI and the Riccati recursion has converged.
+fn channel_information(
     channel: &Channel,
 ) -> anyhow::Result<(DMatrix<f64>, Option<DMatrix<f64>>, usize)> {
-    let known = channel.onsets().iter().all(|o| *o == Onset::Known);
-    let w = channel.window.window as u64;
-    let warmup = if known { 0 } else { (5 * w).max(500) };
     let mut det = channel.detector()?;
     let mut sim = simulator(channel, 1, &[], 0, &[])?;
-    let mut out = StepOutput::new(channel.dims.outputs, channel.fault_names.len());
-    let mut x = SimSample {
-        k: 0,
-        u: vec![],
-        y: vec![],
-        p: vec![],
-    };
-    let last = warmup + w - 1;
-    let mut sigma_prev: Option<DMatrix<f64>> = None;
-    let mut converged = false;
-    for k in 0..=last {
-        sim.next_into(&mut x);
-        det.step(
-            &Sample {
-                k,
-                u: &x.u,
-                y: &x.y,
-                p: &x.p,
-            },
-            &mut out,
-        )?;
-        let sigma = det.filter().innovation_covariance();
-        if let Some(prev) = &sigma_prev {
-            converged = (sigma - prev).amax() <= 1e-12 * sigma.amax();
-        }
-        sigma_prev = Some(sigma.clone());
-    }
-    let onset = if known { 0 } else { last + 1 - w };
-    let m = channel.fault_names.len();
-    let (mut info, mut score) = (DMatrix::zeros(m, m), DVector::zeros(m));
-    det.information(onset, &mut info, &mut score);
-    let steady = (channel.model_is_constant() && converged)
-        .then(|| det.filter().innovation_covariance().clone());
-    Ok((info, steady, (last + 1 - onset) as usize))
+    let samples = std::iter::repeat_with(|| {
+        let s = sim.next_sample();
+        (s.u, s.y, s.p)
+    });
+    let info = window_information(&mut det, samples)?;
+    let steady = (channel.model_is_constant() && info.converged).then_some(info.covariance);
+    Ok((info.information, steady, info.samples))
 }
 
 fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<String> {
@@ -208,7 +178,7 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
             let _ = writeln!(s, "  model consistency: off");
         }
     }
-    let (info, steady, samples) = window_information(channel)?;
+    let (info, steady, samples) = channel_information(channel)?;
     match steady {
         Some(sigma) => {
             let _ = writeln!(
@@ -249,14 +219,10 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
         let _ = writeln!(s, "    F = {}", fmt_matrix(&info));
         let _ = writeln!(s, "    correlation = {}", fmt_matrix(&rep.correlation));
     } else {
-        let worst = rep
-            .pairs
-            .iter()
-            .map(|p| p.correlation.abs())
-            .fold(0.0_f64, f64::max);
         let _ = writeln!(
             s,
-            "    largest pairwise |correlation| {worst:.4} over {} pairs",
+            "    largest pairwise |correlation| {:.4} over {} pairs",
+            rep.max_pair_correlation(),
             rep.pairs.len()
         );
     }

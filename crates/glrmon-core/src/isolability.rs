@@ -408,6 +408,17 @@ impl IsolabilityReport {
         self.undetectable.is_empty() && self.pairs.iter().all(|p| p.separable)
     }
 
+    /// max |ρ_ab| over the pairs of faults: how close the least separable pair is to
+    /// indistinguishable, the one number to read when there are too many pairs to list
+    /// (0 with a single fault).
+    #[must_use]
+    pub fn max_pair_correlation(&self) -> f64 {
+        self.pairs
+            .iter()
+            .map(|p| p.correlation.abs())
+            .fold(0.0_f64, f64::max)
+    }
+
     /// Plain-language verdicts, one line per non-separable pair or undetectable fault, given the fault names, e.g.
     /// `fault "a" and fault "b" cannot be told apart by the minmax test over 100 samples (correlation 0.998 > 0.95)`.
     ///
@@ -517,6 +528,16 @@ mod tests {
     fn gram(p: usize, columns: &[&[f64]]) -> DMatrix<f64> {
         let s = DMatrix::from_fn(p, columns.len(), |i, j| columns[j][i]);
         s.transpose() * s
+    }
+
+    #[test]
+    fn max_pair_correlation_is_the_largest_absolute_correlation() {
+        // ρ(0,1) = −0.9 (negative: the absolute value counts), ρ(0,2) = 0.3, ρ(1,2) = 0.
+        let f = DMatrix::from_row_slice(3, 3, &[1.0, -0.9, 0.3, -0.9, 1.0, 0.0, 0.3, 0.0, 1.0]);
+        let r = isolability(&f, DEFAULT_CORRELATION_LIMIT).unwrap();
+        assert!(close(r.max_pair_correlation(), 0.9, 1e-12));
+        let single = isolability(&DMatrix::from_element(1, 1, 2.0), 0.95).unwrap();
+        assert_eq!(single.max_pair_correlation(), 0.0);
     }
 
     #[test]

@@ -8,6 +8,7 @@ pub mod detector;
 pub mod error;
 pub mod fault;
 mod glr;
+pub mod information;
 pub mod innovation;
 pub mod isolability;
 pub mod isolation;

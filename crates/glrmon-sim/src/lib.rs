@@ -12,12 +12,14 @@
 //! the detector uses, so a simulated fault is exactly the fault the detector looks for.
 #![warn(missing_docs)]
 
+pub mod channel;
 pub mod rng;
 pub mod scenarios;
 
 use glrmon_core::{Dims, FaultDictionary, Onset, Signals, StateSpace, SystemMatrices};
 use nalgebra::{DMatrix, DVector};
 
+pub use channel::{ChannelError, expression_source, fault_magnitudes, from_channel, inject};
 pub use rng::Rng;
 
 /// A fault to inject: which fault of the dictionary, from which sample, how large.
