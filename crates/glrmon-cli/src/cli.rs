@@ -3,8 +3,9 @@
 
 use clap::{Parser, Subcommand};
 
-use crate::commands::{calibrate, demo, diagnose, evaluate, recover, replay, run, status, watch};
-use crate::{simulate, validate};
+use crate::commands::{
+    calibrate, demo, diagnose, evaluate, recover, replay, run, simulate, status, validate, watch,
+};
 
 /// Model-based fault detection and isolation (GLR, Zhang & Basseville 2014) on plant data.
 #[derive(Debug, Parser)]

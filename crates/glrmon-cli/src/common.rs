@@ -1,7 +1,11 @@
 //! What every subcommand shares: the user-error type behind exit code 1, loading a
-//! configuration, choosing its channel, and the default endpoint.
+//! configuration, choosing its channel, a simulator with the `--fault` flags' faults,
+//! and the default endpoint.
 
 use std::path::Path;
+
+use glrmon_sim::{Injection, Simulator};
+use glrmon_spec::Channel;
 
 /// Where `run` listens and `watch`/`simulate --publish` connect when nothing is given.
 pub(crate) const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7447";
@@ -52,4 +56,37 @@ pub(crate) fn pick<'a>(
 ) -> anyhow::Result<&'a glrmon_spec::Channel> {
     cfg.pick_channel(name)
         .map_err(|e| InvalidInput(e.to_string()).into())
+}
+
+/// The channel's simulator ([`glrmon_sim::from_channel`]) with the fault(s) named by
+/// `--fault` injected at `--onset` with the `--magnitude`s.
+pub(crate) fn simulator(
+    channel: &Channel,
+    seed: u64,
+    faults: &[String],
+    onset: u64,
+    magnitudes: &[f64],
+) -> anyhow::Result<Simulator> {
+    let sim = glrmon_sim::from_channel(channel, seed)?;
+    if faults.is_empty() {
+        if !magnitudes.is_empty() {
+            return Err(InvalidInput("--magnitude given without --fault".into()).into());
+        }
+        return Ok(sim);
+    }
+    if faults.len() != magnitudes.len() {
+        return Err(InvalidInput(format!(
+            "--fault names {} fault(s) but --magnitude gives {} value(s)",
+            faults.len(),
+            magnitudes.len()
+        ))
+        .into());
+    }
+    let magnitude = glrmon_sim::fault_magnitudes(channel, faults, magnitudes)
+        .map_err(|e| InvalidInput(e.to_string()))?;
+    Ok(glrmon_sim::inject(
+        sim,
+        channel,
+        Injection { magnitude, onset },
+    )?)
 }

@@ -9,18 +9,16 @@ mod common;
 mod flags;
 mod log;
 mod print;
-mod simulate;
-mod validate;
 
 use std::process::ExitCode;
 
 use clap::Parser as _;
 
 use crate::cli::{Cli, Command};
-use crate::commands::{calibrate, demo, diagnose, evaluate, recover, replay, run, status, watch};
-pub(crate) use crate::common::{InvalidInput, load_config};
-// A path simulate.rs still uses until it moves under commands/.
-use crate::flags as net;
+use crate::commands::{
+    calibrate, demo, diagnose, evaluate, recover, replay, run, simulate, status, validate, watch,
+};
+use crate::common::InvalidInput;
 
 /// mimalloc: samples, records and message buffers are allocated on one thread (the
 /// replay reader, the Zenoh callbacks) and freed on another (the monitors), which

@@ -20,8 +20,8 @@ use serde::Serialize;
 use glrmon_input::{Samples, is_mcap, recorded_config};
 
 use crate::common::pick;
+use crate::common::simulator;
 use crate::common::{InvalidInput, input_error, load_config};
-use crate::simulate::simulator;
 
 #[derive(Debug, Args)]
 pub(crate) struct CalibrateArgs {

@@ -20,7 +20,7 @@ use glrmon_zenoh::{SessionSettings, ZenohSink, ZenohSource};
 use zenoh::Wait as _;
 
 use crate::log::LogEvents;
-use crate::{print, simulate};
+use crate::print;
 
 /// The demo's channels, embedded so the demo needs no file.
 pub(crate) const DEMO_CONFIG: &str = include_str!("../../../../config/demo.toml");
@@ -143,9 +143,9 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     for (i, c) in cfg.channels.iter().enumerate() {
         let seed = args.seed.wrapping_add(i as u64);
         let sim = if c.name == FAULT.0 {
-            simulate::simulator(c, seed, &[FAULT.1.to_owned()], FAULT.2, &[FAULT.3])?
+            crate::common::simulator(c, seed, &[FAULT.1.to_owned()], FAULT.2, &[FAULT.3])?
         } else {
-            simulate::simulator(c, seed, &[], 0, &[])?
+            crate::common::simulator(c, seed, &[], 0, &[])?
         };
         let publisher = session
             .declare_publisher(c.key.clone())

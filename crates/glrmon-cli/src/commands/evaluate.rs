@@ -19,8 +19,8 @@ use glrmon_wire::{Record, Sample};
 use serde::Serialize;
 
 use crate::common::pick;
+use crate::common::simulator;
 use crate::common::{InvalidInput, load_config};
-use crate::simulate::simulator;
 
 #[derive(Debug, Args)]
 pub(crate) struct EvaluateArgs {

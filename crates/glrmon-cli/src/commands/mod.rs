@@ -8,5 +8,7 @@ pub(crate) mod evaluate;
 pub(crate) mod recover;
 pub(crate) mod replay;
 pub(crate) mod run;
+pub(crate) mod simulate;
 pub(crate) mod status;
+pub(crate) mod validate;
 pub(crate) mod watch;

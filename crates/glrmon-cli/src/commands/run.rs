@@ -117,7 +117,7 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     let mut cfg = cfg;
     if let Some(expr) = &args.channels {
         let selector = zenoh::key_expr::KeyExpr::new(expr.as_str()).map_err(|e| {
-            crate::InvalidInput(format!(
+            crate::common::InvalidInput(format!(
                 "--channels \"{expr}\" is not a key expression: {e}"
             ))
         })?;
@@ -161,7 +161,7 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     )
     .await
     .map_err(|e| match e {
-        glrmon_zenoh::ZenohError::Overlap(m) => anyhow::Error::new(crate::InvalidInput(m)),
+        glrmon_zenoh::ZenohError::Overlap(m) => anyhow::Error::new(crate::common::InvalidInput(m)),
         other => other.into(),
     })?;
     let connectivity = ConnectivityWatch::start(

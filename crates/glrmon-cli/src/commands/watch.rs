@@ -70,9 +70,3 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
     let _ = session.close().await;
     Ok(())
 }
-
-/// The client settings of `z` (kept for `simulate --publish` until it calls
-/// [`ZenohArgs::client_settings`] itself).
-pub(crate) fn client_settings(z: &ZenohArgs) -> glrmon_zenoh::SessionSettings {
-    z.client_settings()
-}

@@ -6,10 +6,10 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use clap::Args;
-use glrmon_sim::{Injection, SimSample, Simulator};
+use glrmon_sim::SimSample;
 use glrmon_spec::Channel;
 
-use crate::{InvalidInput, load_config};
+use crate::common::{InvalidInput, load_config, pick, simulator};
 
 #[derive(Debug, Args)]
 pub(crate) struct SimulateArgs {
@@ -49,62 +49,7 @@ pub(crate) struct SimulateArgs {
     #[arg(long, default_value_t = 100.0)]
     rate: f64,
     #[command(flatten)]
-    zenoh: crate::net::ZenohArgs,
-}
-
-/// The channel's simulator ([`glrmon_sim::from_channel`]) with the fault(s) named by
-/// `--fault` injected at `--onset` with the `--magnitude`s.
-pub(crate) fn simulator(
-    channel: &Channel,
-    seed: u64,
-    faults: &[String],
-    onset: u64,
-    magnitudes: &[f64],
-) -> anyhow::Result<Simulator> {
-    let sim = glrmon_sim::from_channel(channel, seed)?;
-    if faults.is_empty() {
-        if !magnitudes.is_empty() {
-            return Err(InvalidInput("--magnitude given without --fault".into()).into());
-        }
-        return Ok(sim);
-    }
-    if faults.len() != magnitudes.len() {
-        return Err(InvalidInput(format!(
-            "--fault names {} fault(s) but --magnitude gives {} value(s)",
-            faults.len(),
-            magnitudes.len()
-        ))
-        .into());
-    }
-    let magnitude = glrmon_sim::fault_magnitudes(channel, faults, magnitudes)
-        .map_err(|e| InvalidInput(e.to_string()))?;
-    Ok(glrmon_sim::inject(
-        sim,
-        channel,
-        Injection { magnitude, onset },
-    )?)
-}
-
-/// Picks the channel named on the command line, or the only one.
-pub(crate) fn pick<'a>(
-    cfg: &'a glrmon_spec::Config,
-    name: Option<&str>,
-) -> anyhow::Result<&'a Channel> {
-    match name {
-        Some(n) => cfg.channel(n).ok_or_else(|| {
-            let names: Vec<&str> = cfg.channels.iter().map(|c| c.name.as_str()).collect();
-            InvalidInput(format!(
-                "no channel \"{n}\" in the configuration (channels: {})",
-                names.join(", ")
-            ))
-            .into()
-        }),
-        None if cfg.channels.len() == 1 => Ok(&cfg.channels[0]),
-        None => Err(InvalidInput(
-            "the configuration has several channels: choose one with --channel".into(),
-        )
-        .into()),
-    }
+    zenoh: crate::flags::ZenohArgs,
 }
 
 pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
@@ -280,7 +225,7 @@ async fn publish(
     args: &SimulateArgs,
 ) -> anyhow::Result<()> {
     use zenoh::Wait as _;
-    let session = glrmon_zenoh::open(&crate::watch::client_settings(&args.zenoh)).await?;
+    let session = glrmon_zenoh::open(&args.zenoh.client_settings()).await?;
     let publisher = session
         .declare_publisher(channel.key.clone())
         .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)

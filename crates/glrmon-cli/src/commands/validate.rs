@@ -11,8 +11,8 @@ use glrmon_core::isolability::{DEFAULT_CORRELATION_LIMIT, isolability};
 use glrmon_spec::{Channel, ThresholdSource};
 use nalgebra::DMatrix;
 
-use crate::InvalidInput;
-use crate::simulate::simulator;
+use crate::common::InvalidInput;
+use crate::common::simulator;
 
 #[derive(Debug, Args)]
 pub(crate) struct ValidateArgs {
