@@ -12,14 +12,10 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use clap::Args;
-use glrmon_monitor::Monitor;
+use glrmon_eval::{EvalError, Protocol, outcome_columns, summarize};
 use glrmon_report::{Evaluation, FaultEvaluation};
-use glrmon_sim::SimSample;
-use glrmon_wire::{Record, Sample};
-use serde::Serialize;
 
 use crate::common::pick;
-use crate::common::simulator;
 use crate::common::{InvalidInput, load_config};
 
 #[derive(Debug, Args)]
@@ -56,27 +52,6 @@ pub(crate) struct EvaluateArgs {
     report: Option<PathBuf>,
 }
 
-/// What one run gave (an element of `runs` in the `--json` file).
-#[derive(Debug, Clone, Default, Serialize)]
-struct Run {
-    /// First crossing of the threshold at or after the onset.
-    crossing: Option<u64>,
-    /// r̂ of the first alarm at or after the onset.
-    onset_estimate: Option<u64>,
-    /// Faults isolated by that alarm.
-    isolated: Vec<String>,
-    /// Alarms raised before the onset.
-    false_alarms: u64,
-}
-
-/// Results for one injected fault (an element of `results` in the `--json` file).
-#[derive(Debug, Clone, Serialize)]
-struct FaultResult {
-    fault: String,
-    magnitude: f64,
-    runs: Vec<Run>,
-}
-
 pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     let cfg = load_config(&args.config)?;
     let channel = pick(&cfg, args.channel.as_deref())?;
@@ -111,48 +86,17 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
             })
             .collect::<Result<_, _>>()?
     };
-    if args.runs == 0 {
-        return Err(InvalidInput("--runs must be at least 1".into()).into());
-    }
-    let w = channel.window.window as u64;
-    let onset = args.onset.unwrap_or(3 * w);
-    let samples = args.samples.unwrap_or(onset + 2 * w);
-    if samples <= onset {
-        return Err(
-            InvalidInput(format!("--samples {samples} ends before the onset {onset}")).into(),
-        );
-    }
-    let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get) as u64;
-    let mut results = Vec::new();
-    for (fault, magnitude) in &injected {
-        let runs: Vec<anyhow::Result<Run>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = (0..threads)
-                .map(|t| {
-                    scope.spawn(move || {
-                        (0..args.runs)
-                            .filter(|i| i % threads == t)
-                            .map(|i| {
-                                one_run(channel, args.seed + i, fault, *magnitude, onset, samples)
-                            })
-                            .collect::<Vec<_>>()
-                    })
-                })
-                .collect();
-            handles
-                .into_iter()
-                .flat_map(|h| {
-                    h.join().unwrap_or_else(|_| {
-                        vec![Err(anyhow::anyhow!("an evaluation thread panicked"))]
-                    })
-                })
-                .collect()
-        });
-        results.push(FaultResult {
-            fault: fault.clone(),
-            magnitude: *magnitude,
-            runs: runs.into_iter().collect::<Result<_, _>>()?,
-        });
-    }
+    let eval_error = |e: EvalError| -> anyhow::Error {
+        if e.is_invalid_input() {
+            InvalidInput(e.to_string()).into()
+        } else {
+            e.into()
+        }
+    };
+    let protocol = Protocol::for_channel(channel, args.onset, args.samples, args.runs, args.seed)
+        .map_err(eval_error)?;
+    let Protocol { onset, samples, .. } = protocol;
+    let results = glrmon_eval::evaluate(channel, &injected, protocol).map_err(eval_error)?;
     let columns = outcome_columns(&channel.fault_names, &results);
     let summaries: Vec<FaultEvaluation> = results
         .iter()
@@ -165,7 +109,7 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.json {
         std::fs::write(
             path,
-            json(&channel.name, &channel.fault_names, &results, onset)?,
+            glrmon_eval::json(&channel.name, &channel.fault_names, &results, onset)?,
         )?;
     }
     if let Some(path) = &args.report {
@@ -198,160 +142,6 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
         write().with_context(|| format!("writing the report {}", path.display()))?;
     }
     Ok(())
-}
-
-fn one_run(
-    channel: &glrmon_spec::Channel,
-    seed: u64,
-    fault: &str,
-    magnitude: f64,
-    onset: u64,
-    samples: u64,
-) -> anyhow::Result<Run> {
-    let mut sim = simulator(channel, seed, &[fault.to_owned()], onset, &[magnitude])?;
-    let mut mon = Monitor::from_channel(channel)?;
-    let threshold = channel.alarm.threshold;
-    let mut x = SimSample {
-        k: 0,
-        u: vec![],
-        y: vec![],
-        p: vec![],
-    };
-    let mut sample = Sample::default();
-    let mut records = Vec::new();
-    let mut run = Run::default();
-    let mut alarmed = false;
-    for _ in 0..samples {
-        sim.next_into(&mut x);
-        sample.k = Some(x.k);
-        sample.u.clone_from(&x.u);
-        sample.y.clone_from(&x.y);
-        sample.p.clone_from(&x.p);
-        mon.on_sample(&sample, &mut records);
-        for r in records.drain(..) {
-            match r {
-                Record::Stat(s)
-                    if run.crossing.is_none()
-                        && s.k >= onset
-                        && s.glr.is_some_and(|l| l > threshold) =>
-                {
-                    run.crossing = Some(s.k);
-                }
-                Record::Alarm(a) if a.k < onset => run.false_alarms += 1,
-                Record::Alarm(a) if !alarmed => {
-                    alarmed = true;
-                    run.onset_estimate = Some(a.onset);
-                    run.isolated = a
-                        .isolation
-                        .iter()
-                        .filter(|i| i.isolated)
-                        .map(|i| i.fault.clone())
-                        .collect();
-                }
-                _ => {}
-            }
-        }
-    }
-    Ok(run)
-}
-
-/// Columns of the confusion matrix: the dictionary's faults, any other isolated name
-/// (an isolation group), then the outcomes without a single isolated fault.
-fn outcome_columns(faults: &[String], results: &[FaultResult]) -> Vec<String> {
-    let mut columns: Vec<String> = faults.to_vec();
-    let fixed = ["none", "several", "undetected"];
-    let mut others: Vec<String> = results
-        .iter()
-        .flat_map(|r| r.runs.iter().map(isolated_label))
-        .filter(|l| !columns.contains(l) && !fixed.contains(&l.as_str()))
-        .collect();
-    others.sort_unstable();
-    others.dedup();
-    columns.extend(others);
-    columns.extend(fixed.map(str::to_owned));
-    columns
-}
-
-/// The figures of one injected fault that the text output and the HTML report state.
-fn summarize(r: &FaultResult, onset: u64, columns: &[String]) -> FaultEvaluation {
-    let delays: Vec<u64> = r
-        .runs
-        .iter()
-        .filter_map(|x| x.crossing.map(|c| c - onset))
-        .collect();
-    let delays_f64: Vec<f64> = delays.iter().map(|d| *d as f64).collect();
-    let delay_quantiles = match (
-        quantile(delays_f64.clone(), 0.1),
-        median(delays_f64.clone()),
-        quantile(delays_f64, 0.9),
-    ) {
-        (Some(p10), Some(p50), Some(p90)) => Some([p10, p50, p90]),
-        _ => None,
-    };
-    let onset_errors: Vec<i64> = r
-        .runs
-        .iter()
-        .filter_map(|x| x.onset_estimate)
-        .map(|e| i64::try_from(i128::from(e) - i128::from(onset)).unwrap_or(i64::MAX))
-        .collect();
-    let mut isolated = vec![0; columns.len()];
-    for run in &r.runs {
-        let label = isolated_label(run);
-        if let Some(i) = columns.iter().position(|c| *c == label) {
-            isolated[i] += 1;
-        }
-    }
-    FaultEvaluation {
-        fault: r.fault.clone(),
-        magnitude: r.magnitude,
-        runs: r.runs.len() as u64,
-        detected: delays.len() as u64,
-        delays,
-        delay_quantiles,
-        onset_error_median_abs: median(
-            onset_errors
-                .iter()
-                .map(|e| e.unsigned_abs() as f64)
-                .collect(),
-        ),
-        onset_errors,
-        false_alarms: r.runs.iter().map(|x| x.false_alarms).sum(),
-        runs_with_false_alarms: r.runs.iter().filter(|x| x.false_alarms > 0).count() as u64,
-        isolated,
-    }
-}
-
-fn median(mut v: Vec<f64>) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    })
-}
-
-fn quantile(mut v: Vec<f64>, p: f64) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let i = ((v.len() - 1) as f64 * p).round() as usize;
-    v.get(i).copied()
-}
-
-/// Column of the confusion matrix for a run: the isolated fault, `none`, or
-/// `several`.
-fn isolated_label(r: &Run) -> String {
-    match r.isolated.as_slice() {
-        [] if r.onset_estimate.is_none() => "undetected".into(),
-        [] => "none".into(),
-        [one] => one.clone(),
-        _ => "several".into(),
-    }
 }
 
 fn text(
@@ -409,67 +199,4 @@ fn text(
         s.push('\n');
     }
     s
-}
-
-/// The `--json` file: the channel, the onset, the channel's fault dictionary and every
-/// run of every injected fault, `{"channel", "onset", "faults", "results": [{"fault",
-/// "magnitude", "runs": [{"crossing", "onset_estimate", "isolated", "false_alarms"}]}]}`.
-#[derive(Debug, Serialize)]
-struct EvaluationRuns<'a> {
-    channel: &'a str,
-    onset: u64,
-    faults: &'a [String],
-    results: &'a [FaultResult],
-}
-
-/// The `--json` file's text, one line.
-fn json(
-    channel: &str,
-    faults: &[String],
-    results: &[FaultResult],
-    onset: u64,
-) -> serde_json::Result<String> {
-    // Every magnitude is finite (checked when parsed), so no float becomes `null`.
-    let mut out = serde_json::to_string(&EvaluationRuns {
-        channel,
-        onset,
-        faults,
-        results,
-    })?;
-    out.push('\n');
-    Ok(out)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn json_keeps_the_keys_and_escapes_names() {
-        let results = [FaultResult {
-            fault: "a\"b".into(),
-            magnitude: 0.5,
-            runs: vec![
-                Run {
-                    crossing: Some(12),
-                    onset_estimate: Some(10),
-                    isolated: vec!["a\"b".into(), "c\\d".into()],
-                    false_alarms: 0,
-                },
-                Run::default(),
-            ],
-        }];
-        let text = json("m\u{1}é", &["a\"b".into()], &results, 10).unwrap();
-        assert_eq!(
-            text,
-            concat!(
-                r#"{"channel":"m\u0001é","onset":10,"faults":["a\"b"],"results":[{"fault":"a\"b","magnitude":0.5,"runs":["#,
-                r#"{"crossing":12,"onset_estimate":10,"isolated":["a\"b","c\\d"],"false_alarms":0},"#,
-                r#"{"crossing":null,"onset_estimate":null,"isolated":[],"false_alarms":0}]}]}"#,
-                "\n"
-            )
-        );
-        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
-        assert_eq!(v["results"][0]["runs"][0]["isolated"][1], "c\\d");
-    }
 }
