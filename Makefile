@@ -52,7 +52,7 @@ check-config: ## glrmon validate every file in config/
 	@for f in config/*.toml config/examples/*.toml; do ./target/debug/glrmon validate $$f >/dev/null || { ./target/debug/glrmon validate $$f; exit 1; }; echo "valid: $$f"; done
 
 fuzz-build: ## build the fuzz targets (fuzz/: sample, record, status, config and MCAP decoders) so they keep compiling
-	$(CARGO) build --manifest-path fuzz/Cargo.toml --target-dir target --locked
+	$(CARGO) build --manifest-path fuzz/Cargo.toml --target-dir target
 
 FUZZ_TARGET ?= samples
 FUZZ_SECONDS ?= 60
