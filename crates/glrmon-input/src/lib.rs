@@ -4,10 +4,12 @@ mod csv;
 mod error;
 mod mcap;
 mod readahead;
+mod replay;
 mod samples;
 
 pub use csv::{CsvReader, HeaderError, RowError, write_header, write_row};
 pub use error::{InputError, InputErrorKind};
 pub use mcap::{McapInput, RecordedInput, is_mcap};
 pub use readahead::{ReadAhead, ReadAheadError};
+pub use replay::{CsvReplayed, McapReplayed, ReplayError, replay_csv, replay_mcap};
 pub use samples::{Samples, recorded_config};

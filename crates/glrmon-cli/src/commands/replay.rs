@@ -4,23 +4,18 @@
 //! result goes to each output sink: JSON lines (default: standard output), an MCAP file
 //! (inputs and results, self-describing), an HTML report.
 
-use std::collections::HashMap;
-use std::io::{BufRead, IsTerminal as _};
+use std::io::IsTerminal as _;
 use std::path::PathBuf;
-use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 
 use anyhow::Context as _;
 use clap::Args;
+use glrmon_input::{CsvReader, CsvReplayed, McapInput, McapReplayed, ReplayError, is_mcap};
 use glrmon_monitor::Monitor;
 use glrmon_record::{FileHeader, McapFileSink};
 use glrmon_report::ReportSink;
-use glrmon_runtime::{
-    ChannelPipeline, Fanout, FnSink, InputItem, Interest, JsonLinesSink, Output, Sink,
-};
-use glrmon_wire::{DecodeLimits, IntakeEvent, Record, Sample};
-
-use glrmon_input::{CsvReader, McapInput, ReadAhead, is_mcap};
+use glrmon_runtime::{ChannelPipeline, Fanout, FnSink, Interest, JsonLinesSink, Output, Sink};
+use glrmon_wire::{DecodeLimits, Record};
 
 use crate::common::pick;
 use crate::common::{InvalidInput, input_error, load_config, read_ahead_error};
@@ -153,7 +148,8 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
     let (sinks, lines) = output_sinks(args, &header)?;
     let mut fanout = Fanout::new(sinks, 1);
     let mut pipeline = ChannelPipeline::new(0, monitor, fanout.plan());
-    let (rows, rejected) = replay_csv_into(csv, &mut pipeline, &mut fanout)?;
+    let CsvReplayed { rows, rejected } =
+        glrmon_input::replay_csv(csv, &mut pipeline, &mut fanout).map_err(replay_error)?;
     close(fanout)?;
     let c = pipeline.monitor().counters();
     let errors: u64 = c.errors.values().sum::<u64>() + rejected;
@@ -169,44 +165,13 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Feeds every row to the monitor, the rows parsed ahead on a reader thread; bad rows
-/// become `error` records and the replay continues. Returns the number of rows and of
-/// rows rejected.
-fn replay_csv_into<R: BufRead + Send + 'static>(
-    csv: CsvReader<R>,
-    pipeline: &mut ChannelPipeline,
-    fanout: &mut Fanout,
-) -> anyhow::Result<(u64, u64)> {
-    let mut rows_ahead = ReadAhead::spawn(csv, |csv, spare| {
-        let mut sample = match spare {
-            Some(Ok(sample)) => sample,
-            _ => Sample::default(),
-        };
-        // A bad row keeps the time it may have carried, for the record's log time.
-        Ok::<_, std::convert::Infallible>(csv.next_into(&mut sample).map(|row| match row {
-            Ok(()) => Ok(sample),
-            Err(e) => Err((e, sample.t)),
-        }))
-    })?;
-    let (mut rows, mut rejected) = (0, 0);
-    while let Some(row) = rows_ahead.next()? {
-        rows += 1;
-        match row {
-            Ok(sample) => {
-                let log_time = glrmon_record::publish_time(sample.t, 0);
-                pipeline.sample(&sample, log_time, fanout)?;
-                rows_ahead.recycle(Ok(sample));
-            }
-            Err((e, t)) => {
-                rejected += 1;
-                let log_time = glrmon_record::publish_time(t, 0);
-                let message = format!("channel \"{}\": {}", pipeline.name(), e.message);
-                pipeline.rejected(e.code, message, e.k, None, log_time, fanout)?;
-            }
-        }
+/// A replay's error with its exit code: a damaged input as [`input_error`], the rest a
+/// runtime failure.
+fn replay_error(e: ReplayError) -> anyhow::Error {
+    match e {
+        ReplayError::Read(e) => read_ahead_error(e),
+        e => e.into(),
     }
-    rows_ahead.finish()?;
-    Ok((rows, rejected))
 }
 
 fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
@@ -232,20 +197,14 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
         max_payload_bytes: cfg.daemon.max_payload_bytes,
         ..DecodeLimits::default()
     });
-    // The replayed channels' monitors, found by name (the last one looked up is
-    // remembered: consecutive inputs of a channel share its name).
-    let mut monitors: Vec<Monitor> = Vec::new();
     let mut order: Vec<Arc<str>> = Vec::new();
-    let mut index: HashMap<Arc<str>, usize> = HashMap::new();
+    let mut monitors: Vec<Monitor> = Vec::new();
     for c in &cfg.channels {
         if args.channel.as_ref().is_none_or(|n| *n == c.name) {
-            let name: Arc<str> = Arc::from(c.name.as_str());
-            index.insert(name.clone(), monitors.len());
+            order.push(Arc::from(c.name.as_str()));
             monitors.push(Monitor::from_channel(c)?);
-            order.push(name);
         }
     }
-    let mut last: Option<(Arc<str>, usize)> = None;
     let header = FileHeader {
         config: cfg.source.clone(),
         channels: order.iter().map(|c| c.to_string()).collect(),
@@ -271,42 +230,25 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
         );
         bar
     });
-    let mut unknown: HashMap<Arc<str>, u64> = HashMap::new();
-    let mut rejected: HashMap<Arc<str>, u64> = HashMap::new();
-    let mut inputs = 0u64;
     let started = std::time::Instant::now();
-    let progress_bytes = input.progress.0.clone();
-    let mut inputs_ahead = ReadAhead::spawn(input, |input, spare| input.next_input(spare))?;
-    while let Some(recorded) = inputs_ahead.next().map_err(read_ahead_error)? {
-        inputs += 1;
-        if inputs % 65_536 == 0 {
-            if let Some(bar) = &progress {
-                bar.set_position(progress_bytes.load(Ordering::Relaxed));
-            }
+    let mut report_progress = |bytes: u64| {
+        if let Some(bar) = &progress {
+            bar.set_position(bytes);
         }
-        let found = match &last {
-            Some((name, i)) if Arc::ptr_eq(name, &recorded.channel) => Some(*i),
-            _ => index.get(&recorded.channel).copied().inspect(|i| {
-                last = Some((recorded.channel.clone(), *i));
-            }),
-        };
-        let Some(pipeline) = found.and_then(|i| channels.get_mut(i)) else {
-            if args.channel.is_none() {
-                *unknown.entry(recorded.channel.clone()).or_insert(0) += 1;
-            }
-            inputs_ahead.recycle(recorded);
-            continue;
-        };
-        if matches!(
-            recorded.item,
-            InputItem::Intake(IntakeEvent::Rejected { .. })
-        ) {
-            *rejected.entry(recorded.channel.clone()).or_insert(0) += 1;
-        }
-        pipeline.feed(&recorded.item, recorded.log_time_ns, &mut fanout)?;
-        inputs_ahead.recycle(recorded);
-    }
-    let input = inputs_ahead.finish().map_err(read_ahead_error)?;
+    };
+    let McapReplayed {
+        input,
+        inputs,
+        unknown,
+        rejected,
+    } = glrmon_input::replay_mcap(
+        input,
+        &mut channels,
+        args.channel.is_none(),
+        &mut fanout,
+        &mut report_progress,
+    )
+    .map_err(replay_error)?;
     if let Some(bar) = progress {
         bar.finish_and_clear();
     }
