@@ -1,5 +1,7 @@
 #![doc = include_str!("../README.md")]
 
+pub mod calibrate;
+
 use glrmon_monitor::Monitor;
 use glrmon_report::FaultEvaluation;
 use glrmon_sim::{Injection, SimSample};

@@ -19,6 +19,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod edit;
 pub mod expr;
 pub mod schema;
 

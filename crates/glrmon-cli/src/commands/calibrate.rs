@@ -7,20 +7,17 @@ use std::io::IsTerminal as _;
 use std::path::{Path, PathBuf};
 
 use clap::Args;
-use std::collections::BTreeMap;
 
-use glrmon_core::calibration::{
-    Calibration, CalibrationError, Quantile, calibrate, count_episodes, upper_quantile,
+use glrmon_core::calibration::Calibration;
+use glrmon_eval::calibrate::{
+    CalibrateError, ChannelCalibration, IsolationCalibration, Statistics, calibrate_channel,
 };
-use glrmon_monitor::Monitor;
-use glrmon_sim::SimSample;
-use glrmon_wire::{Record, Sample};
+use glrmon_spec::edit::EditError;
 use serde::Serialize;
 
-use glrmon_input::{Samples, is_mcap, recorded_config};
+use glrmon_input::{is_mcap, recorded_config};
 
 use crate::common::pick;
-use crate::common::simulator;
 use crate::common::{InvalidInput, input_error, load_config};
 
 #[derive(Debug, Args)]
@@ -77,27 +74,12 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         (None, None) => unreachable!("clap requires one"),
     };
     let g = &channel.alarm;
-    let current_episodes = count_episodes(&stats.glr, *g);
-    let c =
-        calibrate(&stats.glr, args.mtbfa, g.hysteresis, g.clear_samples).map_err(|e| match e {
-            CalibrationError::TooLittleData { .. } | CalibrationError::Invalid(_) => {
-                InvalidInput(format!("channel \"{}\": {e}", channel.name))
-            }
-        })?;
+    let ChannelCalibration {
+        alarm: c,
+        current_episodes,
+        isolation,
+    } = calibrate_channel(channel, stats, args.mtbfa).map_err(calibrate_error)?;
     let alpha = channel.isolation_alpha;
-    let mut isolation = Vec::new();
-    for (test, mut values) in stats.isolation {
-        let current = current_isolation_threshold(channel, &test);
-        let exceeded =
-            values.iter().filter(|&&v| v > current).count() as f64 / values.len().max(1) as f64;
-        let q = upper_quantile(&mut values, alpha);
-        isolation.push(IsolationCalibration {
-            test,
-            quantile: q,
-            current,
-            current_rate: exceeded,
-        });
-    }
     if args.json {
         println!(
             "{}",
@@ -199,30 +181,6 @@ fn calibration_json<'a>(
     }
 }
 
-/// The isolation threshold of one test.
-struct IsolationCalibration {
-    test: String,
-    /// The (1 − α) quantile of its minmax statistic at r̂ on the data.
-    quantile: Option<Quantile>,
-    /// The threshold in force and the fraction of the data above it.
-    current: f64,
-    current_rate: f64,
-}
-
-/// The isolation threshold the channel uses now for `test`.
-fn current_isolation_threshold(channel: &glrmon_spec::Channel, test: &str) -> f64 {
-    if let Some(&(_, t)) = channel.isolation_thresholds.iter().find(|(n, _)| n == test) {
-        return t;
-    }
-    let dof = channel
-        .groups
-        .iter()
-        .find(|(n, _)| n == test)
-        .map_or(1, |(_, f)| f.len().max(1));
-    glrmon_core::threshold::chi2_upper_quantile(dof as f64, channel.isolation_alpha)
-        .unwrap_or(f64::NAN)
-}
-
 fn isolation_text(isolation: &[IsolationCalibration], alpha: f64) -> String {
     let mut s = format!("\nisolation tests at r̂ (type-I probability α = {alpha}):\n");
     for i in isolation {
@@ -279,47 +237,17 @@ fn text(
     )
 }
 
-/// What the channel's monitor gave on the fault-free data.
-#[derive(Debug, Default)]
-struct Statistics {
-    /// l_k of every sample (NaN where no onset is admissible).
-    glr: Vec<f64>,
-    /// The minmax statistic of each isolation test at r̂, by test.
-    isolation: BTreeMap<String, Vec<f64>>,
-}
-
-/// The statistics of the channel's monitor fed with `samples`; a sample the monitor
-/// rejects contributes nothing.
-fn monitor_glr(
-    channel: &glrmon_spec::Channel,
-    mut next: impl FnMut(&mut Sample) -> anyhow::Result<bool>,
-    progress: Option<&indicatif::ProgressBar>,
-) -> anyhow::Result<Statistics> {
-    let mut mon = Monitor::from_channel(channel)?;
-    let mut sample = Sample::default();
-    let mut records = Vec::new();
-    let mut stats = Statistics::default();
-    let mut n = 0u64;
-    while next(&mut sample)? {
-        mon.on_sample(&sample, &mut records);
-        for r in records.drain(..) {
-            if let Record::Stat(s) = r {
-                stats.glr.push(s.glr.unwrap_or(f64::NAN));
-                for (test, value) in mon.isolation_statistics() {
-                    stats.isolation.entry(test).or_default().push(value);
-                }
-            }
-        }
-        n += 1;
-        if n % 65_536 == 0 {
-            if let Some(p) = progress {
-                p.inc(65_536);
-            }
-        }
+/// A library error with its exit code: [`InvalidInput`] (1) when the user's data or
+/// request is at fault, a runtime failure (3) otherwise.
+fn calibrate_error(e: CalibrateError) -> anyhow::Error {
+    match e {
+        CalibrateError::Input(e) => input_error(e),
+        e if e.is_invalid_input() => InvalidInput(e.to_string()).into(),
+        e => e.into(),
     }
-    Ok(stats)
 }
 
+/// The progress bar on a terminal (hidden otherwise).
 fn bar(len: u64) -> Option<indicatif::ProgressBar> {
     std::io::stderr().is_terminal().then(|| {
         let b = indicatif::ProgressBar::new(len);
@@ -331,94 +259,38 @@ fn bar(len: u64) -> Option<indicatif::ProgressBar> {
     })
 }
 
-/// `n` fault-free samples from the model, in one part per core (seeds seed, seed+1, …).
+/// [`glrmon_eval::calibrate::simulated`] with a progress bar.
 fn simulated(channel: &glrmon_spec::Channel, n: u64, seed: u64) -> anyhow::Result<Statistics> {
-    let parts = std::thread::available_parallelism()
-        .map_or(1, std::num::NonZero::get)
-        .min(usize::try_from(n / 10_000).unwrap_or(1).max(1)) as u64;
     let progress = bar(n);
-    let results: Vec<anyhow::Result<Statistics>> = std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..parts)
-            .map(|i| {
-                let len = n / parts + u64::from(i < n % parts);
-                let progress = progress.as_ref();
-                scope.spawn(move || {
-                    let mut sim = simulator(channel, seed + i, &[], 0, &[])?;
-                    let mut x = SimSample {
-                        k: 0,
-                        u: vec![],
-                        y: vec![],
-                        p: vec![],
-                    };
-                    let mut left = len;
-                    monitor_glr(
-                        channel,
-                        |s| {
-                            if left == 0 {
-                                return Ok(false);
-                            }
-                            left -= 1;
-                            sim.next_into(&mut x);
-                            s.k = Some(x.k);
-                            s.t = None;
-                            s.u.clone_from(&x.u);
-                            s.y.clone_from(&x.y);
-                            s.p.clone_from(&x.p);
-                            Ok(true)
-                        },
-                        progress,
-                    )
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| {
-                h.join()
-                    .unwrap_or_else(|_| Err(anyhow::anyhow!("a calibration thread panicked")))
-            })
-            .collect()
-    });
-    if let Some(b) = progress {
-        b.finish_and_clear();
-    }
-    let mut all = Statistics::default();
-    for r in results {
-        // The parts are independent runs: joined, one sample with no admissible onset
-        // between them keeps an episode from spanning two parts.
-        let r = r?;
-        all.glr.extend(r.glr);
-        all.glr.push(f64::NAN);
-        for (test, values) in r.isolation {
-            all.isolation.entry(test).or_default().extend(values);
+    let inc = |d: u64| {
+        if let Some(b) = &progress {
+            b.inc(d);
         }
-    }
-    Ok(all)
-}
-
-fn recorded(channel: &glrmon_spec::Channel, input: &Path) -> anyhow::Result<Statistics> {
-    let mut samples = Samples::open(input, &channel.name, channel.dims).map_err(input_error)?;
-    let progress = bar(0);
-    let stats = monitor_glr(
-        channel,
-        |s| loop {
-            match samples.next_into(s).map_err(input_error)? {
-                None => return Ok(false),
-                Some(Ok(())) => return Ok(true),
-                // A row or payload the monitor never saw: skipped, as live.
-                Some(Err(_)) => {}
-            }
-        },
-        progress.as_ref(),
-    )?;
+    };
+    let stats = glrmon_eval::calibrate::simulated(channel, n, seed, Some(&inc));
     if let Some(b) = progress {
         b.finish_and_clear();
     }
-    Ok(stats)
+    stats.map_err(calibrate_error)
 }
 
-/// Sets `[channels.glr.calibrated]` of `channel` in the file, removing the other ways of
-/// setting the threshold; everything else (comments, order) is kept.
+/// [`glrmon_eval::calibrate::recorded`] with a progress bar.
+fn recorded(channel: &glrmon_spec::Channel, input: &Path) -> anyhow::Result<Statistics> {
+    let progress = bar(0);
+    let inc = |d: u64| {
+        if let Some(b) = &progress {
+            b.inc(d);
+        }
+    };
+    let stats = glrmon_eval::calibrate::recorded(channel, input, Some(&inc));
+    if let Some(b) = progress {
+        b.finish_and_clear();
+    }
+    stats.map_err(calibrate_error)
+}
+
+/// Sets `[channels.glr.calibrated]` of `channel` in the file
+/// ([`glrmon_spec::edit::set_calibrated`]); everything else (comments, order) is kept.
 fn write(
     path: &Path,
     channel: &str,
@@ -427,56 +299,15 @@ fn write(
     source: &str,
 ) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(path)?;
-    let mut doc: toml_edit::DocumentMut = text
-        .parse()
-        .map_err(|e| InvalidInput(format!("{}: {e}", path.display())))?;
-    let channels = doc
-        .get_mut("channels")
-        .and_then(toml_edit::Item::as_array_of_tables_mut)
-        .ok_or_else(|| InvalidInput(format!("{}: no [[channels]]", path.display())))?;
-    let table = channels
-        .iter_mut()
-        .find(|t| t.get("name").and_then(|v| v.as_str()) == Some(channel))
-        .ok_or_else(|| InvalidInput(format!("{}: no channel \"{channel}\"", path.display())))?;
-    if table.get("glr").is_none() {
-        table.insert("glr", toml_edit::table());
-    }
-    let glr = table
-        .get_mut("glr")
-        .and_then(toml_edit::Item::as_table_mut)
-        .ok_or_else(|| InvalidInput(format!("{}: channels.glr is not a table", path.display())))?;
-    for key in ["threshold", "false_alarm", "threshold_mode"] {
-        glr.remove(key);
-    }
-    let mut cal = toml_edit::Table::new();
-    cal.insert("threshold", toml_edit::value(c.threshold));
-    cal.insert("mtbfa", toml_edit::value(c.mtbfa));
-    cal.insert(
-        "samples",
-        toml_edit::value(i64::try_from(c.samples).unwrap_or(i64::MAX)),
-    );
-    cal.insert(
-        "episodes",
-        toml_edit::value(i64::try_from(c.episodes).unwrap_or(i64::MAX)),
-    );
-    let mut interval = toml_edit::Array::new();
-    interval.push(c.threshold_interval.0);
-    interval.push(c.threshold_interval.1);
-    cal.insert("interval", toml_edit::value(interval));
-    cal.insert("source", toml_edit::value(source));
-    let mut iso = toml_edit::InlineTable::new();
-    for i in isolation {
-        if let Some(q) = i.quantile {
-            iso.insert(&i.test, q.value.into());
-        }
-    }
-    if !iso.is_empty() {
-        cal.insert("isolation", toml_edit::value(iso));
-    }
-    glr.insert("calibrated", toml_edit::Item::Table(cal));
-    let updated = doc.to_string();
-    glrmon_spec::parse(&updated)
-        .map_err(|e| InvalidInput(format!("the updated configuration would be invalid:\n{e}")))?;
+    let thresholds: Vec<(&str, f64)> = isolation
+        .iter()
+        .filter_map(|i| i.quantile.map(|q| (i.test.as_str(), q.value)))
+        .collect();
+    let updated = glrmon_spec::edit::set_calibrated(&text, channel, c, &thresholds, source)
+        .map_err(|e| match e {
+            EditError::Invalid(_) => InvalidInput(e.to_string()),
+            e => InvalidInput(format!("{}: {e}", path.display())),
+        })?;
     std::fs::write(path, updated)?;
     Ok(())
 }
