@@ -433,6 +433,23 @@ impl Runtime {
             .is_some_and(|q| q.send(Job::Retune(index, Box::new(tuning))).is_ok())
     }
 
+    /// Hands every channel of `config` that this runtime monitors (found by name) its
+    /// thresholds and alarm settings, behind the payloads already queued; the filters
+    /// go on. Returns how many channels were retuned. What needs a restart (models,
+    /// windows, channels added or removed) is for the caller to refuse first
+    /// ([`glrmon_spec::Config::restart_needed`]).
+    pub fn retune_from(&self, config: &glrmon_spec::Config) -> usize {
+        self.names
+            .iter()
+            .enumerate()
+            .filter(|(index, name)| {
+                config
+                    .channel(name)
+                    .is_some_and(|c| self.retune(*index, glrmon_monitor::Tuning::from_channel(c)))
+            })
+            .count()
+    }
+
     /// The runtime's queue, worker and latency metrics.
     #[must_use]
     pub fn metrics(&self) -> Arc<RuntimeMetrics> {

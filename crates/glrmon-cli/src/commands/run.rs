@@ -361,14 +361,7 @@ fn reload(
         return current;
     }
     let new = new.into_shard(shard);
-    let mut retuned = 0;
-    for (index, name) in runtime.channel_names().iter().enumerate() {
-        if let Some(ch) = new.channel(name) {
-            if runtime.retune(index, glrmon_monitor::Tuning::from_channel(ch)) {
-                retuned += 1;
-            }
-        }
-    }
+    let retuned = runtime.retune_from(&new);
     tracing::info!(
         config = %path.display(),
         channels = retuned,
