@@ -7,7 +7,7 @@ CARGO ?= cargo
 .PHONY: help deps deps-zenohd build test fmt fmt-check lint unit doc check-deps check-config fuzz-build fuzz msrv demo bench bench-e2e bench-replay
 
 help: ## list the targets
-	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-11s %s\n", $$1, $$2}'
+	@grep -E '^[a-zA-Z0-9_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-11s %s\n", $$1, $$2}'
 
 deps: deps-zenohd ## the toolchain (rustfmt, clippy) and zenohd for the router-mesh test
 	@command -v $(CARGO) >/dev/null || { echo "cargo not found: install Rust (rustup)"; exit 1; }
