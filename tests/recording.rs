@@ -257,10 +257,10 @@ fn validate(schema: &serde_json::Value, v: &serde_json::Value, at: &str) -> Resu
             return Err(format!("{at}: {v} is not of type {types:?}"));
         }
     }
-    if let Some(e) = obj.get("enum").and_then(Value::as_array) {
-        if !e.contains(v) {
-            return Err(format!("{at}: {v} is not one of {e:?}"));
-        }
+    if let Some(e) = obj.get("enum").and_then(Value::as_array)
+        && !e.contains(v)
+    {
+        return Err(format!("{at}: {v} is not one of {e:?}"));
     }
     if let (Some(items), Some(arr)) = (obj.get("items"), v.as_array()) {
         for (i, x) in arr.iter().enumerate() {
@@ -479,12 +479,11 @@ fn inputs_in(path: &Path, channel: &str) -> usize {
     };
     let mut n = 0;
     while let Ok(Some(e)) = r.next_event() {
-        if let Event::Message(m) = e {
-            if m.topic.kind == Some(TopicKind::Inputs)
-                && m.topic.channel.as_deref() == Some(channel)
-            {
-                n += 1;
-            }
+        if let Event::Message(m) = e
+            && m.topic.kind == Some(TopicKind::Inputs)
+            && m.topic.channel.as_deref() == Some(channel)
+        {
+            n += 1;
         }
     }
     n

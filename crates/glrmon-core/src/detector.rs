@@ -638,13 +638,13 @@ impl Detector {
     }
 
     fn check(&self, s: &Sample<'_>) -> Result<(), StepError> {
-        if let Some(next) = self.next_k {
-            if s.k != next {
-                return Err(StepError::OutOfOrder {
-                    expected: next,
-                    got: s.k,
-                });
-            }
+        if let Some(next) = self.next_k
+            && s.k != next
+        {
+            return Err(StepError::OutOfOrder {
+                expected: next,
+                got: s.k,
+            });
         }
         for (field, v, expected) in [
             ("u", s.u, self.dims.inputs),

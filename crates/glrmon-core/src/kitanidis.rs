@@ -387,13 +387,13 @@ impl UpdatedFilter {
                 });
             }
         }
-        if let Some(phi) = s.phi {
-            if phi.shape() != (p, m) {
-                return Err(SparseError::Dimension {
-                    what: "phi",
-                    detail: format!("phi is {}×{}, expected {p}×{m}", phi.nrows(), phi.ncols()),
-                });
-            }
+        if let Some(phi) = s.phi
+            && phi.shape() != (p, m)
+        {
+            return Err(SparseError::Dimension {
+                what: "phi",
+                detail: format!("phi is {}×{}, expected {p}×{m}", phi.nrows(), phi.ncols()),
+            });
         }
         if let Some(e) = e {
             if e.shape() != (n, self.ud) {

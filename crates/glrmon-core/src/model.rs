@@ -273,13 +273,13 @@ impl Lpv {
             ("Q", &q),
             ("R", &r),
         ] {
-            if let Some(s) = m.max_signal() {
-                if s >= signals {
-                    return Err(dim_err(
-                        name,
-                        format!("scheduling signal p{s} used but samples carry {signals} signals"),
-                    ));
-                }
+            if let Some(s) = m.max_signal()
+                && s >= signals
+            {
+                return Err(dim_err(
+                    name,
+                    format!("scheduling signal p{s} used but samples carry {signals} signals"),
+                ));
             }
             let finite = m.base.iter().all(|x| x.is_finite())
                 && m.terms.iter().all(|(_, t)| t.iter().all(|x| x.is_finite()));

@@ -63,7 +63,7 @@ fn step_performs_zero_heap_allocations_after_warmup() {
             let k = k as u64;
             // Gaps, then none: an LTI channel leaves the fast path at each gap and
             // enters it again (tables built) in the measured span.
-            if k % 97 == 0 && k < 7_000 {
+            if k.is_multiple_of(97) && k < 7_000 {
                 det.predict_only(k).unwrap();
             } else {
                 det.step(

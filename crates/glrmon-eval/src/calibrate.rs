@@ -114,10 +114,10 @@ pub fn statistics<E: From<glrmon_core::ModelError>>(
             }
         }
         n += 1;
-        if n % PROGRESS_STEP == 0 {
-            if let Some(p) = progress {
-                p(PROGRESS_STEP);
-            }
+        if n.is_multiple_of(PROGRESS_STEP)
+            && let Some(p) = progress
+        {
+            p(PROGRESS_STEP);
         }
     }
     Ok(stats)

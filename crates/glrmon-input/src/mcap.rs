@@ -154,11 +154,11 @@ impl McapInput {
             .next_event()
             .map_err(|e| InputError::new(path, InputErrorKind::Read(e)))?
         {
-            if let Event::Metadata { name, entries } = &event {
-                if name == METADATA_NAME {
-                    header = Some(glrmon_record::header_from_metadata(entries));
-                    break;
-                }
+            if let Event::Metadata { name, entries } = &event
+                && name == METADATA_NAME
+            {
+                header = Some(glrmon_record::header_from_metadata(entries));
+                break;
             }
             let is_message = matches!(event, Event::Message(_));
             pending.push_back(event);
@@ -244,10 +244,9 @@ impl McapInput {
             item: InputItem::Sample(s),
             ..
         }) = spare
+            && self.spare_samples.len() < SPARE_SAMPLES
         {
-            if self.spare_samples.len() < SPARE_SAMPLES {
-                self.spare_samples.push(s);
-            }
+            self.spare_samples.push(s);
         }
         loop {
             if let Some(i) = self.queued.pop_front() {

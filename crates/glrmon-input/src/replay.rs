@@ -137,7 +137,7 @@ pub fn replay_mcap(
         .map_err(ReplayError::Spawn)?;
     while let Some(recorded) = inputs_ahead.next()? {
         inputs += 1;
-        if inputs % PROGRESS_EVERY == 0 {
+        if inputs.is_multiple_of(PROGRESS_EVERY) {
             progress(bytes_read.load(Ordering::Relaxed));
         }
         let found = match &last {

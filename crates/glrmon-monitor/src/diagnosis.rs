@@ -322,13 +322,13 @@ impl DiagnosisEngine {
     /// unchanged then, except for expression-column history.
     pub fn step(&mut self, sample: &Sample<'_>) -> Result<(), DiagnosisError> {
         let k = sample.k;
-        if let Some((_, newest)) = self.held() {
-            if k != newest + 1 {
-                return Err(DiagnosisError::OutOfOrder {
-                    expected: newest + 1,
-                    got: k,
-                });
-            }
+        if let Some((_, newest)) = self.held()
+            && k != newest + 1
+        {
+            return Err(DiagnosisError::OutOfOrder {
+                expected: newest + 1,
+                got: k,
+            });
         }
         let signals = Signals {
             u: sample.u,

@@ -468,22 +468,21 @@ impl Monitor {
             .consistency
             .as_mut()
             .and_then(|c| c.update(self.out.normalized_innovation))
+            && block.changed
         {
-            if block.changed {
-                records.push(Record::Consistency(glrmon_wire::Consistency {
-                    channel: self.channel.clone(),
-                    k,
-                    t: sample.t,
-                    state: block.verdict.as_str().to_owned(),
-                    nis_mean: block.mean,
-                    expected: self.detector.dims().outputs as f64,
-                    band: [block.band.0, block.band.1],
-                    window: self
-                        .consistency
-                        .as_ref()
-                        .map_or(0, |c| c.settings().window as u64),
-                }));
-            }
+            records.push(Record::Consistency(glrmon_wire::Consistency {
+                channel: self.channel.clone(),
+                k,
+                t: sample.t,
+                state: block.verdict.as_str().to_owned(),
+                nis_mean: block.mean,
+                expected: self.detector.dims().outputs as f64,
+                band: [block.band.0, block.band.1],
+                window: self
+                    .consistency
+                    .as_ref()
+                    .map_or(0, |c| c.settings().window as u64),
+            }));
         }
         if let Some(engine) = &mut self.diagnosis {
             match engine.step(&core_sample) {

@@ -876,13 +876,14 @@ fn lasso_path_figure(d: &Diagnosis, x: Axis, fig_id: &mut usize) -> String {
         };
         fig.polyline([path(*j)], color, 1.9, None);
         fig.legend(name, color, Swatch::Line);
-        if let Some(v) = d.estimate.get(name) {
-            if d.lambda.is_finite() && d.lambda > 0.0 {
-                let (px, py) = (fig.xp(d.lambda), fig.yp(*v));
-                fig.raw(&format!(
+        if let Some(v) = d.estimate.get(name)
+            && d.lambda.is_finite()
+            && d.lambda > 0.0
+        {
+            let (px, py) = (fig.xp(d.lambda), fig.yp(*v));
+            fig.raw(&format!(
                     r##"<circle class="refit" cx="{px:.1}" cy="{py:.1}" r="4.5" fill="#fff" stroke="{color}" stroke-width="2"/>"##
                 ));
-            }
         }
     }
     if !colored.is_empty() && !d.estimate.is_empty() {

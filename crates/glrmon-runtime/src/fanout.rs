@@ -19,7 +19,9 @@ impl DeliveryPlan {
     /// `stat` records.
     #[must_use]
     pub fn wants_stat(&self, stat_index: u64) -> bool {
-        self.stat_every.iter().any(|&e| stat_index % e == 0)
+        self.stat_every
+            .iter()
+            .any(|&e| stat_index.is_multiple_of(e))
     }
 
     /// Whether some sink keeps any `stat` record.
@@ -109,10 +111,10 @@ impl Fanout {
     /// `on_error` and the other sinks still get the input.
     pub fn input(&mut self, input: &InputOutput, on_error: &mut dyn FnMut(SinkError)) {
         for (s, interest) in self.sinks.iter_mut().zip(&self.interests) {
-            if interest.inputs {
-                if let Err(e) = s.write_input(input) {
-                    on_error(e);
-                }
+            if interest.inputs
+                && let Err(e) = s.write_input(input)
+            {
+                on_error(e);
             }
         }
     }

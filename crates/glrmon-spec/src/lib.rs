@@ -632,13 +632,13 @@ pub fn parse(text: &str) -> Result<Config, SpecErrors> {
             "no channels: add at least one [[channels]] table".into(),
         );
     }
-    if let Some(mode) = &file.zenoh.mode {
-        if !matches!(mode.as_str(), "peer" | "client" | "router") {
-            v.error(
-                "zenoh.mode".into(),
-                format!("\"{mode}\" is not one of peer, client, router"),
-            );
-        }
+    if let Some(mode) = &file.zenoh.mode
+        && !matches!(mode.as_str(), "peer" | "client" | "router")
+    {
+        v.error(
+            "zenoh.mode".into(),
+            format!("\"{mode}\" is not one of peer, client, router"),
+        );
     }
     let d = &file.daemon;
     if d.workers == Some(0)
@@ -657,18 +657,18 @@ pub fn parse(text: &str) -> Result<Config, SpecErrors> {
             format!("{} must be finite and positive", d.shutdown_timeout),
         );
     }
-    if let Some(text) = &d.shard {
-        if let Err(e) = text.parse::<Shard>() {
-            v.error("daemon.shard".into(), e);
-        }
+    if let Some(text) = &d.shard
+        && let Err(e) = text.parse::<Shard>()
+    {
+        v.error("daemon.shard".into(), e);
     }
-    if let Some(addr) = &d.metrics {
-        if addr.parse::<std::net::SocketAddr>().is_err() {
-            v.error(
-                "daemon.metrics".into(),
-                format!("\"{addr}\" is not a local address of the form 127.0.0.1:9464"),
-            );
-        }
+    if let Some(addr) = &d.metrics
+        && addr.parse::<std::net::SocketAddr>().is_err()
+    {
+        v.error(
+            "daemon.metrics".into(),
+            format!("\"{addr}\" is not a local address of the form 127.0.0.1:9464"),
+        );
     }
     validate_recording(&mut v, &file.recording);
     let mut channels = Vec::new();
@@ -940,10 +940,10 @@ impl Validator {
                 false
             }
         });
-        if let Some(m) = &p0 {
-            if self.shape(prefix, "P0", m, (n, n), &format!("F is {n}×{n}")) {
-                self.covariance(prefix, "P0", m, true);
-            }
+        if let Some(m) = &p0
+            && self.shape(prefix, "P0", m, (n, n), &format!("F is {n}×{n}"))
+        {
+            self.covariance(prefix, "P0", m, true);
         }
         let x0 = match &model.x0 {
             Some(x) if x.len() != n => {
@@ -1282,22 +1282,22 @@ impl Validator {
                 ResidualKind::Kalman
             }
         };
-        if let Some(e) = e {
-            if let Err(err) = unknown_input_rank(h.base(), e) {
-                let text = format!(
-                    "{err} (H·E must have full column rank for the Kitanidis residual of sparse \
+        if let Some(e) = e
+            && let Err(err) = unknown_input_rank(h.base(), e)
+        {
+            let text = format!(
+                "{err} (H·E must have full column rank for the Kitanidis residual of sparse \
                      diagnosis{})",
-                    if h.terms().is_empty() {
-                        ""
-                    } else {
-                        "; checked at the base point of H"
-                    }
-                );
-                if residual == ResidualKind::Kitanidis {
-                    self.error(join(prefix, "model.E"), text);
+                if h.terms().is_empty() {
+                    ""
                 } else {
-                    self.warn(join(prefix, "model.E"), text);
+                    "; checked at the base point of H"
                 }
+            );
+            if residual == ResidualKind::Kitanidis {
+                self.error(join(prefix, "model.E"), text);
+            } else {
+                self.warn(join(prefix, "model.E"), text);
             }
         }
         let window = spec.glr.window;
@@ -1311,16 +1311,16 @@ impl Validator {
         if d.span == Some(0) {
             self.error(dpath("span"), "0 must be at least 1 sample".into());
         }
-        if let Some(span) = d.span {
-            if span > history {
-                self.warn(
-                    dpath("span"),
-                    format!(
-                        "{span} exceeds diagnosis.history = {history}: the regression holds at \
+        if let Some(span) = d.span
+            && span > history
+        {
+            self.warn(
+                dpath("span"),
+                format!(
+                    "{span} exceeds diagnosis.history = {history}: the regression holds at \
                          most {history} samples"
-                    ),
-                );
-            }
+                ),
+            );
         }
         let defaults = LassoSettings::default();
         let lasso = LassoSettings {
@@ -1670,16 +1670,16 @@ impl Validator {
             kp: c.kp,
             ki: c.ki,
         });
-        if let Some(c) = controller {
-            if c.input >= dims.inputs || c.output >= dims.outputs {
-                self.error(
-                    join(prefix, "simulation.controller"),
-                    format!(
-                        "drives u{} from y{} but the channel has {} inputs and {} outputs",
-                        c.input, c.output, dims.inputs, dims.outputs
-                    ),
-                );
-            }
+        if let Some(c) = controller
+            && (c.input >= dims.inputs || c.output >= dims.outputs)
+        {
+            self.error(
+                join(prefix, "simulation.controller"),
+                format!(
+                    "drives u{} from y{} but the channel has {} inputs and {} outputs",
+                    c.input, c.output, dims.inputs, dims.outputs
+                ),
+            );
         }
         SimulationPlan {
             inputs,

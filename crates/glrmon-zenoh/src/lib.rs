@@ -458,13 +458,13 @@ impl Ownership {
             .timeout(wait)
             .await
             .map_err(session_err("liveliness query"))?;
-        if let Ok(reply) = replies.recv_async().await {
-            if reply.result().is_ok() {
-                return Err(ZenohError::Overlap(format!(
-                    "an instance named \"{instance}\" is already running (liveliness token {}): give each instance its own name (--instance or daemon.instance)",
-                    liveliness_key(instance)
-                )));
-            }
+        if let Ok(reply) = replies.recv_async().await
+            && reply.result().is_ok()
+        {
+            return Err(ZenohError::Overlap(format!(
+                "an instance named \"{instance}\" is already running (liveliness token {}): give each instance its own name (--instance or daemon.instance)",
+                liveliness_key(instance)
+            )));
         }
         let replies = session
             .liveliness()
@@ -474,12 +474,12 @@ impl Ownership {
             .map_err(session_err("liveliness query"))?;
         let mut clashes = Vec::new();
         while let Ok(reply) = replies.recv_async().await {
-            if let Ok(sample) = reply.result() {
-                if let Some((channel, other)) = parse_owner(sample.key_expr().as_str()) {
-                    if other != instance && channels.iter().any(|c| c == channel) {
-                        clashes.push(format!("\"{channel}\" (instance \"{other}\")"));
-                    }
-                }
+            if let Ok(sample) = reply.result()
+                && let Some((channel, other)) = parse_owner(sample.key_expr().as_str())
+                && other != instance
+                && channels.iter().any(|c| c == channel)
+            {
+                clashes.push(format!("\"{channel}\" (instance \"{other}\")"));
             }
         }
         if !clashes.is_empty() {
@@ -510,10 +510,11 @@ impl Ownership {
                 if sample.kind() != SampleKind::Put {
                     return;
                 }
-                if let Some((channel, other)) = parse_owner(sample.key_expr().as_str()) {
-                    if other != me && mine.iter().any(|c| c == channel) {
-                        on_overlap(channel, other);
-                    }
+                if let Some((channel, other)) = parse_owner(sample.key_expr().as_str())
+                    && other != me
+                    && mine.iter().any(|c| c == channel)
+                {
+                    on_overlap(channel, other);
                 }
             })
             .await

@@ -99,11 +99,11 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         );
         print!("{}", isolation_text(&isolation, alpha));
     }
-    if args.write {
-        if let Some(path) = &args.config {
-            write(path, &channel.name, &c, &isolation, &source)?;
-            eprintln!("glrmon calibrate: {} updated", path.display());
-        }
+    if args.write
+        && let Some(path) = &args.config
+    {
+        write(path, &channel.name, &c, &isolation, &source)?;
+        eprintln!("glrmon calibrate: {} updated", path.display());
     }
     Ok(())
 }

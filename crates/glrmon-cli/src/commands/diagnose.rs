@@ -128,11 +128,11 @@ pub(crate) fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         ))
         .into());
     }
-    if let Some(e) = &channel.unknown_input {
-        if channel.diagnosis.residual == ResidualKind::Kitanidis {
-            glrmon_core::kitanidis::unknown_input_rank(channel.model.matrices()[2].base(), e)
-                .map_err(|e| InvalidInput(format!("channel \"{}\": {e}", channel.name)))?;
-        }
+    if let Some(e) = &channel.unknown_input
+        && channel.diagnosis.residual == ResidualKind::Kitanidis
+    {
+        glrmon_core::kitanidis::unknown_input_rank(channel.model.matrices()[2].base(), e)
+            .map_err(|e| InvalidInput(format!("channel \"{}\": {e}", channel.name)))?;
     }
     // First pass: the file's extent, so that the span and the history are known.
     let extent = for_each_sample(&args.input, &channel.name, channel.dims, |_, _| Ok(true))?

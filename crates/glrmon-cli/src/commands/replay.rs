@@ -180,18 +180,18 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
         Some(path) => load_config(path)?,
         None => input.recorded_config().map_err(input_error)?,
     };
-    if let Some(name) = &args.channel {
-        if cfg.channel(name).is_none() {
-            return Err(InvalidInput(format!(
-                "no channel \"{name}\" in the configuration (channels: {})",
-                cfg.channels
-                    .iter()
-                    .map(|c| c.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
-            .into());
-        }
+    if let Some(name) = &args.channel
+        && cfg.channel(name).is_none()
+    {
+        return Err(InvalidInput(format!(
+            "no channel \"{name}\" in the configuration (channels: {})",
+            cfg.channels
+                .iter()
+                .map(|c| c.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))
+        .into());
     }
     input.set_limits(DecodeLimits {
         max_payload_bytes: cfg.daemon.max_payload_bytes,

@@ -25,10 +25,10 @@ impl WindowBank {
                 }
                 Onset::Impulse => {
                     of.fill(0.0);
-                    if let Some(s) = newest {
-                        if self.onset[s] == k {
-                            of[s] = self.active[s];
-                        }
+                    if let Some(s) = newest
+                        && self.onset[s] == k
+                    {
+                        of[s] = self.active[s];
                     }
                 }
             }
