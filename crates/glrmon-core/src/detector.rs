@@ -5,13 +5,14 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::decoupling::RangeComplement;
 use crate::error::{ModelError, StepError};
 use crate::fault::FaultDictionary;
 use crate::glr::{DEFAULT_RANK_TOLERANCE, StepInputs, WindowBank};
 use crate::innovation::InnovationFilter;
 use crate::isolation::FisherStatistics;
-use crate::linalg::{gemm, solve_lower_in_place};
-use crate::model::{Dims, Signals, StateSpace, SystemMatrices};
+use crate::linalg::gemm;
+use crate::model::{Dims, LpvMatrix, Signals, StateSpace, SystemMatrices};
 
 /// Default [`WindowSettings::steady_tolerance`].
 pub const DEFAULT_STEADY_TOLERANCE: f64 = 1e-12;
@@ -163,8 +164,20 @@ pub struct Detector {
     cov_before: DMatrix<f64>,
     steady_samples: u64,
     /// The model is LTI and every fault column constant ([`StateSpace::is_constant`],
-    /// [`FaultDictionary::is_constant`]).
+    /// [`FaultDictionary::is_constant`]), and so is E if there is one.
     constant: bool,
+    /// The unknown input's matrix, when the plant has one.
+    unknown_input: Option<Box<UnknownInput>>,
+}
+
+/// E_k of a plant with an unknown input E_kd_k ([`Detector::with_unknown_input`]).
+#[derive(Debug, Clone)]
+struct UnknownInput {
+    matrix: LpvMatrix,
+    /// E_k at the sample being processed.
+    at_k: DMatrix<f64>,
+    /// range(E_k)'s complement, for the state-fault columns.
+    complement: RangeComplement,
 }
 
 impl Detector {
@@ -268,7 +281,64 @@ impl Detector {
             cov_before: DMatrix::zeros(n, n),
             steady_samples: 0,
             constant: model_constant && faults_constant,
+            unknown_input: None,
         })
+    }
+
+    /// The same detector for a plant with an unknown input E_kd_k (E n×q, constant or
+    /// LPV over the scheduling signals): the GLR runs on the innovation decoupled from
+    /// d, with the signatures of the Kitanidis filter's Υ̃ recursion (Zhang 2021,
+    /// §III-B, Prop. 2, eq. (27); [`crate::decoupling`]), so that no d_k can raise an
+    /// alarm. A state fault's component in range(E_k) cannot be told from d and is
+    /// removed; a fault entirely in it has no signature (not detectable). A missing
+    /// sample cannot be bridged ([`Detector::predict_only`] refuses it): d moves the
+    /// state unobserved over it.
+    ///
+    /// # Errors
+    /// [`ModelError::Dimension`] when E does not have n rows, [`ModelError::NonFinite`],
+    /// [`ModelError::Setting`] when q = 0, q ≥ p, or E at its base point does not have
+    /// full column rank.
+    pub fn with_unknown_input(mut self, e: LpvMatrix) -> Result<Self, ModelError> {
+        let (n, q) = e.shape();
+        if n != self.dims.states {
+            return Err(ModelError::Dimension {
+                what: "E",
+                detail: format!(
+                    "E has {n} rows but the model has {} states",
+                    self.dims.states
+                ),
+            });
+        }
+        if e.base()
+            .iter()
+            .chain(e.terms().iter().flat_map(|(_, m)| m.iter()))
+            .any(|v| !v.is_finite())
+        {
+            return Err(ModelError::NonFinite { what: "E" });
+        }
+        self.filter = self.filter.with_unknown_input(q)?;
+        let mut complement = RangeComplement::new(n, q);
+        if !complement.factor(e.base()) {
+            return Err(ModelError::Setting {
+                what: "E",
+                detail: "the columns of E are linearly dependent: give one column per \
+                         independent unknown-input direction"
+                    .into(),
+            });
+        }
+        self.constant &= e.terms().is_empty();
+        self.unknown_input = Some(Box::new(UnknownInput {
+            at_k: e.base().clone(),
+            matrix: e,
+            complement,
+        }));
+        Ok(self)
+    }
+
+    /// q, the number of unknown inputs (0 without).
+    #[must_use]
+    pub fn unknown_inputs(&self) -> usize {
+        self.filter.unknown_inputs()
     }
 
     /// Forgets every sample: the filter starts again from (x̂₀, P₀), the window is
@@ -281,7 +351,11 @@ impl Detector {
     /// [`ModelError`] only if (x̂₀, P₀) were invalid, which [`Detector::new`] excludes.
     pub fn restart(&mut self) -> Result<(), ModelError> {
         let (n, p, m) = (self.dims.states, self.dims.outputs, self.faults.len());
-        self.filter = InnovationFilter::new(self.x0.clone(), self.p0.clone(), p)?;
+        let filter = InnovationFilter::new(self.x0.clone(), self.p0.clone(), p)?;
+        self.filter = match &self.unknown_input {
+            Some(ui) => filter.with_unknown_input(ui.matrix.shape().1)?,
+            None => filter,
+        };
         let kinds = self.faults.faults().iter().map(|f| f.onset).collect();
         let (level, fused) = (self.bank.level(), self.bank.fused());
         self.bank = WindowBank::new(
@@ -367,6 +441,19 @@ impl Detector {
             self.psi.as_mut_slice(),
             self.phi.as_mut_slice(),
         );
+        if let Some(ui) = &mut self.unknown_input {
+            if !ui.matrix.terms().is_empty() {
+                ui.matrix.evaluate_into(sample.p, &mut ui.at_k);
+                if !ui.at_k.iter().all(|v| v.is_finite()) || !ui.complement.factor(&ui.at_k) {
+                    return Err(StepError::Numerical {
+                        what: "E_k evaluated at this sample's signals is not finite or does \
+                               not have full column rank",
+                    });
+                }
+            }
+            ui.complement
+                .project(self.psi.as_mut_slice(), self.faults.len());
+        }
         if self.bank.is_steady() {
             if self.matches_reference() {
                 self.step_steady(sample, out);
@@ -382,16 +469,14 @@ impl Detector {
         let (n, p, m) = (self.dims.states, self.dims.outputs, self.faults.len());
         (self.phi_last.as_mut_slice()).copy_from_slice(self.phi.as_slice());
         // Whiten Φ̃_k in place; F_kK_kΦ̃_k uses the unwhitened copy after the time update.
-        solve_lower_in_place(
-            self.filter.innovation_cholesky().as_slice(),
-            p,
-            self.phi.as_mut_slice(),
-            m,
-        );
+        self.filter.whiten_in_place(self.phi.as_mut_slice(), m);
         // The filter's time update (A_k, F_kK_k) goes first so that one pass over the
         // window does the signatures, the statistics and Γ's time update (eq. (46)).
         (self.cov_before.as_mut_slice()).copy_from_slice(self.filter.covariance().as_slice());
         self.filter.time_update(&self.system, sample.u);
+        if let Some(ui) = &self.unknown_input {
+            self.filter.set_unknown_input(&ui.at_k);
+        }
         gemm(
             1.0,
             self.filter.predictor_gain().as_slice(),
@@ -484,7 +569,9 @@ impl Detector {
     /// whole window has been built under them.
     fn track_stationarity(&mut self, k: u64) {
         let tol = self.settings.steady_tolerance;
-        if tol == 0.0 {
+        let e_varies =
+            (self.unknown_input.as_ref()).is_some_and(|ui| !ui.matrix.terms().is_empty());
+        if tol == 0.0 || e_varies {
             return;
         }
         let same = self.system == self.reference
@@ -580,8 +667,13 @@ impl Detector {
     ///
     /// # Errors
     /// [`StepError::OutOfOrder`] when k is not the next index or no sample has been
-    /// seen yet; [`StepError::Numerical`] when the model is not finite.
+    /// seen yet; [`StepError::Numerical`] when the model is not finite;
+    /// [`StepError::UnknownInputGap`] for a plant with an unknown input
+    /// ([`Detector::with_unknown_input`]), whose state d moves unobserved over a gap.
     pub fn predict_only(&mut self, k: u64) -> Result<(), StepError> {
+        if self.unknown_input.is_some() {
+            return Err(StepError::UnknownInputGap { k });
+        }
         match self.next_k {
             Some(next) if next == k => {}
             Some(next) => {

@@ -66,6 +66,16 @@ pub enum StepError {
         /// What failed.
         what: &'static str,
     },
+    /// Sample k is missing on a plant with an unknown input: d moves the state
+    /// unobserved over the gap, so the filter cannot bridge it and must restart.
+    #[error(
+        "sample {k} is missing and the model has an unknown input: the state cannot be \
+         predicted over the gap"
+    )]
+    UnknownInputGap {
+        /// The missing sample.
+        k: u64,
+    },
 }
 
 /// Threshold of the Assumption (iv) check of Zhang 2021

@@ -17,9 +17,15 @@
 //! Besides ε_k and Σ_k the filter exposes what the Γ recursion (eq. (46)) needs: the
 //! closed-loop matrix A_k = F_k(I − K_kH_k), the predictor gain F_kK_k, and the
 //! Cholesky factor L_k of Σ_k (Σ_k = L_kL_kᵀ) used to whiten the innovation.
+//!
+//! With an unknown input E_kd_k ([`InnovationFilter::with_unknown_input`]) the gain is
+//! the Kitanidis gain and the whitening also removes the directions H_kE_{k−1} that d
+//! can reach ([`crate::decoupling`], Zhang 2021 §III-B): the whitened quantities keep p
+//! rows, the first q of them zero.
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::decoupling::Decoupling;
 use crate::error::{ModelError, StepError};
 use crate::linalg::{
     Shape, cholesky_in_place, copy_n, gemm, gemv, solve_lower_in_place,
@@ -61,6 +67,8 @@ pub struct InnovationFilter {
     tmp_n: DVector<f64>,
     tmp_pp: DMatrix<f64>,
     chol_scratch: DMatrix<f64>,
+    /// The unknown input's decoupling, when the model has one.
+    unknown_input: Option<Box<Decoupling>>,
 }
 
 impl InnovationFilter {
@@ -110,7 +118,68 @@ impl InnovationFilter {
             tmp_n: DVector::zeros(n),
             tmp_pp: z(p, p),
             chol_scratch: z(p, p),
+            unknown_input: None,
         })
+    }
+
+    /// The same filter for a plant with an unknown input E_kd_k of `unknown_inputs`
+    /// (q) columns: from the second sample on, the gain is Kitanidis' (Zhang 2021, eqs.
+    /// (24c)-(24g)) and the whitened innovation has p − q degrees of freedom
+    /// ([`crate::decoupling`]). E_k is given after each time update with
+    /// [`InnovationFilter::set_unknown_input`].
+    ///
+    /// # Errors
+    /// [`ModelError::Setting`] when q = 0 or q ≥ p (nothing would be left to test).
+    pub fn with_unknown_input(mut self, unknown_inputs: usize) -> Result<Self, ModelError> {
+        if unknown_inputs == 0 || unknown_inputs >= self.p {
+            return Err(ModelError::Setting {
+                what: "E",
+                detail: format!(
+                    "E has {unknown_inputs} columns and there are {} outputs: decoupling \
+                     needs at least one column and fewer columns than outputs",
+                    self.p
+                ),
+            });
+        }
+        self.unknown_input = Some(Box::new(Decoupling::new(self.n, self.p, unknown_inputs)));
+        Ok(self)
+    }
+
+    /// E_k (n×q), the unknown input's matrix between this sample and the next; the next
+    /// [`InnovationFilter::measure`] decouples H_{k+1}E_k. Ignored without an unknown
+    /// input.
+    pub fn set_unknown_input(&mut self, e: &DMatrix<f64>) {
+        if let Some(d) = &mut self.unknown_input {
+            d.set_next(e);
+        }
+    }
+
+    /// q, the number of unknown inputs (0 without).
+    #[must_use]
+    pub fn unknown_inputs(&self) -> usize {
+        self.unknown_input
+            .as_ref()
+            .map_or(0, |d| d.unknown_inputs())
+    }
+
+    /// The degrees of freedom of the last whitened innovation: p, or p − q when it was
+    /// decoupled from an unknown input.
+    #[must_use]
+    pub fn innovation_dof(&self) -> usize {
+        match &self.unknown_input {
+            Some(d) if d.applied() => self.p - d.unknown_inputs(),
+            _ => self.p,
+        }
+    }
+
+    /// x ← W_k x for the `cols` columns of x (p×cols): L_k⁻¹x, and with an unknown input
+    /// the projection that zeroes the directions H_kE_{k−1} ([`crate::decoupling`]).
+    /// What whitens ε_k and H_k whitens the output-fault columns Φ_k too.
+    pub fn whiten_in_place(&self, x: &mut [f64], cols: usize) {
+        solve_lower_in_place(self.chol.as_slice(), self.p, x, cols);
+        if let Some(d) = &self.unknown_input {
+            d.project(x, cols);
+        }
     }
 
     /// Measurement update for sample k: computes ε_k, Σ_k, L_k, K_k and the whitened
@@ -171,6 +240,10 @@ impl InnovationFilter {
                 what: "innovation covariance Σ_k is not positive definite",
             });
         }
+        if let Some(d) = &mut self.unknown_input {
+            d.prepare(self.chol_scratch.as_slice(), sys.h.as_slice())?;
+            d.commit();
+        }
         std::mem::swap(&mut self.chol, &mut self.chol_scratch);
         copy_n(
             self.innovation_cov.as_mut_slice(),
@@ -180,9 +253,14 @@ impl InnovationFilter {
         self.innovation_from(s, sys, u, y);
         copy_n(self.h_white.as_mut_slice(), sys.h.as_slice(), p * n);
         solve_lower_in_place(self.chol.as_slice(), p, self.h_white.as_mut_slice(), n);
-        // K = P Hᵀ Σ⁻¹ = (P Hᵀ L⁻ᵀ) L⁻¹: solve X Lᵀ = P Hᵀ, then K L = X.
+        // K = P Hᵀ Σ⁻¹ = (P Hᵀ L⁻ᵀ) L⁻¹: solve X Lᵀ = P Hᵀ, then K L = X. With an
+        // unknown input, X becomes XQ₂Q₂ᵀ + E R⁻¹Q₁ᵀ in between (the Kitanidis gain).
         copy_n(self.gain.as_mut_slice(), self.pht.as_slice(), n * p);
         solve_right_lower_transpose_in_place(self.chol.as_slice(), p, self.gain.as_mut_slice(), n);
+        if let Some(d) = &self.unknown_input {
+            d.project(self.h_white.as_mut_slice(), n);
+            d.correct_gain(self.gain.as_mut_slice());
+        }
         solve_right_lower_in_place(self.chol.as_slice(), p, self.gain.as_mut_slice(), n);
         Ok(())
     }
@@ -325,6 +403,9 @@ impl InnovationFilter {
             self.innovation_white.as_mut_slice(),
             1,
         );
+        if let Some(d) = &self.unknown_input {
+            d.project(self.innovation_white.as_mut_slice(), 1);
+        }
     }
 
     /// Time update of the stationary filter: X̂_{k+1} = F_k(X̂_k + Kε_k) + G_kU_k
@@ -498,7 +579,8 @@ impl InnovationFilter {
         &self.predictor_gain
     }
 
-    /// εᵀΣ⁻¹ε of the last measured sample: χ²(p) under no fault.
+    /// εᵀΣ⁻¹ε of the last measured sample: χ²(p) under no fault (with an unknown input,
+    /// the decoupled part's: χ²(p − q), [`InnovationFilter::innovation_dof`]).
     #[must_use]
     pub fn normalized_innovation_squared(&self) -> f64 {
         self.innovation_white.norm_squared()
