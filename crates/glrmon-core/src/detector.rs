@@ -35,6 +35,11 @@ pub struct WindowSettings {
     /// the first sample whose matrices or fault columns differ, or at a gap. 0 turns the
     /// fast path off.
     pub steady_tolerance: f64,
+    /// Measured samples after the start (or a restart) during which no statistic is
+    /// reported (`glr`, `onset` none): 0 for none, w to hold the GLR off until the
+    /// window is full, as Zhang & Basseville 2014 do in §6.2 (the filter and the window
+    /// run meanwhile; only the output is withheld).
+    pub warm_up: u64,
 }
 
 impl Default for WindowSettings {
@@ -44,6 +49,7 @@ impl Default for WindowSettings {
             min_lag: 1,
             rank_tolerance: DEFAULT_RANK_TOLERANCE,
             steady_tolerance: DEFAULT_STEADY_TOLERANCE,
+            warm_up: 0,
         }
     }
 }
@@ -523,6 +529,8 @@ impl Detector {
 
     fn write_output(&mut self, k: u64, best: Option<crate::glr::WindowMax>, out: &mut StepOutput) {
         out.k = k;
+        // Withheld during the warm-up (this sample is measured sample input_count + 1).
+        let best = best.filter(|_| self.input_count + 1 >= self.settings.warm_up);
         (out.innovation.as_mut_slice()).copy_from_slice(self.filter.innovation().as_slice());
         out.normalized_innovation = self.filter.normalized_innovation_squared();
         match best {

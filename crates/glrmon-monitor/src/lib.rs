@@ -257,7 +257,7 @@ impl Monitor {
         };
         let mut monitor = Self::new(&channel.name, channel.detector()?, settings);
         if let Some(c) = channel.consistency {
-            monitor = monitor.with_consistency(Consistency::new(channel.dims.outputs, c)?);
+            monitor = monitor.with_consistency(Consistency::new(channel.innovation_dof(), c)?);
         }
         if !channel.diagnosis.enabled {
             return Ok(monitor);
@@ -388,6 +388,13 @@ impl Monitor {
                         self.settings.max_gap
                     );
                     self.restart(k, sample.t, ErrorCode::Gap, why, records);
+                } else if self.detector.unknown_inputs() > 0 {
+                    let why = format!(
+                        "{missing} samples missing before k = {k} and the model has an \
+                         unknown input (model.E), which moves the state unobserved over a \
+                         gap: the filter restarts from its initial state at k = {k}"
+                    );
+                    self.restart(k, sample.t, ErrorCode::Gap, why, records);
                 } else {
                     let mut failed = None;
                     for gap_k in next..k {
@@ -476,7 +483,7 @@ impl Monitor {
                 t: sample.t,
                 state: block.verdict.as_str().to_owned(),
                 nis_mean: block.mean,
-                expected: self.detector.dims().outputs as f64,
+                expected: (self.detector.dims().outputs - self.detector.unknown_inputs()) as f64,
                 band: [block.band.0, block.band.1],
                 window: self
                     .consistency
@@ -1057,10 +1064,12 @@ lasso = { ratio = 1e-2 }
     }
 
     /// Assumption (iv) is checked at the base point of H only: when an LPV H loses it
-    /// (H_kE = 0 while p0 = 1), the Kitanidis filter fails, one `error` record says so,
-    /// the filter restarts, and the samples keep flowing.
+    /// (H_kE = 0 while p0 = 1), the detector cannot decouple the unknown input at that
+    /// sample (Zhang 2021 §III-B): one `error` record says so, the sample is dropped and
+    /// the filter restarts at the next one (which needs no decoupling: nothing precedes
+    /// it), and the samples keep flowing. Over k = 30..35 that is every other sample.
     #[test]
-    fn a_residual_filter_failure_is_reported_once_and_the_filter_restarts() {
+    fn a_decoupling_failure_is_reported_and_the_filter_restarts() {
         let text = r#"
 [[channels]]
 name = "lpv"
@@ -1097,14 +1106,17 @@ enabled = true
                 _ => None,
             })
             .collect();
-        assert_eq!(errors.len(), 1, "{errors:#?}");
-        assert_eq!(errors[0].k, Some(30));
-        assert!(
-            errors[0].message.contains("Assumption (iv)"),
-            "{}",
-            errors[0].message
-        );
-        assert_eq!(mon.counters().samples, 80);
+        let ks: Vec<Option<u64>> = errors.iter().map(|e| e.k).collect();
+        assert_eq!(ks, [Some(30), Some(32), Some(34)], "{errors:#?}");
+        for e in &errors {
+            assert!(
+                e.message.contains("Assumption (iv)") && e.message.contains("restarts"),
+                "{}",
+                e.message
+            );
+        }
+        assert_eq!(mon.counters().samples, 77);
+        assert_eq!(mon.counters().restarts, 3);
         let held = mon.diagnosis().and_then(DiagnosisEngine::held);
         assert_eq!(held.map(|(_, newest)| newest), Some(79));
         assert!(held.is_some_and(|(oldest, _)| oldest >= 31));

@@ -501,13 +501,24 @@ impl Channel {
     /// # Errors
     /// As [`Detector::new`] (not expected after validation).
     pub fn detector(&self) -> Result<Detector, ModelError> {
-        Detector::new(
+        let detector = Detector::new(
             Box::new(self.model.clone()),
             self.dictionary()?,
             self.x0.clone(),
             self.p0.clone(),
             self.window,
-        )
+        )?;
+        match &self.unknown_input {
+            Some(e) => detector.with_unknown_input(LpvMatrix::constant(e.clone())),
+            None => Ok(detector),
+        }
+    }
+
+    /// The degrees of freedom of the detector's whitened innovation: p, or p − q with
+    /// q unknown inputs, which the detector decouples (Zhang 2021 §III-B).
+    #[must_use]
+    pub fn innovation_dof(&self) -> usize {
+        self.dims.outputs - self.unknown_input.as_ref().map_or(0, |e| e.ncols())
     }
 
     /// Whether the model's matrices are constant (LTI).
@@ -1030,9 +1041,10 @@ impl Validator {
                 false
             }
         };
-        // The χ² detector tests εᵀΣ⁻¹ε ~ χ²(p) on one sample: no window to correct for.
+        // The χ² detector tests εᵀΣ⁻¹ε ~ χ²(p) on one sample (χ²(p − q) decoupled from
+        // q unknown inputs): no window to correct for.
         let m = if chi2_detector {
-            dims.outputs.max(1)
+            (dims.outputs - e.as_ref().map_or(0, |e| e.ncols()).min(dims.outputs)).max(1)
         } else {
             faults.len().max(1)
         };
@@ -1159,7 +1171,8 @@ impl Validator {
                 window: c.window,
                 alpha: c.alpha,
             };
-            match glrmon_core::consistency::Consistency::new(dims.outputs, settings) {
+            let dof = dims.outputs - e.as_ref().map_or(0, |e| e.ncols()).min(dims.outputs);
+            match glrmon_core::consistency::Consistency::new(dof.max(1), settings) {
                 Ok(_) => Some(settings),
                 Err(e) => {
                     let field = if c.window == 0 { "window" } else { "alpha" };
@@ -1169,6 +1182,18 @@ impl Validator {
             }
         } else {
             None
+        };
+        let warm_up = match &glr.warm_up {
+            None => 0,
+            Some(schema::WarmUpSpec::Samples(n)) => *n,
+            Some(schema::WarmUpSpec::Keyword(w)) if w == "window" => glr.window as u64,
+            Some(schema::WarmUpSpec::Keyword(other)) => {
+                self.error(
+                    join(prefix, "glr.warm_up"),
+                    format!("\"{other}\" is not \"window\" or a number of samples"),
+                );
+                0
+            }
         };
         if self.errors.len() > before {
             return None;
@@ -1191,6 +1216,7 @@ impl Validator {
                 window: glr.window,
                 min_lag: glr.min_lag,
                 rank_tolerance: tolerance,
+                warm_up,
                 ..WindowSettings::default()
             },
             alarm: AlarmSettings {
@@ -1282,22 +1308,29 @@ impl Validator {
                 ResidualKind::Kalman
             }
         };
-        if let Some(e) = e
-            && let Err(err) = unknown_input_rank(h.base(), e)
-        {
-            let text = format!(
-                "{err} (H·E must have full column rank for the Kitanidis residual of sparse \
-                     diagnosis{})",
-                if h.terms().is_empty() {
-                    ""
-                } else {
-                    "; checked at the base point of H"
-                }
-            );
-            if residual == ResidualKind::Kitanidis {
+        if let Some(e) = e {
+            if let Err(err) = unknown_input_rank(h.base(), e) {
+                let text = format!(
+                    "{err} (H·E must have full column rank: the detector and the Kitanidis \
+                     residual decouple the unknown input{})",
+                    if h.terms().is_empty() {
+                        ""
+                    } else {
+                        "; checked at the base point of H"
+                    }
+                );
                 self.error(join(prefix, "model.E"), text);
-            } else {
-                self.warn(join(prefix, "model.E"), text);
+            } else if e.ncols() >= h.shape().0 {
+                self.error(
+                    join(prefix, "model.E"),
+                    format!(
+                        "has {} columns and H has {} rows: once the unknown input is \
+                         decoupled no output direction is left to detect faults with \
+                         (E needs fewer columns than there are outputs)",
+                        e.ncols(),
+                        h.shape().0
+                    ),
+                );
             }
         }
         let window = spec.glr.window;

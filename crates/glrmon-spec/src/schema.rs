@@ -264,7 +264,8 @@ pub struct ModelSpec {
     /// R (p×p), symmetric positive definite.
     #[serde(rename = "R")]
     pub r: MatrixSpec,
-    /// Unknown-input matrix E (n×d), for the Kitanidis residuals of sparse diagnosis.
+    /// Unknown-input matrix E (n×q, q < p): the detector runs on the innovation
+    /// decoupled from E·d_k, and sparse diagnosis on the Kitanidis residual.
     #[serde(rename = "E")]
     pub e: Option<MatrixSpec>,
     /// X̂_0 (default 0).
@@ -364,6 +365,20 @@ pub struct GlrSpec {
     /// a longer one the filter restarts from its initial state.
     #[serde(default = "default_max_gap")]
     pub max_gap: u64,
+    /// Samples after the start (and after each restart) during which the GLR is held
+    /// off: `"window"` (w, until the window is full, as Zhang & Basseville 2014 §6.2
+    /// do), a sample count, or none (default).
+    pub warm_up: Option<WarmUpSpec>,
+}
+
+/// `glr.warm_up`: a keyword or a number of samples.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum WarmUpSpec {
+    /// A number of samples.
+    Samples(u64),
+    /// `"window"`.
+    Keyword(String),
 }
 
 impl Default for GlrSpec {
@@ -383,6 +398,7 @@ impl Default for GlrSpec {
             groups: Vec::new(),
             rank_tolerance: None,
             max_gap: default_max_gap(),
+            warm_up: None,
         }
     }
 }

@@ -303,24 +303,21 @@ fn unknown_input_invisible_to_the_outputs_fails_assumption_iv() {
     // More unknown-input directions than outputs.
     let text = with("R = 0.04", "R = 0.04\nE = [[1.0, 0.0], [0.0, 1.0]]");
     assert_error(&text, r#"channels[0] "pump3": model.E: Assumption (iv)"#);
-    // The same E is fine when the outputs see it…
-    let ok = with("R = 0.04", "R = 0.04\nE = [[1.0], [0.0]]");
+    // The same E is fine when the outputs see it and leave a direction free of it…
+    let ok = with("H = [[1.0, 0.0]]", "H = [[1.0, 0.0], [0.0, 1.0]]")
+        .replace("R = 0.04", "R = 0.04\nE = [[1.0], [0.0]]");
     let cfg = glrmon_spec::parse(&ok).unwrap();
     let d = cfg.channels[0].diagnosis;
     assert_eq!(d.residual, glrmon_spec::ResidualKind::Kitanidis);
     assert!(!d.enabled);
     assert_eq!(d.history, 100);
-    // …and a rank-deficient E only warns when the Kalman residual is chosen.
-    let kalman = with("R = 0.04", "R = 0.04\nE = [[0.0], [1.0]]")
+    assert_eq!(cfg.channels[0].innovation_dof(), 1);
+    // …and a rank-deficient E is an error whatever the residual: the detector itself
+    // decouples the unknown input (Zhang 2021 §III-B).
+    let kalman = with("H = [[1.0, 0.0]]", "H = [[1.0, 0.0], [1.0, 0.0]]")
+        .replace("R = 0.04", "R = 0.04\nE = [[0.0], [1.0]]")
         + "\n[channels.diagnosis]\nresidual = \"kalman\"\n";
-    let cfg = glrmon_spec::parse(&kalman).unwrap();
-    assert!(
-        cfg.warnings
-            .iter()
-            .any(|w| w.to_string().contains("model.E: Assumption (iv)")),
-        "{:?}",
-        cfg.warnings
-    );
+    assert_error(&kalman, "model.E: Assumption (iv)");
 }
 
 #[test]
@@ -367,5 +364,32 @@ fn bad_shard_and_metrics_address_name_the_daemon_keys() {
     assert_error(
         &text,
         "daemon.metrics: \"localhost\" is not a local address",
+    );
+}
+
+#[test]
+fn warm_up_is_the_window_a_count_or_an_error() {
+    let warm = |v: &str| {
+        let cfg = glrmon_spec::parse(&with("min_lag = 1", &format!("min_lag = 1\nwarm_up = {v}")))
+            .unwrap();
+        cfg.channels[0].window.warm_up
+    };
+    assert_eq!(warm("\"window\""), 50);
+    assert_eq!(warm("30"), 30);
+    assert_eq!(
+        glrmon_spec::parse(BASE).unwrap().channels[0].window.warm_up,
+        0
+    );
+    assert_error(
+        &with("min_lag = 1", "min_lag = 1\nwarm_up = \"full\""),
+        "glr.warm_up: \"full\" is not \"window\" or a number of samples",
+    );
+}
+
+#[test]
+fn an_unknown_input_must_leave_an_output_direction() {
+    assert_error(
+        &with("R = 0.04", "R = 0.04\nE = [[1.0], [0.0]]"),
+        "model.E has 1 columns and H has 1 rows",
     );
 }

@@ -98,7 +98,7 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
         "LPV (time-varying)"
     };
     let known = channel.onsets().iter().all(|o| *o == Onset::Known);
-    let window = if known {
+    let mut window = if known {
         "known profiles: GLR over all samples (no onset search)".to_owned()
     } else {
         format!(
@@ -106,6 +106,13 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
             channel.window.window, channel.window.min_lag
         )
     };
+    if channel.window.warm_up > 0 {
+        let _ = write!(
+            window,
+            ", GLR held off for the first {} samples after a (re)start",
+            channel.window.warm_up
+        );
+    }
     let threshold = match channel.threshold_source {
         ThresholdSource::Explicit => format!("{:.4} (explicit)", channel.alarm.threshold),
         ThresholdSource::Bonferroni { false_alarm } => format!(
@@ -115,7 +122,8 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
         ),
         ThresholdSource::Chi2 { false_alarm } if channel.chi2_detector => format!(
             "{:.4} (χ²({}) upper quantile at {false_alarm:e} per sample)",
-            channel.alarm.threshold, channel.dims.outputs
+            channel.alarm.threshold,
+            channel.innovation_dof()
         ),
         ThresholdSource::Chi2 { false_alarm } => format!(
             "{:.4} (χ²({}) upper quantile at {false_alarm:e} per onset: optimistic, the window's \
@@ -165,18 +173,31 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
     }
     match channel.consistency {
         Some(c) => {
-            let band = glrmon_core::consistency::Consistency::new(channel.dims.outputs, c)
+            let band = glrmon_core::consistency::Consistency::new(channel.innovation_dof(), c)
                 .map(|t| t.band())
                 .unwrap_or((f64::NAN, f64::NAN));
             let _ = writeln!(
                 s,
                 "  model consistency: blocks of {} samples, mean of εᵀΣ⁻¹ε expected {} within [{:.3}, {:.3}] (α = {:e})",
-                c.window, channel.dims.outputs, band.0, band.1, c.alpha
+                c.window,
+                channel.innovation_dof(),
+                band.0,
+                band.1,
+                c.alpha
             );
         }
         None => {
             let _ = writeln!(s, "  model consistency: off");
         }
+    }
+    if let Some(e) = &channel.unknown_input {
+        let _ = writeln!(
+            s,
+            "  unknown input: E has {} column(s), decoupled from the innovation: the GLR runs on {} of the {} output directions (Zhang 2021 §III-B); faults in range(E) are not detectable",
+            e.ncols(),
+            channel.innovation_dof(),
+            channel.dims.outputs
+        );
     }
     let (info, steady, samples) = channel_information(channel)?;
     match steady {
