@@ -258,10 +258,14 @@ pub struct ModelSpec {
     /// J (p×l); absent means zero.
     #[serde(rename = "J")]
     pub j: Option<MatrixSpec>,
-    /// Q (n×n), symmetric positive semi-definite.
+    /// Q (n×n), symmetric positive semi-definite. A constant Q whose smallest eigenvalue
+    /// is negative by at most [`PSD_TOLERANCE`](crate::PSD_TOLERANCE) × its spectral
+    /// radius (a rounded printout) is replaced by the nearest PSD matrix, with a warning.
     #[serde(rename = "Q")]
     pub q: MatrixSpec,
-    /// R (p×p), symmetric positive definite.
+    /// R (p×p), symmetric positive definite. A constant R within
+    /// [`PSD_TOLERANCE`](crate::PSD_TOLERANCE) of that has its small eigenvalues raised
+    /// to `PSD_TOLERANCE` × λ_max, with a warning.
     #[serde(rename = "R")]
     pub r: MatrixSpec,
     /// Unknown-input matrix E (n×d), for the Kitanidis residuals of sparse diagnosis.
@@ -269,7 +273,7 @@ pub struct ModelSpec {
     pub e: Option<MatrixSpec>,
     /// X̂_0 (default 0).
     pub x0: Option<Vec<f64>>,
-    /// P_0 (default I), symmetric positive definite.
+    /// P_0 (default I), symmetric positive definite (rounded matrices as for R).
     #[serde(rename = "P0")]
     pub p0: Option<MatrixSpec>,
 }
