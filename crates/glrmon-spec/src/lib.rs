@@ -418,7 +418,12 @@ pub struct DiagnosisSettings {
     pub history: usize,
     /// The Lasso path (Zhang 2021, eq. (39)).
     pub lasso: LassoSettings,
+    /// Level α of the no-fault test before the λ rule, in (0, 1] (1: no test).
+    pub alpha: f64,
 }
+
+/// Default level of the sparse diagnosis's no-fault test: as `glr.isolation_alpha`.
+pub const DEFAULT_DIAGNOSIS_ALPHA: f64 = 0.01;
 
 /// A validated channel.
 #[derive(Debug, Clone)]
@@ -1412,12 +1417,20 @@ impl Validator {
                 format!("{} is not in (0, 1) (λ_min/λ_max)", lasso.ratio),
             );
         }
+        let alpha = d.alpha.unwrap_or(DEFAULT_DIAGNOSIS_ALPHA);
+        if !(alpha > 0.0 && alpha <= 1.0) {
+            self.error(
+                dpath("alpha"),
+                format!("{alpha} is not in (0, 1] (1 turns the no-fault test off)"),
+            );
+        }
         DiagnosisSettings {
             enabled: d.enabled,
             residual,
             span: d.span,
             history,
             lasso,
+            alpha,
         }
     }
 

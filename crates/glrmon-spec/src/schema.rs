@@ -474,6 +474,11 @@ pub struct DiagnosisSpec {
     /// Samples of filter quantities kept to rebuild the regression at an alarm (default
     /// 2 × `glr.window`).
     pub history: Option<usize>,
+    /// Level α of the no-fault test that precedes the λ rule: the probability that a
+    /// fault-free span gets a non-empty support (default 0.01; 1 turns the test off and
+    /// keeps Zhang 2021's rule, which always selects some faults). See
+    /// `glrmon_core::sparse::no_fault_test`.
+    pub alpha: Option<f64>,
     /// Settings of the Lasso path.
     #[serde(default)]
     pub lasso: LassoSpec,

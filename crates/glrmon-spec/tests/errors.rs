@@ -346,6 +346,26 @@ fn diagnosis_table_is_strict_and_checked() {
         "diagnosis.lasso.path_points",
     );
     assert_error(&diag("lasso = { points = 10 }"), "unknown field `points`");
+    assert_error(
+        &diag("alpha = 0.0"),
+        r#"channels[0] "pump3": diagnosis.alpha: 0 is not in (0, 1]"#,
+    );
+    assert_error(
+        &diag("alpha = 1.5"),
+        "diagnosis.alpha: 1.5 is not in (0, 1]",
+    );
+    assert_eq!(
+        glrmon_spec::parse(&diag("alpha = 1.0")).unwrap().channels[0]
+            .diagnosis
+            .alpha,
+        1.0
+    );
+    assert_eq!(
+        glrmon_spec::parse(BASE).unwrap().channels[0]
+            .diagnosis
+            .alpha,
+        glrmon_spec::DEFAULT_DIAGNOSIS_ALPHA
+    );
     let cfg = glrmon_spec::parse(&diag(
         "enabled = true\nspan = 30\nhistory = 60\nlasso = { path_points = 50, ratio = 1e-3 }",
     ))
