@@ -70,7 +70,10 @@
 //! matrix (both about 0.1 ms for Example 1: m = 50, N = 100, n = 3, p = 2) and the Lasso
 //! path on the m×m Gram matrix, which dominates: 2.3-4.4 ms for the whole path (100 λ
 //! down to 10⁻⁴λ_max, selection and refit) on Example 1 data on one core
-//! (crates/glrmon-core/benches/diagnose.rs), most of it at the small-λ end.
+//! (crates/glrmon-core/benches/diagnose.rs), most of it at the small-λ end. The
+//! no-fault test adds, unless the Lasso is whitened already, a second rebuild with
+//! per-sample weights (O(span·(p³ + p·m²))) and one m×m symmetric eigendecomposition
+//! (not benchmarked; the same order as the rebuild and Gram matrix above, below the path).
 //!
 //! Gaps: the residual filter has no predict-only step. After a gap (or a failure of
 //! the filter, e.g. Assumption (iv) lost at an LPV point) the monitor restarts it from
