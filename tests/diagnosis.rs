@@ -116,6 +116,53 @@ fn simulate_then_diagnose_finds_exactly_the_injected_faults() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Issue 19: on fault-free Example 1 data `glrmon diagnose` says "no fault": an
+/// empty support and estimate in the record, and the text names the χ² test. (The
+/// paper's rule alone always selected some of the 50 faults.)
+#[test]
+fn issue19_diagnose_on_fault_free_data_reports_no_fault() {
+    let dir = std::env::temp_dir().join(format!("glrmon-nofault-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("example1-clean.csv");
+    let config = table1::example1_path();
+    run_ok(
+        glrmon()
+            .args(["simulate", "--config"])
+            .arg(&config)
+            .args(["--channel", "ltv3", "--samples", "101", "--seed", "7"])
+            .arg("--output")
+            .arg(&csv),
+    );
+    let json = run_ok(
+        glrmon()
+            .args(["diagnose", "--config"])
+            .arg(&config)
+            .args(["--channel", "ltv3", "--json"])
+            .arg(&csv),
+    );
+    let glrmon_wire::Record::Diagnosis(d) =
+        glrmon_wire::decode_record(json.trim().as_bytes()).unwrap()
+    else {
+        panic!("not a diagnosis: {json}");
+    };
+    assert!(d.support.is_empty(), "{json}");
+    assert!(d.estimate.is_empty(), "{json}");
+    assert_eq!(d.plateau, [d.lambda, d.lambda]);
+    assert_eq!(Some(&d.lambda), d.path_lambda.first());
+    let text = run_ok(
+        glrmon()
+            .args(["diagnose", "--config"])
+            .arg(&config)
+            .arg(&csv),
+    );
+    assert!(text.contains("support:   (none)"), "{text}");
+    assert!(
+        text.contains("the χ²(50) upper quantile at α = 0.01: no fault in the span"),
+        "{text}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Online: with `[channels.diagnosis] enabled = true` (and an isolation delay that
 /// lets 100 samples accumulate), `glrmon replay` emits a `diagnosis` record right after
 /// the alarm, isolating exactly the injected faults.

@@ -151,6 +151,33 @@ fn validate_lists_every_error_and_exits_1() {
     );
 }
 
+/// Issue 19: the 2014 paper's §6.2 Q as printed (four decimals, λ_min = −2.5·10⁻⁵) is
+/// valid: exit 0, with a warning naming the field, λ_min and the change.
+#[test]
+fn issue19_validate_accepts_paper2014_gas_q_with_a_warning() {
+    let dir = TempDir::new("issue19");
+    let file = dir.file("gas-q.toml");
+    let text = std::fs::read_to_string(config("examples/paper2014-unstable.toml")).unwrap();
+    assert!(text.contains("Q = 0.0025"), "fixture changed");
+    let text = text.replacen(
+        "Q = 0.0025",
+        "Q = [[100.2766, -66.1165], [-66.1165, 43.5933]]",
+        1,
+    );
+    std::fs::write(&file, text).unwrap();
+    let out = ok(&glrmon(&["validate", &file]));
+    assert!(out.contains(": valid, 1 channel(s)"), "{out}");
+    let warning = out
+        .lines()
+        .find(|l| l.starts_with("warning: ") && l.contains("model.Q"))
+        .unwrap_or_else(|| panic!("no model.Q warning:\n{out}"));
+    assert!(
+        warning.contains(r#"channels[0] "unstable": model.Q is not positive semi-definite as written (smallest eigenvalue -2.548e-5"#),
+        "{warning}"
+    );
+    assert!(warning.contains("max |ΔQ| = 1."), "{warning}");
+}
+
 /// Issue 3: on the §6.1 plant the alarm lands within 5 samples of the injected onset
 /// 201 and isolates the right state (both magnitudes of the paper's Figures 3-4).
 #[test]

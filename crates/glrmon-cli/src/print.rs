@@ -65,8 +65,14 @@ fn diagnosis_line(d: &Diagnosis) -> String {
         .iter()
         .map(|(k, v)| format!("{k} {v:.3}"))
         .collect();
+    // An empty support is the diagnosis's "no fault" (the χ² test of θ = 0).
+    let none = if d.support.is_empty() {
+        " (no fault)"
+    } else {
+        ""
+    };
     format!(
-        "DIAG  {} k={} span={}..{} residual={} support=[{}] estimate=[{}] lambda={:.3e}",
+        "DIAG  {} k={} span={}..{} residual={} support=[{}]{none} estimate=[{}] lambda={:.3e}",
         d.channel,
         d.k,
         d.from,

@@ -23,6 +23,12 @@
 //! in [`select_plateau`]) and re-estimates the selected components by ordinary least
 //! squares (§V, Example 1).
 //!
+//! The paper diagnoses only after a detection and its λ rule always selects some
+//! faults. glrmon also diagnoses spans on request and after false alarms, so it first
+//! asks whether the regression explains anything at all: [`no_fault_test`], the
+//! likelihood-ratio test of θ = 0 on the whitened regression (χ² under no fault), and
+//! [`diagnose_tested`] returns the empty support when it is not significant (issue 19).
+//!
 //! Everything here works on the sufficient statistics XᵀX (m×m), Xᵀy (m), yᵀy and N,
 //! accumulated sample by sample by [`GramAccumulator`]: memory and the cost of the
 //! path do not depend on the number of samples. [`diagnose`] runs the whole chain.
@@ -662,7 +668,9 @@ const LOG_TIE: f64 = 1e-9;
 /// exactly as:
 ///
 /// 1. a *run* is a maximal set of consecutive path points with the same count;
-/// 2. runs with count 0 are discarded (θ̂ = 0 isolates nothing), and so are runs with
+/// 2. runs with count 0 are discarded (θ̂ = 0 isolates nothing; the path starts at
+///    λ_max, so the zero run has no width, and whether the span shows a fault at all
+///    is decided before, by [`no_fault_test`] in [`diagnose_tested`]), and so are runs with
 ///    count m (all faults active: the dense least-squares end of the path, whose width
 ///    is set by the path's lower end rather than by the data) unless no other run with
 ///    a non-zero count exists;
@@ -787,8 +795,12 @@ pub struct Diagnosis {
     pub path: Vec<(f64, usize)>,
     /// Whether coordinate descent met the tolerance at every λ of the path.
     pub converged: bool,
-    /// The whole regularisation path θ̂(λ_i), for plots like Zhang 2021, Fig. 2.
+    /// The whole regularisation path θ̂(λ_i), for plots like Zhang 2021, Fig. 2 (no
+    /// point when Xᵀy = 0 and the test found no fault).
     pub lasso_path: LassoPath,
+    /// The test of θ = 0 that preceded the λ rule ([`diagnose_tested`]); `None` from
+    /// [`diagnose`], which always applies the paper's rule.
+    pub test: Option<NoFaultTest>,
 }
 
 /// Sparse fault isolation of Zhang 2021, §IV: the Lasso path (eq. (39)) by
@@ -823,6 +835,143 @@ pub fn diagnose(
         path: sizes,
         converged: path.converged(),
         lasso_path: path,
+        test: None,
+    })
+}
+
+/// The test of "no fault" (θ = 0) before the λ rule: the likelihood-ratio statistic of
+/// the whitened regression y = Xθ + e against θ = 0 and its χ² threshold.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoFaultTest {
+    /// T = bᵀG⁺b with G = XᵀWX, b = XᵀWy: the drop of the whitened residual sum of
+    /// squares from θ = 0 to the least-squares θ̂.
+    pub statistic: f64,
+    /// rank G, the degrees of freedom of T under no fault (0: no fault is visible in
+    /// the span at all).
+    pub dof: usize,
+    /// The χ²(dof) upper quantile at `level` (0 when `level` is 1 or dof is 0).
+    pub threshold: f64,
+    /// The level α: the probability that fault-free data is diagnosed as faulty.
+    pub level: f64,
+}
+
+impl NoFaultTest {
+    /// Whether the regression explains a significant part of the residual:
+    /// T > threshold.
+    #[must_use]
+    pub fn fault(&self) -> bool {
+        self.statistic > self.threshold
+    }
+}
+
+/// Relative eigenvalue cut-off of G = XᵀWX in [`no_fault_test`]: directions below it
+/// carry no fault signal the data can see.
+const TEST_RANK_TOLERANCE: f64 = 1e-9;
+
+/// The likelihood-ratio test of θ = 0 in the regression y = Xθ + e of Zhang 2021,
+/// eq. (37), on a *whitened* accumulator (rows weighted by the pseudo-inverse W_k of the
+/// fault-free residual covariance, [`GramAccumulator::push_weighted`]).
+///
+/// # Math
+/// With e Gaussian, white (Zhang 2021, Props. 1-2: Kalman and Kitanidis residuals are
+/// white) and Cov(e_k) = W_k⁺, the log-likelihood ratio of the least-squares θ̂ against
+/// θ = 0 is ½T with
+///
+/// ```text
+/// T = ‖y‖²_W − min_θ ‖y − Xθ‖²_W = bᵀG⁺b,   G = XᵀWX,  b = XᵀWy
+/// ```
+///
+/// and under θ = 0, b ~ N(0, G), so T ~ χ²(rank G) exactly, whatever N, p and m (the
+/// same statistic as the 2014 GLR, Zhang & Basseville 2014, eq. (35), on the diagnosis
+/// span). The test says "fault" when T exceeds the χ²(rank G) upper α quantile. It
+/// tests the explained part only: unlike the whitened residual sum of squares ‖y‖²_W
+/// against χ²(N·p), it does not lose power as the span grows and does not fire when the
+/// residual is off for reasons no fault of the dictionary explains (Q or R wrong).
+/// Directions of G below 10⁻⁹·λ_max(G) are dropped (rank decision); `level` = 1 turns
+/// the test off (threshold 0: any signal is a fault, the paper's behaviour).
+///
+/// # Errors
+/// [`SparseError::Setting`] when `level` is not in (0, 1]; [`SparseError::Empty`] when
+/// no sample was accumulated.
+pub fn no_fault_test(whitened: &GramAccumulator, level: f64) -> Result<NoFaultTest, SparseError> {
+    if !(level > 0.0 && level <= 1.0) {
+        return Err(SparseError::Setting {
+            what: "level",
+            detail: format!("the no-fault test's level {level} is not in (0, 1]"),
+        });
+    }
+    if whitened.samples == 0 {
+        return Err(SparseError::Empty);
+    }
+    let eig = whitened.xtx.clone().symmetric_eigen();
+    let top = eig.eigenvalues.amax();
+    let mut statistic = 0.0;
+    let mut dof = 0;
+    for (i, &ev) in eig.eigenvalues.iter().enumerate() {
+        if ev > TEST_RANK_TOLERANCE * top && ev > 0.0 {
+            let proj = eig.eigenvectors.column(i).dot(&whitened.xty);
+            statistic += proj * proj / ev;
+            dof += 1;
+        }
+    }
+    let threshold = if dof == 0 || level >= 1.0 {
+        0.0
+    } else {
+        crate::threshold::chi2_upper_quantile(dof as f64, level).map_err(|e| {
+            SparseError::Setting {
+                what: "level",
+                detail: e.to_string(),
+            }
+        })?
+    };
+    Ok(NoFaultTest {
+        statistic,
+        dof,
+        threshold,
+        level,
+    })
+}
+
+/// [`diagnose`] preceded by a [`no_fault_test`]: when the test finds no fault the
+/// support is empty (no estimate; λ and the plateau are λ_max, the point where θ̂(λ)
+/// becomes 0, or 0 when Xᵀy = 0 and the path has no point), otherwise the paper's λ
+/// rule decides as in [`diagnose`]. This is where glrmon departs from Zhang 2021, whose
+/// diagnosis follows a detection and whose λ rule never selects the empty support.
+///
+/// # Errors
+/// As [`diagnose`], except that Xᵀy = 0 is no error when the test finds no fault.
+pub fn diagnose_tested(
+    gram: &GramAccumulator,
+    test: NoFaultTest,
+    settings: &LassoSettings,
+) -> Result<Diagnosis, SparseError> {
+    if test.fault() {
+        let mut d = diagnose(gram, settings)?;
+        d.test = Some(test);
+        return Ok(d);
+    }
+    let path = match lasso_path(gram, settings) {
+        Ok(path) => path,
+        Err(SparseError::NoSignal) => LassoPath {
+            m: gram.m,
+            lambdas: Vec::new(),
+            coefficients: Vec::new(),
+            sweeps: Vec::new(),
+            converged: Vec::new(),
+        },
+        Err(e) => return Err(e),
+    };
+    let lambda = path.lambdas().first().copied().unwrap_or(0.0);
+    Ok(Diagnosis {
+        support: Vec::new(),
+        estimate: Vec::new(),
+        lasso: Vec::new(),
+        lambda,
+        plateau: (lambda, lambda),
+        path: path.support_sizes(),
+        converged: path.converged(),
+        lasso_path: path,
+        test: Some(test),
     })
 }
 
@@ -1245,6 +1394,120 @@ mod tests {
         println!(
             "m = {m}: {} λ points, {total} coordinate sweeps in all; diagnose() takes {per:?}",
             path.len()
+        );
+    }
+
+    /// Whitened fault-free regressions (y ~ N(0, I), W = I): the no-fault statistic
+    /// follows χ²(rank XᵀX): mean m and rejection rate α at α = 0.05, over 2000
+    /// regressions (binomial sd of the count 9.7: the band is ±4 sd).
+    #[test]
+    fn no_fault_statistic_is_chi2_rank_under_no_fault_and_rejects_at_its_level() {
+        let mut rng = Rng::new(19);
+        let (rows, m, trials, level) = (40, 6, 2000, 0.05);
+        let mut rejected = 0;
+        let mut sum = 0.0;
+        for _ in 0..trials {
+            let x = rng.matrix(rows, m);
+            let y = DVector::from_fn(rows, |_, _| rng.normal());
+            let test = no_fault_test(&accumulate(&x, &y, &mut rng), level).unwrap();
+            assert_eq!(test.dof, m);
+            assert!((test.threshold - 12.591_587_243_743_977).abs() < 1e-9);
+            sum += test.statistic;
+            rejected += usize::from(test.fault());
+        }
+        let mean = sum / trials as f64;
+        println!("χ²({m}) law: mean {mean:.3}, {rejected}/{trials} above the α = {level} quantile");
+        assert!((mean - m as f64).abs() < 0.35, "mean {mean}");
+        assert!(
+            (61..=139).contains(&rejected),
+            "{rejected}/{trials} rejected"
+        );
+        // A duplicated column: rank 5, χ²(5).
+        let mut x = rng.matrix(rows, m);
+        let c0 = x.column(0).into_owned();
+        x.set_column(1, &c0);
+        let y = DVector::from_fn(rows, |_, _| rng.normal());
+        assert_eq!(
+            no_fault_test(&accumulate(&x, &y, &mut rng), level)
+                .unwrap()
+                .dof,
+            5
+        );
+    }
+
+    /// Issue 19: without a fault the tested diagnosis says so (empty support) in at
+    /// least 1 − α of the regressions; with one (two components of magnitude 1-2 at
+    /// unit noise) the test fires and the support holds the true faults.
+    #[test]
+    fn issue19_tested_diagnosis_is_empty_without_fault_and_exact_with_one() {
+        let mut rng = Rng::new(2019);
+        let (rows, m, level) = (100, 20, 0.01);
+        let settings = LassoSettings::default();
+        let mut empty = 0;
+        for _ in 0..200 {
+            let x = rng.matrix(rows, m);
+            let y = DVector::from_fn(rows, |_, _| rng.normal());
+            let g = one_row_per_sample(&x, &y);
+            let d = diagnose_tested(&g, no_fault_test(&g, level).unwrap(), &settings).unwrap();
+            if d.support.is_empty() {
+                empty += 1;
+                assert!(d.estimate.is_empty() && d.lasso.is_empty());
+                assert_eq!(d.lambda, d.lasso_path.lambdas()[0]);
+                assert_eq!(d.plateau, (d.lambda, d.lambda));
+            }
+            // The paper's rule alone never says "no fault": the bug of issue 19.
+            assert!(!diagnose(&g, &settings).unwrap().support.is_empty());
+        }
+        // P(empty) = 0.99; 196 is its mean, P(count < 193) ≈ 0.03 under Binomial(200, 0.99).
+        println!("fault-free: {empty}/200 empty supports at α = {level}");
+        assert!(empty >= 193, "{empty}/200 empty");
+        for trial in 0..20 {
+            let x = rng.matrix(rows, m);
+            let theta = sparse_theta(m, 2, &mut rng);
+            let y = &x * &theta + DVector::from_fn(rows, |_, _| rng.normal());
+            let g = one_row_per_sample(&x, &y);
+            let test = no_fault_test(&g, level).unwrap();
+            assert!(test.fault(), "trial {trial}: {test:?}");
+            let d = diagnose_tested(&g, test, &settings).unwrap();
+            let truth: Vec<usize> = (0..m).filter(|&j| theta[j] != 0.0).collect();
+            assert!(
+                truth.iter().all(|j| d.support.contains(j)),
+                "trial {trial}: support {:?}, truth {truth:?}",
+                d.support
+            );
+            assert_eq!(d.test, Some(test));
+        }
+    }
+
+    #[test]
+    fn no_fault_test_edge_cases() {
+        // No fault signature at all (X = 0): rank 0, no fault, no error, no path.
+        let mut g = GramAccumulator::new(3);
+        g.push(&DMatrix::zeros(2, 3), &DVector::from_vec(vec![0.5, -1.0]))
+            .unwrap();
+        let test = no_fault_test(&g, 0.01).unwrap();
+        assert_eq!((test.dof, test.statistic, test.threshold), (0, 0.0, 0.0));
+        let d = diagnose_tested(&g, test, &LassoSettings::default()).unwrap();
+        assert!(d.support.is_empty() && d.lasso_path.is_empty());
+        assert_eq!((d.lambda, d.plateau), (0.0, (0.0, 0.0)));
+        // Level 1 turns the test off: any signal is a fault.
+        let mut g = GramAccumulator::new(1);
+        g.push(
+            &DMatrix::from_element(1, 1, 1.0),
+            &DVector::from_element(1, 1e-6),
+        )
+        .unwrap();
+        assert!(no_fault_test(&g, 1.0).unwrap().fault());
+        assert!(!no_fault_test(&g, 0.5).unwrap().fault());
+        for bad in [0.0, -0.1, 1.5, f64::NAN] {
+            assert!(matches!(
+                no_fault_test(&g, bad),
+                Err(SparseError::Setting { what: "level", .. })
+            ));
+        }
+        assert_eq!(
+            no_fault_test(&GramAccumulator::new(2), 0.01),
+            Err(SparseError::Empty)
         );
     }
 }

@@ -19,6 +19,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod covariance;
 pub mod edit;
 pub mod expr;
 pub mod schema;
@@ -35,6 +36,8 @@ use glrmon_core::{
 };
 use nalgebra::{DMatrix, DVector};
 
+pub use crate::covariance::PSD_TOLERANCE;
+use crate::covariance::Verdict;
 use crate::expr::{Expr, ExprColumn, ExprContext};
 use crate::schema::{
     ChannelSpec, ConfigFile, DaemonSpec, DiagnosisSpec, EntrySpec, FaultSpec, MatrixSpec,
@@ -415,7 +418,12 @@ pub struct DiagnosisSettings {
     pub history: usize,
     /// The Lasso path (Zhang 2021, eq. (39)).
     pub lasso: LassoSettings,
+    /// Level α of the no-fault test before the λ rule, in (0, 1] (1: no test).
+    pub alpha: f64,
 }
+
+/// Default level of the sparse diagnosis's no-fault test: as `glr.isolation_alpha`.
+pub const DEFAULT_DIAGNOSIS_ALPHA: f64 = 0.01;
 
 /// A validated channel.
 #[derive(Debug, Clone)]
@@ -833,8 +841,17 @@ impl Validator {
         true
     }
 
-    /// Symmetric, and positive (semi-)definite at the base point.
-    fn covariance(&mut self, prefix: &str, name: &str, m: &LpvMatrix, definite: bool) {
+    /// Symmetric, and positive (semi-)definite. A constant matrix within
+    /// [`PSD_TOLERANCE`] of that (a paper's rounded figures) comes back projected, with a
+    /// warning, and the caller uses it instead; an LPV matrix is checked at its base
+    /// point and used as written (see [`covariance`](mod@covariance)).
+    fn covariance(
+        &mut self,
+        prefix: &str,
+        name: &str,
+        m: &LpvMatrix,
+        definite: bool,
+    ) -> Option<LpvMatrix> {
         let path = join(prefix, &format!("model.{name}"));
         for (label, mat) in
             std::iter::once(("", m.base())).chain(m.terms().iter().map(|(_, t)| (" term", t)))
@@ -845,21 +862,76 @@ impl Validator {
                     path.clone(),
                     format!("is not symmetric{label} (max |M − Mᵀ| = {asym:.3e})"),
                 );
-                return;
+                return None;
             }
         }
-        let eig = m.base().clone().symmetric_eigenvalues();
-        let (lo, hi) = (eig.min(), eig.max());
-        if definite && !(lo > 1e-12 * hi.abs().max(1e-300) && lo > 0.0) {
-            self.error(
-                path,
-                format!("is not positive definite (smallest eigenvalue {lo:.3e})"),
-            );
-        } else if !definite && lo < -1e-9 * hi.abs().max(1e-300) {
-            self.error(
-                path,
-                format!("is not positive semi-definite (smallest eigenvalue {lo:.3e})"),
-            );
+        let kind = if definite {
+            "positive definite"
+        } else {
+            "positive semi-definite"
+        };
+        if !m.terms().is_empty() {
+            // Today's check at the base point: no projection for an LPV matrix.
+            let eig = m.base().clone().symmetric_eigenvalues();
+            let (lo, hi) = (eig.min(), eig.max());
+            let bad = if definite {
+                !(lo > 1e-12 * hi.abs().max(1e-300) && lo > 0.0)
+            } else {
+                lo < -1e-9 * hi.abs().max(1e-300)
+            };
+            if bad {
+                self.error(
+                    path,
+                    format!(
+                        "is not {kind} at its base point (smallest eigenvalue {lo:.3e}; an LPV \
+                         covariance is used as written, never projected)"
+                    ),
+                );
+            }
+            return None;
+        }
+        match covariance::classify(m.base(), definite) {
+            Verdict::Kept => None,
+            Verdict::Rejected {
+                lambda_min,
+                lambda_max,
+            } => {
+                self.error(
+                    path,
+                    format!(
+                        "is not {kind} (smallest eigenvalue {lambda_min:.3e}, largest \
+                         {lambda_max:.3e}; a rounded matrix is accepted down to \
+                         −{PSD_TOLERANCE:e} × the spectral radius: give more digits if it was \
+                         rounded)"
+                    ),
+                );
+                None
+            }
+            Verdict::Projected {
+                matrix,
+                lambda_min,
+                lambda_max,
+                floor,
+                change,
+            } => {
+                let clip = if definite {
+                    format!(
+                        "eigenvalues below {PSD_TOLERANCE:e} × λ_max = {floor:.3e} raised to it"
+                    )
+                } else {
+                    "negative eigenvalues set to 0".to_owned()
+                };
+                self.warn(
+                    path,
+                    format!(
+                        "is not {kind} as written (smallest eigenvalue {lambda_min:.3e}, \
+                         largest {lambda_max:.3e}, within the tolerance {PSD_TOLERANCE:e} for \
+                         rounded figures): using the nearest {kind} matrix ({clip}; \
+                         max |Δ{name}| = {change:.3e})"
+                    ),
+                );
+                Some(LpvMatrix::constant(matrix))
+            }
         }
     }
 
@@ -930,13 +1002,17 @@ impl Validator {
             (p, l),
             &format!("H has {p} rows and there are {l} inputs"),
         );
-        let q = self.matrix(prefix, "Q", &model.q, Some(n))?;
-        let r = self.matrix(prefix, "R", &model.r, Some(p))?;
-        if self.shape(prefix, "Q", &q, (n, n), &format!("F is {n}×{n}")) {
-            self.covariance(prefix, "Q", &q, false);
+        let mut q = self.matrix(prefix, "Q", &model.q, Some(n))?;
+        let mut r = self.matrix(prefix, "R", &model.r, Some(p))?;
+        if self.shape(prefix, "Q", &q, (n, n), &format!("F is {n}×{n}"))
+            && let Some(projected) = self.covariance(prefix, "Q", &q, false)
+        {
+            q = projected;
         }
-        if self.shape(prefix, "R", &r, (p, p), &format!("H has {p} rows")) {
-            self.covariance(prefix, "R", &r, true);
+        if self.shape(prefix, "R", &r, (p, p), &format!("H has {p} rows"))
+            && let Some(projected) = self.covariance(prefix, "R", &r, true)
+        {
+            r = projected;
         }
         let p0 = match &model.p0 {
             Some(s) => self.matrix(prefix, "P0", s, Some(n)),
@@ -951,11 +1027,12 @@ impl Validator {
                 false
             }
         });
-        if let Some(m) = &p0
-            && self.shape(prefix, "P0", m, (n, n), &format!("F is {n}×{n}"))
-        {
-            self.covariance(prefix, "P0", m, true);
-        }
+        let p0 = match p0 {
+            Some(m) if self.shape(prefix, "P0", &m, (n, n), &format!("F is {n}×{n}")) => {
+                Some(self.covariance(prefix, "P0", &m, true).unwrap_or(m))
+            }
+            other => other,
+        };
         let x0 = match &model.x0 {
             Some(x) if x.len() != n => {
                 self.error(
@@ -1373,12 +1450,20 @@ impl Validator {
                 format!("{} is not in (0, 1) (λ_min/λ_max)", lasso.ratio),
             );
         }
+        let alpha = d.alpha.unwrap_or(DEFAULT_DIAGNOSIS_ALPHA);
+        if !(alpha > 0.0 && alpha <= 1.0) {
+            self.error(
+                dpath("alpha"),
+                format!("{alpha} is not in (0, 1] (1 turns the no-fault test off)"),
+            );
+        }
         DiagnosisSettings {
             enabled: d.enabled,
             residual,
             span: d.span,
             history,
             lasso,
+            alpha,
         }
     }
 

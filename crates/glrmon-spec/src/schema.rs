@@ -258,10 +258,14 @@ pub struct ModelSpec {
     /// J (p×l); absent means zero.
     #[serde(rename = "J")]
     pub j: Option<MatrixSpec>,
-    /// Q (n×n), symmetric positive semi-definite.
+    /// Q (n×n), symmetric positive semi-definite. A constant Q whose smallest eigenvalue
+    /// is negative by at most [`PSD_TOLERANCE`](crate::PSD_TOLERANCE) × its spectral
+    /// radius (a rounded printout) is replaced by the nearest PSD matrix, with a warning.
     #[serde(rename = "Q")]
     pub q: MatrixSpec,
-    /// R (p×p), symmetric positive definite.
+    /// R (p×p), symmetric positive definite. A constant R within
+    /// [`PSD_TOLERANCE`](crate::PSD_TOLERANCE) of that has its small eigenvalues raised
+    /// to `PSD_TOLERANCE` × λ_max, with a warning.
     #[serde(rename = "R")]
     pub r: MatrixSpec,
     /// Unknown-input matrix E (n×q, q < p): the detector runs on the innovation
@@ -270,7 +274,7 @@ pub struct ModelSpec {
     pub e: Option<MatrixSpec>,
     /// X̂_0 (default 0).
     pub x0: Option<Vec<f64>>,
-    /// P_0 (default I), symmetric positive definite.
+    /// P_0 (default I), symmetric positive definite (rounded matrices as for R).
     #[serde(rename = "P0")]
     pub p0: Option<MatrixSpec>,
 }
@@ -486,6 +490,11 @@ pub struct DiagnosisSpec {
     /// Samples of filter quantities kept to rebuild the regression at an alarm (default
     /// 2 × `glr.window`).
     pub history: Option<usize>,
+    /// Level α of the no-fault test that precedes the λ rule: the probability that a
+    /// fault-free span gets a non-empty support (default 0.01; 1 turns the test off and
+    /// keeps Zhang 2021's rule, which always selects some faults). See
+    /// `glrmon_core::sparse::no_fault_test`.
+    pub alpha: Option<f64>,
     /// Settings of the Lasso path.
     #[serde(default)]
     pub lasso: LassoSpec,

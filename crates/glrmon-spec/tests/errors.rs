@@ -343,6 +343,26 @@ fn diagnosis_table_is_strict_and_checked() {
         "diagnosis.lasso.path_points",
     );
     assert_error(&diag("lasso = { points = 10 }"), "unknown field `points`");
+    assert_error(
+        &diag("alpha = 0.0"),
+        r#"channels[0] "pump3": diagnosis.alpha: 0 is not in (0, 1]"#,
+    );
+    assert_error(
+        &diag("alpha = 1.5"),
+        "diagnosis.alpha: 1.5 is not in (0, 1]",
+    );
+    assert_eq!(
+        glrmon_spec::parse(&diag("alpha = 1.0")).unwrap().channels[0]
+            .diagnosis
+            .alpha,
+        1.0
+    );
+    assert_eq!(
+        glrmon_spec::parse(BASE).unwrap().channels[0]
+            .diagnosis
+            .alpha,
+        glrmon_spec::DEFAULT_DIAGNOSIS_ALPHA
+    );
     let cfg = glrmon_spec::parse(&diag(
         "enabled = true\nspan = 30\nhistory = 60\nlasso = { path_points = 50, ratio = 1e-3 }",
     ))
@@ -391,5 +411,84 @@ fn an_unknown_input_must_leave_an_output_direction() {
     assert_error(
         &with("R = 0.04", "R = 0.04\nE = [[1.0], [0.0]]"),
         "model.E has 1 columns and H has 1 rows",
+    );
+}
+
+/// Issue 19: Zhang & Basseville 2014 §6.2's Q, printed to four decimals, has
+/// λ_min = −2.5·10⁻⁵ (1.8·10⁻⁷ of λ_max). It is accepted with a warning naming the field,
+/// and the model uses the nearest PSD matrix, within 10⁻⁴ of the printed one.
+#[test]
+fn issue19_paper2014_gas_q_is_projected_with_a_warning() {
+    let text = with(
+        "Q = 0.01",
+        "Q = [[100.2766, -66.1165], [-66.1165, 43.5933]]",
+    );
+    let cfg = glrmon_spec::parse(&text).unwrap();
+    let warning = cfg
+        .warnings
+        .iter()
+        .map(ToString::to_string)
+        .find(|w| w.contains("model.Q"))
+        .unwrap_or_else(|| panic!("no model.Q warning in {:?}", cfg.warnings));
+    assert!(
+        warning.starts_with(r#"channels[0] "pump3": model.Q is not positive semi-definite as written (smallest eigenvalue -2.548e-5"#),
+        "{warning}"
+    );
+    assert!(warning.contains("max |ΔQ| = "), "{warning}");
+    let given = nalgebra::DMatrix::from_row_slice(2, 2, &[100.2766, -66.1165, -66.1165, 43.5933]);
+    let used = cfg.channels[0].model.matrices()[4].base().clone();
+    let change = (&used - &given).amax();
+    assert!(change > 0.0 && change < 1e-4, "max |ΔQ| = {change:e}");
+    assert_eq!(used, used.transpose());
+    let eig = used.symmetric_eigenvalues();
+    assert!(eig.min() >= -1e-12 * eig.max(), "{eig}");
+    // The channel builds: the projected Q reaches the filter.
+    assert!(cfg.channels[0].detector().is_ok());
+}
+
+/// Issue 19: the tolerance is for rounding, not for wrong matrices: λ_min = −10⁻²·λ_max
+/// is refused, and the message names the field, λ_min and the tolerance.
+#[test]
+fn issue19_q_one_percent_indefinite_is_rejected_naming_the_field() {
+    let errs = errors(&with("Q = 0.01", "Q = [[1.0, 0.0], [0.0, -0.01]]"));
+    let e = errs
+        .iter()
+        .find(|e| e.contains("model.Q"))
+        .unwrap_or_else(|| panic!("{errs:#?}"));
+    assert!(
+        e.starts_with(r#"channels[0] "pump3": model.Q is not positive semi-definite (smallest eigenvalue -1.000e-2"#),
+        "{e}"
+    );
+    assert!(e.contains("1e-5"), "{e}");
+}
+
+/// Issue 19: a rounded R that is singular as written is raised to eigenvalues ≥
+/// 10⁻⁵·λ_max (R must stay positive definite), with a warning.
+#[test]
+fn issue19_rounded_singular_r_is_made_definite_with_a_warning() {
+    let text = BASE
+        .replace("H = [[1.0, 0.0]]", "H = [[1.0, 0.0], [0.0, 1.0]]")
+        .replace("R = 0.04", "R = [[4.0, 2.0], [2.0, 0.99999]]");
+    let cfg = glrmon_spec::parse(&text).unwrap();
+    let w: Vec<String> = cfg.warnings.iter().map(ToString::to_string).collect();
+    assert!(
+        w.iter()
+            .any(|w| w.contains("model.R is not positive definite as written")),
+        "{w:#?}"
+    );
+    let used = cfg.channels[0].model.matrices()[5].base().clone();
+    let eig = used.symmetric_eigenvalues();
+    assert!((eig.min() / eig.max() - 1e-5).abs() < 1e-9, "{eig}");
+}
+
+/// An LPV covariance keeps the check at its base point and is never projected.
+#[test]
+fn lpv_q_is_checked_at_its_base_point_without_projection() {
+    assert_error(
+        &with(
+            "Q = 0.01",
+            "Q = { base = [[1.0, 0.0], [0.0, -1e-7]], p0 = [[0.1, 0.0], [0.0, 0.1]] }",
+        ),
+        "model.Q is not positive semi-definite at its base point",
     );
 }

@@ -2,8 +2,9 @@
 //! a CSV file or of one channel of an MCAP recording. The channel's residual filter (Kitanidis when the model has E, else
 //! Kalman, or as `[channels.diagnosis]` says) runs from the first row; the regression
 //! of Zhang 2021, eq. (36), is stacked over `--from`…`--to` (default: the whole file);
-//! the Lasso path (eq. (39)), the plateau λ (§IV) and the least-squares refit (§V) give
-//! the isolated faults and their magnitudes. Step, impulse and ramp faults are taken to
+//! a χ² test of θ = 0 says whether the span shows any fault (if not, the support is
+//! empty); the Lasso path (eq. (39)), the plateau λ (§IV) and the least-squares refit
+//! (§V) give the isolated faults and their magnitudes. Step, impulse and ramp faults are taken to
 //! begin at `--onset` (default `--from`); known-profile faults act from the first row.
 //! The same engine runs in the monitor at every alarm ([`glrmon_monitor::diagnosis`]).
 
@@ -203,6 +204,22 @@ fn text(d: &SpanDiagnosis, faults: usize) -> String {
             format!("{} ({} faults)", r.support.join(", "), r.support.len())
         }
     );
+    if let Some(t) = &d.detail.test {
+        let verdict = if t.fault() {
+            "a fault (the λ rule picks the support)"
+        } else {
+            "no fault in the span (empty support)"
+        };
+        let _ = writeln!(
+            s,
+            "  test:      T = {:.4} {} {:.4}, the χ²({}) upper quantile at α = {}: {verdict}",
+            t.statistic,
+            if t.fault() { ">" } else { "≤" },
+            t.threshold,
+            t.dof,
+            t.level
+        );
+    }
     let mut est = String::new();
     for name in &r.support {
         if let Some(v) = r.estimate.get(name) {
@@ -210,7 +227,9 @@ fn text(d: &SpanDiagnosis, faults: usize) -> String {
             let _ = write!(est, "{sep}{name} = {v:.4}");
         }
     }
-    let _ = writeln!(s, "  estimate:  {est}  (least squares on the support)");
+    if !r.support.is_empty() {
+        let _ = writeln!(s, "  estimate:  {est}  (least squares on the support)");
+    }
     let mut lasso = String::new();
     for (i, &(j, v)) in d.detail.lasso.iter().enumerate() {
         let sep = if i == 0 { "" } else { ", " };
@@ -220,23 +239,33 @@ fn text(d: &SpanDiagnosis, faults: usize) -> String {
             .map_or_else(|| format!("#{j}"), Clone::clone);
         let _ = write!(lasso, "{sep}{name} = {v:.4}");
     }
-    let _ = writeln!(s, "  lasso:     {lasso}  (θ̂(λ), shrunk by the penalty)");
+    if !r.support.is_empty() {
+        let _ = writeln!(s, "  lasso:     {lasso}  (θ̂(λ), shrunk by the penalty)");
+    }
     let run = d
         .detail
         .path
         .iter()
         .filter(|&&(l, _)| l >= r.plateau[0] && l <= r.plateau[1])
         .count();
-    let _ = writeln!(
-        s,
-        "  lambda:    {:.4e}, middle of the plateau [{:.4e}, {:.4e}] ({} of {} path points with {} faults)",
-        r.lambda,
-        r.plateau[0],
-        r.plateau[1],
-        run,
-        d.detail.path.len(),
-        r.support.len()
-    );
+    if r.support.is_empty() {
+        let _ = writeln!(
+            s,
+            "  lambda:    {:.4e} = λ_max, where θ̂(λ) becomes 0 (no λ chosen)",
+            r.lambda
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "  lambda:    {:.4e}, middle of the plateau [{:.4e}, {:.4e}] ({} of {} path points with {} faults)",
+            r.lambda,
+            r.plateau[0],
+            r.plateau[1],
+            run,
+            d.detail.path.len(),
+            r.support.len()
+        );
+    }
     let mut runs: Vec<(usize, usize)> = Vec::new();
     for &c in &r.path_support_sizes {
         match runs.last_mut() {

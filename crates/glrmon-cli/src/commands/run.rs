@@ -100,6 +100,11 @@ impl Sink for LogSink {
 
 pub(crate) fn run(args: &RunArgs) -> anyhow::Result<()> {
     let cfg = load_config(&args.config)?;
+    // What `glrmon validate` prints as warnings, e.g. a rounded covariance the model
+    // replaced by its nearest PSD matrix: the daemon's log says so too.
+    for w in &cfg.warnings {
+        tracing::warn!(path = %w.path, "Configuration: {}.", w.message);
+    }
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;

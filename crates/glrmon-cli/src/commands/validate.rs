@@ -165,8 +165,8 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
         );
         let _ = writeln!(
             s,
-            "  sparse diagnosis at alarms: {:?} residual, span {span}, history {} samples, λ path of {} points down to {:e}·λ_max",
-            diag.residual, diag.history, diag.lasso.path_points, diag.lasso.ratio
+            "  sparse diagnosis at alarms: {:?} residual, span {span}, history {} samples, no-fault test at α = {}, λ path of {} points down to {:e}·λ_max",
+            diag.residual, diag.history, diag.alpha, diag.lasso.path_points, diag.lasso.ratio
         );
     } else {
         let _ = writeln!(s, "  sparse diagnosis at alarms: off");
