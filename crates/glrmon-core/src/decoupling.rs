@@ -411,6 +411,16 @@ mod tests {
         d_scale: f64,
         fault: Option<(DVector<f64>, DVector<f64>, f64, u64)>,
     ) -> Vec<([f64; 2], [f64; 3])> {
+        simulate_with(seed, len, d_scale, fault, |_| e1())
+    }
+
+    fn simulate_with(
+        seed: u64,
+        len: u64,
+        d_scale: f64,
+        fault: Option<(DVector<f64>, DVector<f64>, f64, u64)>,
+        e_of: impl Fn(&[f64; 3]) -> DMatrix<f64>,
+    ) -> Vec<([f64; 2], [f64; 3])> {
         let mut model = example1();
         let mut sys = SystemMatrices::zeros(model.dims());
         let mut rng = Rng::new(seed);
@@ -422,7 +432,7 @@ mod tests {
             let mut y = &sys.h * &x + DVector::from_fn(2, |_, _| 0.5f64.sqrt() * rng.normal());
             let d = d_scale * (10.0 * (0.1 * k as f64).sin() + rng.normal() + 100.0);
             let w = DVector::from_fn(3, |_, _| rng.normal());
-            x = &sys.f * &x + e1() * d + w;
+            x = &sys.f * &x + e_of(&p) * d + w;
             if let Some((psi, phi, theta, onset)) = &fault {
                 if k >= *onset {
                     y += phi * *theta;
@@ -585,6 +595,68 @@ mod tests {
             vec![0.0; 3]
         );
         assert!(info[(0, 0)] > 0.0 && info[(2, 2)] > 0.0);
+    }
+
+    /// An LPV unknown-input matrix, E_k = [−1, 0.5·cos k, 0]ᵀ (p1 = cos k), is decoupled
+    /// sample by sample: with d ≈ 100 and d ≡ 0 the outputs are the same to 1e-9.
+    #[test]
+    fn an_lpv_unknown_input_is_decoupled_at_every_sample() {
+        let e_of = |p: &[f64; 3]| DMatrix::from_column_slice(3, 1, &[-1.0, 0.5 * p[1], 0.0]);
+        let with_d = simulate_with(13, 300, 1.0, None, e_of);
+        let without = simulate_with(13, 300, 0.0, None, e_of);
+        let lpv = || {
+            let mut term = DMatrix::zeros(3, 1);
+            term[(1, 0)] = 0.5;
+            LpvMatrix::new(e1(), vec![(1, term)]).unwrap()
+        };
+        let make = || detector(20, false).with_unknown_input(lpv()).unwrap();
+        let (mut a, mut b) = (make(), make());
+        let (mut oa, mut ob) = (StepOutput::new(2, 3), StepOutput::new(2, 3));
+        let mut worst = 0.0_f64;
+        let mut largest = 0.0_f64;
+        for k in 0..300u64 {
+            let (ya, p) = &with_d[k as usize];
+            let (yb, _) = &without[k as usize];
+            a.step(
+                &Sample {
+                    k,
+                    u: &[],
+                    y: ya,
+                    p,
+                },
+                &mut oa,
+            )
+            .unwrap();
+            b.step(
+                &Sample {
+                    k,
+                    u: &[],
+                    y: yb,
+                    p,
+                },
+                &mut ob,
+            )
+            .unwrap();
+            assert_eq!((oa.onset, oa.rank), (ob.onset, ob.rank), "k = {k}");
+            if let (Some(ga), Some(gb)) = (oa.glr, ob.glr) {
+                worst = worst.max((ga - gb).abs() / gb.max(1.0));
+                largest = largest.max(ga);
+            }
+        }
+        assert!(worst < 1e-9, "largest relative difference {worst:e}");
+        // The constant E of the other tests does not decouple this d.
+        let mut c = detector(20, true);
+        let mut oc = StepOutput::new(2, 3);
+        let mut constant_max = 0.0_f64;
+        for k in 0..300u64 {
+            let (y, p) = &with_d[k as usize];
+            c.step(&Sample { k, u: &[], y, p }, &mut oc).unwrap();
+            constant_max = constant_max.max(oc.glr.unwrap_or(0.0));
+        }
+        assert!(
+            constant_max > 10.0 * largest.max(1.0),
+            "{constant_max} vs {largest}"
+        );
     }
 
     /// Under no fault the decoupled whitened innovation is N(0, 1) (p − q = 1) and white,

@@ -197,6 +197,8 @@ pub struct DiagnosisEngine {
     post: Vec<f64>,
     s: Vec<f64>,
     whiten: bool,
+    /// E_k, the unknown-input matrix at the sample being processed (n×0 without).
+    e_k: nalgebra::DMatrix<f64>,
 }
 
 impl DiagnosisEngine {
@@ -260,6 +262,10 @@ impl DiagnosisEngine {
             post: vec![0.0; n * m],
             s: vec![0.0; p * m],
             whiten: false,
+            e_k: channel
+                .unknown_input
+                .as_ref()
+                .map_or_else(|| nalgebra::DMatrix::zeros(n, 0), |e| e.base().clone()),
             channel: channel.clone(),
         })
     }
@@ -284,7 +290,7 @@ impl DiagnosisEngine {
                         channel.name
                     ))
                 })?;
-                Filter::Kitanidis(KitanidisResidual::new(x0, p0, p, 0, e.ncols())?)
+                Filter::Kitanidis(KitanidisResidual::new(x0, p0, p, 0, e.shape().1)?)
             }
         })
     }
@@ -373,7 +379,8 @@ impl DiagnosisEngine {
                 let Some(e) = self.channel.unknown_input.as_ref() else {
                     return Err(DiagnosisError::Setting("no unknown-input matrix E".into()));
                 };
-                f.step(&rs, e, &mut self.out)?;
+                e.evaluate_into(sample.p, &mut self.e_k);
+                f.step(&rs, &self.e_k, &mut self.out)?;
                 (f.gain(), f.residual_covariance(), f.residual_rank())
             }
         };

@@ -16,7 +16,7 @@ pub mod channel;
 pub mod rng;
 pub mod scenarios;
 
-use glrmon_core::{Dims, FaultDictionary, Onset, Signals, StateSpace, SystemMatrices};
+use glrmon_core::{Dims, FaultDictionary, LpvMatrix, Onset, Signals, StateSpace, SystemMatrices};
 use nalgebra::{DMatrix, DVector};
 
 pub use channel::{ChannelError, expression_source, fault_magnitudes, from_channel, inject};
@@ -82,7 +82,8 @@ pub struct Simulator {
     held_control: f64,
     inputs: Option<SignalFn>,
     signals: Option<SignalFn>,
-    unknown: Option<(DMatrix<f64>, SignalFn, DVector<f64>)>,
+    /// E (constant or LPV), d_k, d_k's buffer and E_k's.
+    unknown: Option<(LpvMatrix, SignalFn, DVector<f64>, DMatrix<f64>)>,
     dims: Dims,
     rng: Rng,
     k: u64,
@@ -209,21 +210,22 @@ impl Simulator {
         self
     }
 
-    /// An unknown input E d_k added to the state equation (Zhang 2021, eq. (1)): the
-    /// detector does not see d_k.
+    /// An unknown input E_kd_k added to the state equation (Zhang 2021, eq. (1)): the
+    /// detector does not see d_k. E_k is `e` evaluated at the sample's signals p(k)
+    /// ([`LpvMatrix::constant`] for a constant E).
     ///
     /// # Errors
     /// [`SimError::Dimension`] when E does not have n rows.
-    pub fn with_unknown_input(mut self, e: DMatrix<f64>, d: SignalFn) -> Result<Self, SimError> {
-        if e.nrows() != self.dims.states {
+    pub fn with_unknown_input(mut self, e: LpvMatrix, d: SignalFn) -> Result<Self, SimError> {
+        let (rows, cols) = e.shape();
+        if rows != self.dims.states {
             return Err(SimError::Dimension(format!(
-                "E has {} rows, model has {} states",
-                e.nrows(),
+                "E has {rows} rows, model has {} states",
                 self.dims.states
             )));
         }
-        let buf = DVector::zeros(e.ncols());
-        self.unknown = Some((e, d, buf));
+        let at_k = e.base().clone();
+        self.unknown = Some((e, d, DVector::zeros(cols), at_k));
         Ok(self)
     }
 
@@ -304,9 +306,10 @@ impl Simulator {
             *w = self.rng.normal();
         }
         let mut x = &self.sys.f * &self.x + &self.sys.g * &u + &self.sqrt_q * &self.noise_w;
-        if let Some((e, d, buf)) = &mut self.unknown {
+        if let Some((e, d, buf, at_k)) = &mut self.unknown {
             d(k, buf.as_mut_slice());
-            x += &*e * &*buf;
+            e.evaluate_into(&out.p, at_k);
+            x += &*at_k * &*buf;
         }
         if let (Some(f), Some(inj)) = (&self.faults, &self.injection) {
             for (j, fault) in f.faults().iter().enumerate() {

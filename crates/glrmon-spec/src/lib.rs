@@ -438,8 +438,8 @@ pub struct Channel {
     pub dims: Dims,
     /// The model.
     pub model: Lpv,
-    /// Unknown-input matrix E (n×d), if given.
-    pub unknown_input: Option<DMatrix<f64>>,
+    /// Unknown-input matrix E (n×q, constant or LPV), if given.
+    pub unknown_input: Option<LpvMatrix>,
     /// X̂_0.
     pub x0: DVector<f64>,
     /// P_0.
@@ -517,7 +517,7 @@ impl Channel {
             self.window,
         )?;
         match &self.unknown_input {
-            Some(e) => detector.with_unknown_input(LpvMatrix::constant(e.clone())),
+            Some(e) => detector.with_unknown_input(e.clone()),
             None => Ok(detector),
         }
     }
@@ -526,14 +526,15 @@ impl Channel {
     /// q unknown inputs, which the detector decouples (Zhang 2021 §III-B).
     #[must_use]
     pub fn innovation_dof(&self) -> usize {
-        self.dims.outputs - self.unknown_input.as_ref().map_or(0, |e| e.ncols())
+        self.dims.outputs - self.unknown_input.as_ref().map_or(0, |e| e.shape().1)
     }
 
-    /// Whether the model's matrices are constant (LTI).
+    /// Whether the model's matrices (and E, if any) are constant (LTI).
     #[must_use]
     pub fn model_is_constant(&self) -> bool {
         use glrmon_core::StateSpace as _;
         self.model.is_constant()
+            && (self.unknown_input.as_ref()).is_none_or(|e| e.terms().is_empty())
     }
 
     /// The onset profiles of the faults, in dictionary order.
@@ -1052,21 +1053,13 @@ impl Validator {
             .e
             .as_ref()
             .and_then(|e| self.matrix(prefix, "E", e, None));
-        let e = e.and_then(|e| {
-            if !e.terms().is_empty() {
-                self.error(
-                    join(prefix, "model.E"),
-                    "cannot depend on scheduling signals".into(),
-                );
-                return None;
-            }
-            self.shape(prefix, "E", &e, (n, e.shape().1), &format!("F is {n}×{n}"))
-                .then(|| e.base().clone())
-        });
-        let diagnosis = self.diagnosis(prefix, spec, &h, e.as_ref());
+        let e =
+            e.filter(|e| self.shape(prefix, "E", e, (n, e.shape().1), &format!("F is {n}×{n}")));
+        let diagnosis = self.diagnosis(prefix, spec, &h, e.as_ref().map(LpvMatrix::base));
         // Signals: explicit, or the highest LPV index + 1.
         let lpv_max = [&f, &g, &h, &j, &q, &r]
-            .iter()
+            .into_iter()
+            .chain(e.as_ref())
             .flat_map(|m| m.terms().iter().map(|(i, _)| *i + 1))
             .max()
             .unwrap_or(0);
@@ -1121,7 +1114,7 @@ impl Validator {
         // The χ² detector tests εᵀΣ⁻¹ε ~ χ²(p) on one sample (χ²(p − q) decoupled from
         // q unknown inputs): no window to correct for.
         let m = if chi2_detector {
-            (dims.outputs - e.as_ref().map_or(0, |e| e.ncols()).min(dims.outputs)).max(1)
+            (dims.outputs - e.as_ref().map_or(0, |e| e.shape().1).min(dims.outputs)).max(1)
         } else {
             faults.len().max(1)
         };
@@ -1241,14 +1234,14 @@ impl Validator {
                 }
             }
         }
-        let simulation = self.simulation(prefix, spec, dims, e.as_ref());
+        let simulation = self.simulation(prefix, spec, dims, e.as_ref().map(LpvMatrix::base));
         let c = spec.consistency;
         let consistency = if c.enabled {
             let settings = glrmon_core::consistency::ConsistencySettings {
                 window: c.window,
                 alpha: c.alpha,
             };
-            let dof = dims.outputs - e.as_ref().map_or(0, |e| e.ncols()).min(dims.outputs);
+            let dof = dims.outputs - e.as_ref().map_or(0, |e| e.shape().1).min(dims.outputs);
             match glrmon_core::consistency::Consistency::new(dof.max(1), settings) {
                 Ok(_) => Some(settings),
                 Err(e) => {

@@ -194,7 +194,7 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
         let _ = writeln!(
             s,
             "  unknown input: E has {} column(s), decoupled from the innovation: the GLR runs on {} of the {} output directions (Zhang 2021 §III-B); faults in range(E) are not detectable",
-            e.ncols(),
+            e.shape().1,
             channel.innovation_dof(),
             channel.dims.outputs
         );
