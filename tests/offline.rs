@@ -178,6 +178,69 @@ fn issue19_validate_accepts_paper2014_gas_q_with_a_warning() {
     assert!(warning.contains("max |ΔQ| = 1."), "{warning}");
 }
 
+/// Issue 19 (Zhang 2021 §III-B): with an unknown input E, `validate` says the GLR runs
+/// on p − q output directions and that a state fault in the range of E is not
+/// detectable (its signature is exactly zero), while the sensor bias outside it is; the
+/// fault-free replay of 3 000 samples with d ≈ 50 raises no alarm.
+#[test]
+fn issue19_validate_reports_faults_in_the_range_of_e_undetectable() {
+    let dir = TempDir::new("issue19-e");
+    let file = dir.file("e.toml");
+    std::fs::write(
+        &file,
+        r#"
+[[channels]]
+name = "tank"
+[channels.model]
+F = [[0.5, 0.1, 0.0], [0.0, 0.6, 0.1], [0.0, 0.0, 0.7]]
+H = [[1.0, 0.0, 0.0], [0.0, 1.0, 1.0]]
+E = [[1.0], [0.0], [0.0]]
+Q = 0.01
+R = 0.01
+[[channels.faults]]
+name = "sensor1"
+kind = "sensor_bias"
+output = 1
+[[channels.faults]]
+name = "inflow"
+psi = [2.0, 0.0, 0.0]
+[channels.simulation]
+unknown_input = ["50 + 10*sin(0.05*k)"]
+"#,
+    )
+    .unwrap();
+    let out = ok(&glrmon(&["validate", &file]));
+    assert!(
+        out.contains("unknown input: E has 1 column(s), decoupled from the innovation: the GLR runs on 1 of the 2 output directions"),
+        "{out}"
+    );
+    assert!(
+        out.contains(r#"fault "inflow" is undetectable"#)
+            && !out.contains(r#"fault "sensor1" is undetectable"#),
+        "{out}"
+    );
+    let csv = dir.file("e.csv");
+    ok(&glrmon(&[
+        "simulate",
+        "--config",
+        &file,
+        "--samples",
+        "3000",
+        "--output",
+        &csv,
+    ]));
+    let replay = ok(&glrmon(&[
+        "replay",
+        "--config",
+        &file,
+        &csv,
+        "--stat-every",
+        "0",
+        "--quiet",
+    ]));
+    assert!(!replay.contains(r#""type":"alarm""#), "{replay}");
+}
+
 /// Issue 3: on the §6.1 plant the alarm lands within 5 samples of the injected onset
 /// 201 and isolates the right state (both magnitudes of the paper's Figures 3-4).
 #[test]
