@@ -854,7 +854,8 @@ impl Detector {
     /// Writes the fault signature S_k(r) = H_kΓ_k(r) + Φ_k(r) (p×m, eq. (45)) of onset r
     /// at the last measured sample k; false when r is not in the window, or when the
     /// signatures are not kept ([`Detector::keep_signatures`]) or were switched on after
-    /// that sample.
+    /// that sample. With an unknown input it is the part the decoupled innovation sees,
+    /// L_k[0; Q₂ᵀ]L_k⁻¹S_k(r) ([`Detector::with_unknown_input`]).
     pub fn signature(&self, onset: u64, out: &mut DMatrix<f64>) -> bool {
         if self.last_measured != self.next_k.map(|n| n - 1) {
             // The last step was predict-only: no signature at that sample.

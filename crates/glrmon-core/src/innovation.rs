@@ -50,7 +50,7 @@ pub struct InnovationFilter {
     chol: DMatrix<f64>,
     /// L_k⁻¹ε_k.
     innovation_white: DVector<f64>,
-    /// L_k⁻¹H_k.
+    /// L_k⁻¹H_k (with an unknown input, [0; Q₂ᵀL_k⁻¹H_k]).
     h_white: DMatrix<f64>,
     /// K_k (n×p).
     gain: DMatrix<f64>,
@@ -549,7 +549,8 @@ impl InnovationFilter {
         &self.chol
     }
 
-    /// L_k⁻¹ε_k, the whitened innovation (N(0, I) under no fault).
+    /// L_k⁻¹ε_k, the whitened innovation (N(0, I) under no fault); with an unknown
+    /// input [0; Q₂ᵀL_k⁻¹ε_k], N(0, I) on its last p − q entries.
     #[must_use]
     pub fn whitened_innovation(&self) -> &DVector<f64> {
         &self.innovation_white
@@ -561,7 +562,8 @@ impl InnovationFilter {
         &self.h_white
     }
 
-    /// K_k (eq. (7)).
+    /// K_k (eq. (7)); with an unknown input, the Kitanidis gain K̄_k (Zhang 2021, eq.
+    /// (24g)).
     #[must_use]
     pub fn gain(&self) -> &DMatrix<f64> {
         &self.gain
