@@ -617,6 +617,8 @@ impl Monitor {
             return;
         };
         self.counters.isolation_updates += 1;
+        // The episode's `alarm_end` reports the latest estimate of its onset.
+        self.reported_onset = onset;
         let isolation = self.isolate(onset);
         records.push(Record::Isolation(IsolationUpdate {
             channel: self.channel.clone(),

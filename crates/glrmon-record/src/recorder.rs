@@ -253,6 +253,7 @@ impl Sink for Recorder {
         let t = match &output.record {
             Record::Stat(r) => r.t,
             Record::Alarm(r) => r.t,
+            Record::Isolation(r) => r.t,
             Record::AlarmEnd(r) => r.t,
             _ => None,
         };
@@ -763,6 +764,7 @@ mod tests {
                         magnitude: vec![],
                         isolation: vec![],
                         faults: vec![],
+                        update_k: None,
                     }),
                     json: b"{}".to_vec(),
                     log_time_ns: k * 1_000_000,

@@ -128,7 +128,8 @@ pub struct AlarmEnd {
     pub k: u64,
     /// Sample time in seconds, if known.
     pub t: Option<f64>,
-    /// Onset r̂ reported when the episode began.
+    /// Onset r̂ as last reported for the episode: by its `isolation` record if one
+    /// came, else by its `alarm`.
     pub onset: u64,
     /// Length of the episode in samples.
     pub duration: u64,
