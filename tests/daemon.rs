@@ -287,7 +287,10 @@ async fn faulty_channel_gives_one_alarm_clean_channel_none_then_sigterm_exits_0(
         })
         .collect();
     assert_eq!(updates.len(), 1, "{updates:#?}");
-    assert_eq!((updates[0].k, updates[0].alarm_k, updates[0].onset), (203, 201, 201));
+    assert_eq!(
+        (updates[0].k, updates[0].alarm_k, updates[0].onset),
+        (203, 201, 201)
+    );
     let isolated: Vec<&str> = updates[0]
         .isolation
         .iter()

@@ -169,8 +169,15 @@ mod tests {
             text,
             "ALARM pump3 k=201 onset=201 glr=1805.1 (threshold 27.6) isolated=[x0_jump] magnitude=[x0_jump 3.981, x1_jump 0.005] minmax=[x0_jump 1213.1/6.6] update_k=203 t=2.010"
         );
-        let text = line(&Record::Alarm(Alarm { update_k: None, ..a })).unwrap();
-        assert!(text.ends_with("minmax=[x0_jump 1213.1/6.6] t=2.010"), "{text}");
+        let text = line(&Record::Alarm(Alarm {
+            update_k: None,
+            ..a
+        }))
+        .unwrap();
+        assert!(
+            text.ends_with("minmax=[x0_jump 1213.1/6.6] t=2.010"),
+            "{text}"
+        );
     }
 
     #[test]

@@ -264,12 +264,12 @@ fn summary_shows_the_numbers() {
         .find(|r| r.contains("pump&lt;3&gt;&amp;co"))
         .expect("row of the channel");
     for want in [
-        ">400<",     // samples
-        ">0 … 399<", // k range
-        ">1<",       // alarms, episodes ended
-        ">201<",     // onset r̂
+        ">400<",                                                 // samples
+        ">0 … 399<",                                             // k range
+        ">1<",                                                   // alarms, episodes ended
+        ">201<",                                                 // onset r̂
         "k=220 (alarm k=215): <span class=\"isolated\">x0_jump", // final isolation
-        "f00=2",     // diagnosis support and estimate
+        "f00=2",                                                 // diagnosis support and estimate
         "f02=1",
         "gap: 1",
         "invalid_json: 1",
@@ -307,7 +307,8 @@ fn alarm_table_shows_the_crossing_and_the_update() {
     }
     // θ̂ names it once, each isolation column once.
     assert_eq!(
-        row.matches("<span class=\"isolated\">x0_jump</span>").count(),
+        row.matches("<span class=\"isolated\">x0_jump</span>")
+            .count(),
         2,
         "{row}"
     );

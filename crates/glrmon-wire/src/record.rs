@@ -1080,11 +1080,13 @@ mod tests {
             text.ends_with(r#""faults":["leak","bias"],"update_k":150}"#),
             "{text}"
         );
-        let text = json(&Alarm {
-            update_k: None,
-            ..alarm()
-        }
-        .into());
+        let text = json(
+            &Alarm {
+                update_k: None,
+                ..alarm()
+            }
+            .into(),
+        );
         assert!(text.ends_with(r#","update_k":null}"#), "{text}");
 
         assert_eq!(

@@ -18,9 +18,9 @@ use glrmon_monitor::Monitor;
 use glrmon_runtime::{FnSink, Output, Runtime, Sink};
 use glrmon_sim::SimSample;
 use glrmon_wire::{Record, Sample, decode_record, encode_sample};
-use zenoh::sample::Sample as ZenohSample;
 use glrmon_zenoh::{SessionSettings, ZenohSink, ZenohSource};
 use zenoh::Wait as _;
+use zenoh::sample::Sample as ZenohSample;
 
 use crate::log::LogEvents;
 use crate::print;
