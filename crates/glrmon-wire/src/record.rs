@@ -79,8 +79,8 @@ pub struct Alarm {
     pub isolation: Vec<IsolationResult>,
     /// Fault names, in the order of `magnitude`.
     pub faults: Vec<String>,
-    /// The sample at which an `isolation` record will refine this alarm (the crossing
-    /// + `isolation_delay`) if the episode is still on then; `None` (`null` or absent)
+    /// The sample at which an `isolation` record will refine this alarm (`k` plus
+    /// `isolation_delay`) if the episode is still on then; `None` (`null` or absent)
     /// when no refinement is scheduled (`isolation_delay = 0`, or a record of a glrmon
     /// from before the field existed, whose alarms came `isolation_delay` samples
     /// after the crossing).
