@@ -244,8 +244,9 @@ impl Monitor {
     }
 
     /// Runs `engine` alongside the detector and emits a `diagnosis` record after every
-    /// alarm and isolation update (see the [crate documentation](crate#sparse-diagnosis)). The engine must
-    /// be fresh (no sample processed) and built for the same channel.
+    /// alarm and isolation update (see the [crate
+    /// documentation](crate#sparse-diagnosis)). The engine must be fresh (no sample
+    /// processed) and built for the same channel.
     #[must_use]
     pub fn with_diagnosis(mut self, engine: DiagnosisEngine) -> Self {
         self.diagnosis = Some(engine);
@@ -570,9 +571,16 @@ impl Monitor {
             }
             AlarmTransition::Active | AlarmTransition::Quiet => {}
         }
-        if let Some(p) = self.pending.filter(|p| k >= p.update_k) {
+        // With `clear_samples` > 1 an episode survives samples without an admissible
+        // onset, where there is nothing to test: the update then waits for the next
+        // sample with one.
+        if let (Some(p), Some(glr), Some(onset)) = (
+            self.pending.filter(|p| k >= p.update_k),
+            self.out.glr,
+            self.out.onset,
+        ) {
             self.pending = None;
-            self.emit_update(p, k, sample.t, records);
+            self.emit_update(p, k, sample.t, glr, onset, records);
         }
     }
 
@@ -607,15 +615,17 @@ impl Monitor {
         self.diagnose(k, onset, records);
     }
 
-    /// The `isolation` record of the alarm `p` at k, its sample `update_k`, the episode
-    /// still on: onset, magnitude and isolation tests as they are now.
-    fn emit_update(&mut self, p: PendingUpdate, k: u64, t: Option<f64>, records: &mut Vec<Record>) {
-        // With `clear_samples` > 1 an episode survives samples without an admissible
-        // onset; there is nothing to test at such a sample, and the alarm's isolation
-        // stands.
-        let (Some(glr), Some(onset)) = (self.out.glr, self.out.onset) else {
-            return;
-        };
+    /// The `isolation` record of the alarm `p` at k (its `update_k`), the episode still
+    /// on, l_k = `glr` and r̂ = `onset`: magnitude and isolation tests as they are now.
+    fn emit_update(
+        &mut self,
+        p: PendingUpdate,
+        k: u64,
+        t: Option<f64>,
+        glr: f64,
+        onset: u64,
+        records: &mut Vec<Record>,
+    ) {
         self.counters.isolation_updates += 1;
         // The episode's `alarm_end` reports the latest estimate of its onset.
         self.reported_onset = onset;

@@ -99,7 +99,9 @@ pub struct Alarm {
 pub struct IsolationUpdate {
     /// Channel name.
     pub channel: String,
-    /// The sample at which the isolation was computed (`alarm_k` + `isolation_delay`).
+    /// The sample at which the isolation was computed: `alarm_k` + `isolation_delay`
+    /// (later only when the episode, with `clear_samples` > 1, lasted through samples
+    /// without an admissible onset then: the first sample with one).
     pub k: u64,
     /// Sample time in seconds, if known.
     pub t: Option<f64>,
