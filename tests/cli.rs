@@ -31,11 +31,27 @@ fn demo_prints_one_alarm_for_the_faulty_channel_with_the_right_isolation() {
     let stdout = String::from_utf8(out.stdout).unwrap();
     let alarms: Vec<&str> = stdout.lines().filter(|l| l.starts_with("ALARM")).collect();
     assert_eq!(alarms.len(), 1, "{stdout}");
+    // Issue 19: the alarm at the crossing (l_k first above λ at 201, the injected
+    // onset), its isolation refined isolation_delay = n = 2 samples later.
     assert!(
-        alarms[0].starts_with("ALARM unstable k=203 onset=201"),
+        alarms[0].starts_with("ALARM unstable k=201 onset=200"),
         "{stdout}"
     );
-    assert!(alarms[0].contains("isolated=[x0_jump]"), "{stdout}");
+    assert!(alarms[0].contains(" update_k=203 "), "{stdout}");
+    let updates: Vec<&str> = stdout.lines().filter(|l| l.starts_with("ISOL")).collect();
+    assert_eq!(updates.len(), 1, "{stdout}");
+    assert!(
+        updates[0].starts_with("ISOL  unstable k=203 alarm_k=201 onset=201"),
+        "{stdout}"
+    );
+    assert!(updates[0].contains("isolated=[x0_jump]"), "{stdout}");
+    assert!(
+        stdout.contains(
+            "  alarm unstable: l_k first above the threshold at k=201, alarm record at k=201 \
+             (latency 0 samples), isolation update at k=203"
+        ),
+        "{stdout}"
+    );
     for clean in ["dc_motor", "lpv"] {
         assert!(
             stdout.contains(&format!("  {clean:<10} samples=600 alarms=0 errors=0")),
@@ -48,6 +64,24 @@ fn demo_prints_one_alarm_for_the_faulty_channel_with_the_right_isolation() {
         .filter(|l| l.contains(r#""type":"stat""#))
         .count();
     assert_eq!(stats, 3 * 600);
+    // The same from the published records: the alarm's k is the first stat of the
+    // channel whose l_k exceeds its threshold.
+    let records: Vec<glrmon_wire::Record> = text
+        .lines()
+        .map(|l| glrmon_wire::decode_record(l.as_bytes()).unwrap())
+        .filter(|r| r.channel() == "unstable")
+        .collect();
+    let crossing = records.iter().find_map(|r| match r {
+        glrmon_wire::Record::Stat(s) if s.glr.zip(s.threshold).is_some_and(|(l, h)| l > h) => {
+            Some(s.k)
+        }
+        _ => None,
+    });
+    let alarm_k = records.iter().find_map(|r| match r {
+        glrmon_wire::Record::Alarm(a) => Some(a.k),
+        _ => None,
+    });
+    assert_eq!((crossing, alarm_k), (Some(201), Some(201)));
     assert!(stdout.contains("recording: "), "{stdout}");
     let replayed = dir.join("replay.jsonl");
     let out = glrmon()

@@ -277,8 +277,21 @@ async fn faulty_channel_gives_one_alarm_clean_channel_none_then_sigterm_exits_0(
     let records = got.lock().unwrap().clone();
     let a = alarms(&records, "unstable");
     assert_eq!(a.len(), 1, "{a:#?}");
-    assert_eq!((a[0].k, a[0].onset), (203, 201));
-    let isolated: Vec<&str> = a[0]
+    // Issue 19: the alarm at the crossing, its isolation refined 2 samples later.
+    assert_eq!((a[0].k, a[0].onset, a[0].update_k), (201, 200, Some(203)));
+    let updates: Vec<&glrmon_wire::IsolationUpdate> = records
+        .iter()
+        .filter_map(|r| match r {
+            Record::Isolation(u) if u.channel == "unstable" => Some(u),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(updates.len(), 1, "{updates:#?}");
+    assert_eq!(
+        (updates[0].k, updates[0].alarm_k, updates[0].onset),
+        (203, 201, 201)
+    );
+    let isolated: Vec<&str> = updates[0]
         .isolation
         .iter()
         .filter(|i| i.isolated)
@@ -377,6 +390,6 @@ async fn bad_payloads_and_gaps_are_reported_and_the_alarm_is_unchanged() {
     );
     let a = alarms(&records, "unstable");
     assert_eq!(a.len(), 1, "{a:#?}");
-    assert_eq!((a[0].k, a[0].onset), (203, 201));
+    assert_eq!((a[0].k, a[0].onset), (201, 200));
     let _ = session.close().await;
 }

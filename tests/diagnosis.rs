@@ -165,7 +165,8 @@ fn issue19_diagnose_on_fault_free_data_reports_no_fault() {
 
 /// Online: with `[channels.diagnosis] enabled = true` (and an isolation delay that
 /// lets 100 samples accumulate), `glrmon replay` emits a `diagnosis` record right after
-/// the alarm, isolating exactly the injected faults.
+/// the alarm (at the crossing) and another right after its isolation update, 100
+/// samples later, which isolates exactly the injected faults.
 #[test]
 fn replay_emits_the_diagnosis_right_after_the_alarm() {
     let dir = std::env::temp_dir().join(format!("glrmon-diagnosis-replay-{}", std::process::id()));
@@ -207,6 +208,18 @@ fn replay_emits_the_diagnosis_right_after_the_alarm() {
         panic!("no diagnosis after the alarm: {records:?}");
     };
     assert_eq!((d.k, d.to, d.from), (a.k, a.k, 0));
+    let update = records
+        .iter()
+        .position(|r| matches!(r, glrmon_wire::Record::Isolation(_)))
+        .expect("an isolation update");
+    let glrmon_wire::Record::Isolation(u) = &records[update] else {
+        unreachable!()
+    };
+    assert_eq!((u.alarm_k, u.k), (a.k, a.k + 100));
+    let Some(glrmon_wire::Record::Diagnosis(d)) = records.get(update + 1) else {
+        panic!("no diagnosis after the isolation update: {records:?}");
+    };
+    assert_eq!((d.k, d.to, d.from), (u.k, u.k, 0));
     assert_eq!(d.support, injected);
     assert!(
         !records

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use glrmon_wire::{Alarm, Record, decode_record};
+use glrmon_wire::{Alarm, IsolationUpdate, Record, decode_record};
 
 fn glrmon(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_glrmon"))
@@ -72,8 +72,15 @@ fn alarms(records: &[Record]) -> Vec<&Alarm> {
         .collect()
 }
 
-fn isolated(a: &Alarm) -> Vec<&str> {
-    a.isolation
+/// The faults the alarm's episode isolated in the end: by its `isolation` update when
+/// one came, else by the alarm at the crossing.
+fn isolated<'a>(records: &'a [Record], a: &'a Alarm) -> Vec<&'a str> {
+    let update = records.iter().find_map(|r| match r {
+        Record::Isolation(u) if u.channel == a.channel && u.alarm_k == a.k => Some(u),
+        _ => None,
+    });
+    update
+        .map_or(&a.isolation, |u| &u.isolation)
         .iter()
         .filter(|i| i.isolated)
         .map(|i| i.fault.as_str())
@@ -243,6 +250,9 @@ unknown_input = ["50 + 10*sin(0.05*k)"]
 
 /// Issue 3: on the §6.1 plant the alarm lands within 5 samples of the injected onset
 /// 201 and isolates the right state (both magnitudes of the paper's Figures 3-4).
+/// Issue 19: the `alarm` record's k is exactly the first sample whose l_k exceeds the
+/// threshold (from the `stat` records of the same replay), and its `isolation` record,
+/// which decides the isolation, comes isolation_delay = n = 2 samples later.
 #[test]
 fn paper2014_simulate_replay_alarm_within_5_samples_of_201_isolates_the_state() {
     let dir = TempDir::new("p2014");
@@ -251,21 +261,37 @@ fn paper2014_simulate_replay_alarm_within_5_samples_of_201_isolates_the_state() 
         let recs = simulate_replay(&dir, &cfg, fault, 201, magnitude, 400, 7);
         let a = alarms(&recs);
         assert_eq!(a.len(), 1, "{fault} {magnitude}: {a:#?}");
+        let crossing = recs.iter().find_map(|r| match r {
+            Record::Stat(s) if s.glr.zip(s.threshold).is_some_and(|(l, h)| l > h) => Some(s.k),
+            _ => None,
+        });
+        assert_eq!(Some(a[0].k), crossing, "{fault} {magnitude}");
+        assert!(a[0].glr > a[0].threshold);
         assert!(
             (201..=206).contains(&a[0].k),
             "{fault} {magnitude}: alarm at {}",
             a[0].k
         );
+        assert_eq!(a[0].update_k, Some(a[0].k + 2), "{fault} {magnitude}");
+        let u: Vec<&IsolationUpdate> = recs
+            .iter()
+            .filter_map(|r| match r {
+                Record::Isolation(u) => Some(u),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(u.len(), 1, "{fault} {magnitude}: {u:#?}");
+        assert_eq!((u[0].alarm_k, u[0].k), (a[0].k, a[0].k + 2));
         assert!(
-            a[0].onset.abs_diff(201) <= 5,
+            u[0].onset.abs_diff(201) <= 5,
             "{fault} {magnitude}: onset {}",
-            a[0].onset
+            u[0].onset
         );
         assert_eq!(
-            isolated(a[0]),
+            isolated(&recs, a[0]),
             [fault],
             "{fault} {magnitude}: {:#?}",
-            a[0].isolation
+            u[0].isolation
         );
         let stats = recs.iter().filter(|r| matches!(r, Record::Stat(_))).count();
         assert_eq!(stats, 400);
@@ -286,7 +312,11 @@ fn dc_motor_each_fault_is_detected_and_isolated() {
             "{fault}: alarm at {}",
             a[0].k
         );
-        assert_eq!(isolated(a[0]), [fault], "{fault}: {:#?}", a[0].isolation);
+        let events: Vec<&Record> = recs
+            .iter()
+            .filter(|r| !matches!(r, Record::Stat(_)))
+            .collect();
+        assert_eq!(isolated(&recs, a[0]), [fault], "{fault}: {events:#?}");
     }
 }
 

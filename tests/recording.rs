@@ -341,7 +341,8 @@ fn files(dir: &Path, suffix: &str) -> Vec<PathBuf> {
 }
 
 /// Issue 6: a live run through Zenoh, recorded; `glrmon replay FILE.mcap` (no
-/// --config) gives every `stat`, `alarm`, `alarm_end`, `diagnosis` and `error` record
+/// --config) gives every `stat`, `alarm`, `isolation`, `alarm_end`, `diagnosis` and
+/// `error` record
 /// byte for byte (hence bit for bit: shortest round-trip floats) — as JSON lines and as
 /// an MCAP output.
 #[test]
@@ -394,6 +395,7 @@ fn live_run_recorded_then_replayed_gives_identical_records() {
     assert_eq!(count(&live, "unstable", "intake"), 1);
     assert_eq!(count(&live, "unstable", "error"), 52);
     assert!(count(&live, "unstable", "alarm") >= 1);
+    assert!(count(&live, "unstable", "isolation") >= 1);
     assert!(count(&live, "ltv3", "diagnosis") >= 1);
 
     let jsonl = scratch.0.join("replay.jsonl");
@@ -415,7 +417,14 @@ fn live_run_recorded_then_replayed_gives_identical_records() {
     );
     let (replayed_mcap, _, _) = read_all(&mcap_out);
     let mut compared = BTreeMap::new();
-    for kind in ["stat", "alarm", "alarm_end", "diagnosis", "error"] {
+    for kind in [
+        "stat",
+        "alarm",
+        "isolation",
+        "alarm_end",
+        "diagnosis",
+        "error",
+    ] {
         for channel in ["unstable", "ltv3"] {
             let key = (channel.to_owned(), kind);
             let a = live.get(&key).cloned().unwrap_or_default();

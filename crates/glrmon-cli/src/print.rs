@@ -2,12 +2,16 @@
 
 use std::fmt::Write as _;
 
-use glrmon_wire::{Alarm, AlarmEnd, Consistency, Diagnosis, ErrorRecord, Record};
+use glrmon_wire::{
+    Alarm, AlarmEnd, Consistency, Diagnosis, ErrorRecord, IsolationResult, IsolationUpdate, Record,
+};
 
-/// One line for an alarm or alarm end; `None` for other records.
+/// One line for an alarm, isolation update, alarm end, diagnosis, error or consistency
+/// change; `None` for other records (`stat`, and types this version does not know).
 pub(crate) fn line(record: &Record) -> Option<String> {
     match record {
         Record::Alarm(a) => Some(alarm_line(a)),
+        Record::Isolation(u) => Some(update_line(u)),
         Record::AlarmEnd(e) => Some(end_line(e)),
         Record::Diagnosis(d) => Some(diagnosis_line(d)),
         Record::Error(e) => Some(error_line(e)),
@@ -16,34 +20,56 @@ pub(crate) fn line(record: &Record) -> Option<String> {
     }
 }
 
-fn alarm_line(a: &Alarm) -> String {
-    let isolated: Vec<&str> = a
-        .isolation
+/// `isolated=[…] magnitude=[…] minmax=[…]` of an alarm or an isolation update.
+fn isolation_fields(isolation: &[IsolationResult], faults: &[String], magnitude: &[f64]) -> String {
+    let isolated: Vec<&str> = isolation
         .iter()
         .filter(|i| i.isolated)
         .map(|i| i.fault.as_str())
         .collect();
     let mut mag = String::new();
-    for (i, (name, v)) in a.faults.iter().zip(&a.magnitude).enumerate() {
+    for (i, (name, v)) in faults.iter().zip(magnitude).enumerate() {
         let sep = if i == 0 { "" } else { ", " };
         let _ = write!(mag, "{sep}{name} {v:.3}");
     }
     let mut tests = String::new();
-    for (i, t) in a.isolation.iter().enumerate() {
+    for (i, t) in isolation.iter().enumerate() {
         let sep = if i == 0 { "" } else { ", " };
         let _ = write!(tests, "{sep}{} {:.1}/{:.1}", t.fault, t.minmax, t.threshold);
     }
     format!(
-        "ALARM {} k={} onset={} glr={:.1} (threshold {:.1}) isolated=[{}] magnitude=[{}] minmax=[{}]{}",
+        "isolated=[{}] magnitude=[{mag}] minmax=[{tests}]",
+        isolated.join(", ")
+    )
+}
+
+fn alarm_line(a: &Alarm) -> String {
+    let update = a
+        .update_k
+        .map_or_else(String::new, |u| format!(" update_k={u}"));
+    format!(
+        "ALARM {} k={} onset={} glr={:.1} (threshold {:.1}) {}{update}{}",
         a.channel,
         a.k,
         a.onset,
         a.glr,
         a.threshold,
-        isolated.join(", "),
-        mag,
-        tests,
+        isolation_fields(&a.isolation, &a.faults, &a.magnitude),
         time(a.t)
+    )
+}
+
+fn update_line(u: &IsolationUpdate) -> String {
+    format!(
+        "ISOL  {} k={} alarm_k={} onset={} glr={:.1} (threshold {:.1}) {}{}",
+        u.channel,
+        u.k,
+        u.alarm_k,
+        u.onset,
+        u.glr,
+        u.threshold,
+        isolation_fields(&u.isolation, &u.faults, &u.magnitude),
+        time(u.t)
     )
 }
 
@@ -117,14 +143,13 @@ fn time(t: Option<f64>) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glrmon_wire::IsolationResult;
 
     #[test]
     fn alarm_line_names_channel_time_onset_isolated_fault_and_magnitude() {
         let a = Alarm {
             channel: "pump3".into(),
-            k: 203,
-            t: Some(2.03),
+            k: 201,
+            t: Some(2.01),
             glr: 1805.1,
             threshold: 27.6,
             onset: 201,
@@ -137,11 +162,47 @@ mod tests {
                 isolated: true,
             }],
             faults: vec!["x0_jump".into(), "x1_jump".into()],
+            update_k: Some(203),
         };
-        let line = line(&Record::Alarm(a)).unwrap();
+        let text = line(&Record::Alarm(a.clone())).unwrap();
         assert_eq!(
-            line,
-            "ALARM pump3 k=203 onset=201 glr=1805.1 (threshold 27.6) isolated=[x0_jump] magnitude=[x0_jump 3.981, x1_jump 0.005] minmax=[x0_jump 1213.1/6.6] t=2.030"
+            text,
+            "ALARM pump3 k=201 onset=201 glr=1805.1 (threshold 27.6) isolated=[x0_jump] magnitude=[x0_jump 3.981, x1_jump 0.005] minmax=[x0_jump 1213.1/6.6] update_k=203 t=2.010"
+        );
+        let text = line(&Record::Alarm(Alarm {
+            update_k: None,
+            ..a
+        }))
+        .unwrap();
+        assert!(
+            text.ends_with("minmax=[x0_jump 1213.1/6.6] t=2.010"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn isolation_line_names_its_alarm_and_sample() {
+        let u = IsolationUpdate {
+            channel: "pump3".into(),
+            k: 203,
+            t: None,
+            alarm_k: 201,
+            glr: 25.0,
+            threshold: 27.6,
+            onset: 200,
+            magnitude: vec![3.5],
+            isolation: vec![IsolationResult {
+                fault: "x0_jump".into(),
+                minmax: 0.5,
+                sensitivity: 1.5,
+                threshold: 6.6,
+                isolated: false,
+            }],
+            faults: vec!["x0_jump".into()],
+        };
+        assert_eq!(
+            line(&Record::Isolation(u)).unwrap(),
+            "ISOL  pump3 k=203 alarm_k=201 onset=200 glr=25.0 (threshold 27.6) isolated=[] magnitude=[x0_jump 3.500] minmax=[x0_jump 0.5/6.6]"
         );
     }
 }

@@ -10,14 +10,23 @@ use glrmon_wire::{Record, Sample};
 use serde::Serialize;
 
 /// What one run gave (an element of `runs` in `glrmon evaluate --json`).
+///
+/// The detection is the first alarm at or after the onset; the monitor raises it at
+/// the crossing (the first sample of its episode with l_k > λ), so `crossing` minus
+/// the onset is the detection delay a consumer of the `alarm` records sees. Onset and
+/// isolation are that alarm's last ones: from its `isolation` update,
+/// `isolation_delay` samples later, if its episode lasted that long, else from the
+/// alarm itself (`isolated_at` tells which).
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
 pub struct Run {
-    /// First crossing of the threshold at or after the onset.
+    /// k of the first alarm at or after the onset: its crossing of the threshold.
     pub crossing: Option<u64>,
-    /// r̂ of the first alarm at or after the onset.
+    /// r̂ of that alarm's last isolation.
     pub onset_estimate: Option<u64>,
-    /// Faults isolated by that alarm.
+    /// Faults isolated by that alarm's last isolation.
     pub isolated: Vec<String>,
+    /// The sample of that isolation: the alarm's `k`, or its update's.
+    pub isolated_at: Option<u64>,
     /// Alarms raised before the onset.
     pub false_alarms: u64,
 }
@@ -163,11 +172,10 @@ pub fn one_run(
     onset: u64,
     samples: u64,
 ) -> Result<Run, EvalError> {
-    let sim = glrmon_sim::from_channel(channel, seed).map_err(glrmon_sim::ChannelError::from)?;
-    let magnitude = glrmon_sim::fault_magnitudes(channel, &[fault.to_owned()], &[magnitude])?;
-    let mut sim = glrmon_sim::inject(sim, channel, Injection { magnitude, onset })?;
+    let mut sim = simulator(channel, seed, fault, magnitude, onset)?;
     let mut mon = Monitor::from_channel(channel)?;
-    let threshold = channel.alarm.threshold;
+    // Detection, onset and isolation come from the alarm and isolation records.
+    mon.set_stat_records(false);
     let mut x = SimSample {
         k: 0,
         u: vec![],
@@ -177,7 +185,6 @@ pub fn one_run(
     let mut sample = Sample::default();
     let mut records = Vec::new();
     let mut run = Run::default();
-    let mut alarmed = false;
     for _ in 0..samples {
         sim.next_into(&mut x);
         sample.k = Some(x.k);
@@ -187,29 +194,52 @@ pub fn one_run(
         mon.on_sample(&sample, &mut records);
         for r in records.drain(..) {
             match r {
-                Record::Stat(s)
-                    if run.crossing.is_none()
-                        && s.k >= onset
-                        && s.glr.is_some_and(|l| l > threshold) =>
-                {
-                    run.crossing = Some(s.k);
-                }
                 Record::Alarm(a) if a.k < onset => run.false_alarms += 1,
-                Record::Alarm(a) if !alarmed => {
-                    alarmed = true;
+                Record::Alarm(a) if run.crossing.is_none() => {
+                    run.crossing = Some(a.k);
                     run.onset_estimate = Some(a.onset);
-                    run.isolated = a
-                        .isolation
-                        .iter()
-                        .filter(|i| i.isolated)
-                        .map(|i| i.fault.clone())
-                        .collect();
+                    run.isolated = isolated(&a.isolation);
+                    run.isolated_at = Some(a.k);
+                }
+                Record::Isolation(u) if run.crossing == Some(u.alarm_k) => {
+                    run.onset_estimate = Some(u.onset);
+                    run.isolated = isolated(&u.isolation);
+                    run.isolated_at = Some(u.k);
                 }
                 _ => {}
             }
         }
     }
     Ok(run)
+}
+
+/// The channel's simulator with `fault` of `magnitude` injected from `onset`, the noise
+/// seeded with `seed`: what [`one_run`] feeds its monitor.
+///
+/// # Errors
+/// [`EvalError::Simulator`] when the simulator cannot be built or the fault injected.
+pub fn simulator(
+    channel: &Channel,
+    seed: u64,
+    fault: &str,
+    magnitude: f64,
+    onset: u64,
+) -> Result<glrmon_sim::Simulator, EvalError> {
+    let sim = glrmon_sim::from_channel(channel, seed).map_err(glrmon_sim::ChannelError::from)?;
+    let magnitude = glrmon_sim::fault_magnitudes(channel, &[fault.to_owned()], &[magnitude])?;
+    Ok(glrmon_sim::inject(
+        sim,
+        channel,
+        Injection { magnitude, onset },
+    )?)
+}
+
+fn isolated(tests: &[glrmon_wire::IsolationResult]) -> Vec<String> {
+    tests
+        .iter()
+        .filter(|i| i.isolated)
+        .map(|i| i.fault.clone())
+        .collect()
 }
 
 /// Columns of the confusion matrix: the dictionary's faults, any other isolated name
@@ -319,7 +349,8 @@ fn isolated_label(r: &Run) -> String {
 
 /// The `--json` file: the channel, the onset, the channel's fault dictionary and every
 /// run of every injected fault, `{"channel", "onset", "faults", "results": [{"fault",
-/// "magnitude", "runs": [{"crossing", "onset_estimate", "isolated", "false_alarms"}]}]}`.
+/// "magnitude", "runs": [{"crossing", "onset_estimate", "isolated", "isolated_at",
+/// "false_alarms"}]}]}`.
 #[derive(Debug, Serialize)]
 pub struct EvaluationRuns<'a> {
     /// The channel.
@@ -367,6 +398,7 @@ mod tests {
                     crossing: Some(12),
                     onset_estimate: Some(10),
                     isolated: vec!["a\"b".into(), "c\\d".into()],
+                    isolated_at: Some(14),
                     false_alarms: 0,
                 },
                 Run::default(),
@@ -377,12 +409,58 @@ mod tests {
             text,
             concat!(
                 r#"{"channel":"m\u0001é","onset":10,"faults":["a\"b"],"results":[{"fault":"a\"b","magnitude":0.5,"runs":["#,
-                r#"{"crossing":12,"onset_estimate":10,"isolated":["a\"b","c\\d"],"false_alarms":0},"#,
-                r#"{"crossing":null,"onset_estimate":null,"isolated":[],"false_alarms":0}]}]}"#,
+                r#"{"crossing":12,"onset_estimate":10,"isolated":["a\"b","c\\d"],"isolated_at":14,"false_alarms":0},"#,
+                r#"{"crossing":null,"onset_estimate":null,"isolated":[],"isolated_at":null,"false_alarms":0}]}]}"#,
                 "\n"
             )
         );
         let v: serde_json::Value = serde_json::from_str(&text).unwrap();
         assert_eq!(v["results"][0]["runs"][0]["isolated"][1], "c\\d");
+    }
+
+    /// Issue 19: the run's detection is the crossing itself: the first sample at or
+    /// after the onset whose l_k exceeds λ, as the `stat` records of the same run show
+    /// it (before, the alarm, and with it the run's onset estimate and isolation, came
+    /// `isolation_delay` samples later). The isolation is the update's, that delay on.
+    #[test]
+    fn issue_19_a_run_detects_at_the_crossing_and_isolates_at_the_update() {
+        let cfg = glrmon_spec::parse(include_str!(
+            "../../../config/examples/paper2014-unstable.toml"
+        ))
+        .unwrap();
+        let channel = &cfg.channels[0];
+        let delay = u64::from(channel.isolation_delay);
+        assert!(delay > 0);
+        for seed in 1..6 {
+            let run = one_run(channel, seed, "x0_jump", 4.0, 201, 400).unwrap();
+            // The same run with the per-sample statistics.
+            let mut sim = simulator(channel, seed, "x0_jump", 4.0, 201).unwrap();
+            let mut mon = Monitor::from_channel(channel).unwrap();
+            let mut records = Vec::new();
+            for _ in 0..400 {
+                let x = sim.next_sample();
+                let s = Sample {
+                    k: Some(x.k),
+                    t: None,
+                    u: x.u,
+                    y: x.y,
+                    p: x.p,
+                };
+                mon.on_sample(&s, &mut records);
+            }
+            let crossing = records.iter().find_map(|r| match r {
+                Record::Stat(s)
+                    if s.k >= 201 && s.glr.is_some_and(|l| l > channel.alarm.threshold) =>
+                {
+                    Some(s.k)
+                }
+                _ => None,
+            });
+            assert!(crossing.is_some(), "seed {seed}: detected");
+            assert_eq!(run.crossing, crossing, "seed {seed}");
+            assert_eq!(run.isolated_at, crossing.map(|c| c + delay), "seed {seed}");
+            assert_eq!(run.isolated, ["x0_jump"], "seed {seed}");
+            assert_eq!(run.false_alarms, 0);
+        }
     }
 }

@@ -6,26 +6,44 @@
 //! It never asks where its records go (data flows one way, docs/ARCHITECTURE.md):
 //! callers hand them to sinks.
 //!
-//! Isolation runs `isolation_delay` samples after the crossing (default n, the number of
-//! states): at the crossing itself few samples carry the fault, and faults whose
-//! signatures differ only after a few steps cannot be told apart yet (in the §6.1 plant
-//! a jump of x0 at 201 and a jump of x1 at 200 give the same first innovation).
+//! # Alarm at the crossing, isolation refined later
+//!
+//! The `alarm` record is emitted at the crossing: the first sample k of an episode with
+//! l_k > λ, carrying that sample's onset r̂, magnitude θ̂ and the isolation tests run
+//! at r̂ then. Detection latency is thus the crossing itself, however large the state
+//! dimension n. The isolation tests are run again `isolation_delay` samples later
+//! (default n) and published as an `isolation` record naming the alarm (`alarm_k`):
+//! at the crossing few samples carry the fault, and faults whose signatures differ
+//! only after a few steps cannot be told apart yet (in the §6.1 plant a jump of x0 at
+//! 201 and a jump of x1 at 200 give the same first innovation). The alarm announces
+//! that sample in `update_k`.
+//!
+//! The update comes only while the episode is still on at that sample. An episode
+//! that ends earlier (l_k below λ·(1 − h), a restart after a gap) gets no update: its
+//! alarm at the crossing, where l_k > λ, stays the episode's only isolation, and its
+//! `alarm_end` tells a consumer waiting for `update_k` that none will come. Tests run
+//! on a statistic that has fallen back towards noise would describe the noise, not the
+//! fault, and reporting them would read as an alarm below the threshold.
 //!
 //! # Sparse diagnosis
 //!
 //! When the channel's `[channels.diagnosis]` table enables it, a [`DiagnosisEngine`]
 //! runs the residual filter of Zhang 2021 (Kalman, §III-A, or Kitanidis, §III-B)
 //! alongside the detector and keeps a ring of the last `history` samples' filter
-//! quantities. Every `alarm` record is followed, in the same `records` vector, by a
-//! `diagnosis` record: the Lasso regression (Zhang 2021, eqs. (36), (39)) rebuilt from
-//! the GLR's onset r̂ (clamped to the ring and to `span`) to the alarm's sample, its
-//! support, least-squares refit, λ and plateau (see [`diagnosis`]).
+//! quantities. Every `alarm` and every `isolation` record is followed, in the same
+//! `records` vector, by a `diagnosis` record with the same `k`: the Lasso regression
+//! (Zhang 2021, eqs. (36), (39)) rebuilt from that record's onset r̂ (clamped to the
+//! ring and to `span`) to its sample, its support, least-squares refit, λ and plateau
+//! (see [`diagnosis`]). The diagnosis at the crossing spans the few samples since r̂
+//! and is the plant's first answer; the one with the isolation update spans
+//! `isolation_delay` more samples and supersedes it, as the update supersedes the
+//! alarm's isolation. An episode shorter than the delay keeps its crossing diagnosis.
 //!
-//! The diagnosis is computed synchronously, when the alarm is emitted. This keeps the
+//! The diagnosis is computed synchronously, when its record is emitted. This keeps the
 //! output deterministic (replay reproduces live results and record order exactly) and
 //! still keeps it off every other channel's path: the runtime gives each worker thread
 //! its own shard of monitors, so a diagnosis delays only the samples of the channels in
-//! the same shard, once per alarm, by the cost of one Lasso path — under 5 ms for
+//! the same shard, at most twice per alarm, by the cost of one Lasso path — under 5 ms for
 //! m = 50 faults and N = 100 samples (2.3-4.4 ms measured on Example 1 data,
 //! crates/glrmon-core/benches/diagnose.rs), O(m²) per λ and coordinate sweep, and
 //! independent of N beyond the O(N·p·m²) Gram accumulation. A worker thread per
@@ -43,7 +61,8 @@ use glrmon_core::consistency::Consistency;
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{AlarmSettings, AlarmState, AlarmTransition, Detector, StepError, StepOutput};
 use glrmon_wire::{
-    Alarm, AlarmEnd, ErrorCode, ErrorRecord, IsolationResult, Record, Sample, Stage, Stat,
+    Alarm, AlarmEnd, ErrorCode, ErrorRecord, IsolationResult, IsolationUpdate, Record, Sample,
+    Stage, Stat,
 };
 
 /// An isolation test: a named group of faults tested against all others (minmax,
@@ -61,7 +80,8 @@ pub struct IsolationGroup {
 pub struct MonitorSettings {
     /// Detection threshold and episode hysteresis.
     pub alarm: AlarmSettings,
-    /// Samples between the crossing and the isolation tests.
+    /// Samples between the alarm (the crossing) and its `isolation` update; 0: the
+    /// alarm's isolation is final.
     pub isolation_delay: u32,
     /// Type-I probability of each isolation test; the threshold is the χ²(dim a) upper
     /// quantile.
@@ -86,7 +106,7 @@ pub struct MonitorSettings {
 pub struct Tuning {
     /// Detection threshold and episode hysteresis.
     pub alarm: AlarmSettings,
-    /// Samples between the crossing and the isolation tests.
+    /// Samples between the alarm (the crossing) and its `isolation` update.
     pub isolation_delay: u32,
     /// Type-I probability of each isolation test.
     pub isolation_alpha: f64,
@@ -114,9 +134,11 @@ pub struct MonitorCounters {
     pub samples: u64,
     /// Samples filled by predict-only steps.
     pub gap_samples: u64,
-    /// Alarms raised.
+    /// Alarms raised (one per episode, at its crossing).
     pub alarms: u64,
-    /// Sparse diagnoses emitted.
+    /// `isolation` records: alarms whose episode lasted `isolation_delay` samples.
+    pub isolation_updates: u64,
+    /// Sparse diagnoses emitted (with alarms and with isolation updates).
     pub diagnoses: u64,
     /// Restarts of the filter from its initial state (after a gap longer than
     /// `max_gap`, or a numerical failure).
@@ -135,7 +157,8 @@ pub struct Monitor {
     groups: Vec<IsolationGroup>,
     fault_names: Vec<String>,
     out: StepOutput,
-    pending: Option<PendingAlarm>,
+    /// The isolation update the current episode's alarm announced.
+    pending: Option<PendingUpdate>,
     reported_onset: u64,
     counters: MonitorCounters,
     arrivals: u64,
@@ -153,8 +176,11 @@ pub struct Monitor {
 }
 
 #[derive(Debug, Clone, Copy)]
-struct PendingAlarm {
-    isolate_at: u64,
+struct PendingUpdate {
+    /// The alarm's sample (the crossing).
+    alarm_k: u64,
+    /// The sample of the update: `alarm_k` + `isolation_delay`.
+    update_k: u64,
 }
 
 impl Monitor {
@@ -218,8 +244,9 @@ impl Monitor {
     }
 
     /// Runs `engine` alongside the detector and emits a `diagnosis` record after every
-    /// alarm (see the [crate documentation](crate#sparse-diagnosis)). The engine must
-    /// be fresh (no sample processed) and built for the same channel.
+    /// alarm and isolation update (see the [crate
+    /// documentation](crate#sparse-diagnosis)). The engine must be fresh (no sample
+    /// processed) and built for the same channel.
     #[must_use]
     pub fn with_diagnosis(mut self, engine: DiagnosisEngine) -> Self {
         self.diagnosis = Some(engine);
@@ -273,8 +300,10 @@ impl Monitor {
 
     /// Applies new thresholds and alarm settings (a configuration reload) without
     /// touching the filter: the detection threshold and episode hysteresis take effect
-    /// at the next sample (an episode going on continues under them), the isolation
-    /// delay, level and calibrated thresholds at the next alarm.
+    /// at the next sample (an episode going on continues under them); the isolation
+    /// level and calibrated thresholds at the next isolation (an alarm or a pending
+    /// update); the isolation delay at the next alarm (an update already announced
+    /// keeps its sample).
     pub fn retune(&mut self, tuning: &Tuning) {
         self.settings.alarm = tuning.alarm;
         self.alarm.set_settings(tuning.alarm);
@@ -336,8 +365,11 @@ impl Monitor {
     }
 
     /// Processes one decoded sample and appends the resulting records: a `stat` per
-    /// processed sample, `alarm` / `alarm_end` at episode edges, `error` for a rejected
-    /// sample (the channel's state is then unchanged) and for each filled gap.
+    /// processed sample, `alarm` at the crossing that starts an episode and `alarm_end`
+    /// where it ends, `isolation` `isolation_delay` samples after the alarm if the
+    /// episode is still on, a `diagnosis` after each alarm and isolation record when
+    /// enabled, `error` for a rejected sample (the channel's state is then unchanged)
+    /// and for each filled gap.
     ///
     /// # Examples
     ///
@@ -523,16 +555,11 @@ impl Monitor {
             self.push_stat(k, sample.t, records);
         }
         match self.alarm.update(k, self.out.glr) {
-            AlarmTransition::Started => {
-                self.pending = Some(PendingAlarm {
-                    isolate_at: k + u64::from(self.settings.isolation_delay),
-                });
-            }
+            AlarmTransition::Started => self.emit_alarm(k, sample.t, records),
             AlarmTransition::Ended { started, peak } => {
-                if self.pending.is_some() {
-                    // The episode ended before the isolation delay ran out.
-                    self.emit_alarm(k, sample.t, records);
-                }
+                // An episode shorter than the isolation delay: its alarm, raised at
+                // the crossing, stays its isolation (see the crate documentation).
+                self.pending = None;
                 records.push(Record::AlarmEnd(AlarmEnd {
                     channel: self.channel.clone(),
                     k,
@@ -544,11 +571,21 @@ impl Monitor {
             }
             AlarmTransition::Active | AlarmTransition::Quiet => {}
         }
-        if self.pending.is_some_and(|p| k >= p.isolate_at) {
-            self.emit_alarm(k, sample.t, records);
+        // With `clear_samples` > 1 an episode survives samples without an admissible
+        // onset, where there is nothing to test: the update then waits for the next
+        // sample with one.
+        if let (Some(p), Some(glr), Some(onset)) = (
+            self.pending.filter(|p| k >= p.update_k),
+            self.out.glr,
+            self.out.onset,
+        ) {
+            self.pending = None;
+            self.emit_update(p, k, sample.t, glr, onset, records);
         }
     }
 
+    /// The `alarm` record of the crossing at k (l_k > λ just started an episode), its
+    /// isolation at the current r̂, and the update it announces.
     fn emit_alarm(&mut self, k: u64, t: Option<f64>, records: &mut Vec<Record>) {
         self.pending = None;
         let (Some(glr), Some(onset)) = (self.out.glr, self.out.onset) else {
@@ -556,6 +593,12 @@ impl Monitor {
         };
         self.counters.alarms += 1;
         self.reported_onset = onset;
+        let delay = u64::from(self.settings.isolation_delay);
+        let update_k = (delay > 0).then(|| k.saturating_add(delay));
+        self.pending = update_k.map(|update_k| PendingUpdate {
+            alarm_k: k,
+            update_k,
+        });
         let isolation = self.isolate(onset);
         records.push(Record::Alarm(Alarm {
             channel: self.channel.clone(),
@@ -567,12 +610,44 @@ impl Monitor {
             magnitude: self.out.magnitude.iter().copied().collect(),
             isolation,
             faults: self.fault_names.clone(),
+            update_k,
         }));
         self.diagnose(k, onset, records);
     }
 
-    /// The `diagnosis` record of an alarm at k with onset r̂, right after the alarm (or
-    /// an `error` record when the regression cannot be made, e.g. no signal).
+    /// The `isolation` record of the alarm `p` at k (its `update_k`), the episode still
+    /// on, l_k = `glr` and r̂ = `onset`: magnitude and isolation tests as they are now.
+    fn emit_update(
+        &mut self,
+        p: PendingUpdate,
+        k: u64,
+        t: Option<f64>,
+        glr: f64,
+        onset: u64,
+        records: &mut Vec<Record>,
+    ) {
+        self.counters.isolation_updates += 1;
+        // The episode's `alarm_end` reports the latest estimate of its onset.
+        self.reported_onset = onset;
+        let isolation = self.isolate(onset);
+        records.push(Record::Isolation(IsolationUpdate {
+            channel: self.channel.clone(),
+            k,
+            t,
+            alarm_k: p.alarm_k,
+            glr,
+            threshold: self.settings.alarm.threshold,
+            onset,
+            magnitude: self.out.magnitude.iter().copied().collect(),
+            isolation,
+            faults: self.fault_names.clone(),
+        }));
+        self.diagnose(k, onset, records);
+    }
+
+    /// The `diagnosis` record at k with onset r̂, right after the alarm or isolation
+    /// record of k (or an `error` record when the regression cannot be made, e.g. no
+    /// signal).
     fn diagnose(&mut self, k: u64, onset: u64, records: &mut Vec<Record>) {
         let Some(engine) = &self.diagnosis else {
             return;
@@ -586,7 +661,7 @@ impl Monitor {
                 records,
                 Some(k),
                 ErrorCode::Numerical,
-                format!("sparse diagnosis at the alarm: {e}"),
+                format!("sparse diagnosis at k = {k}: {e}"),
             ),
         }
     }
@@ -643,7 +718,8 @@ impl Monitor {
     }
 
     /// Restarts the detector from its initial state (see [`Detector::restart`]): an
-    /// ongoing alarm episode ends here (`alarm_end`), a pending isolation is dropped,
+    /// ongoing alarm episode ends here (`alarm_end`), a pending isolation update is
+    /// dropped,
     /// the residual filter of sparse diagnosis restarts too; reported as an `error`.
     fn restart(
         &mut self,
@@ -654,9 +730,6 @@ impl Monitor {
         records: &mut Vec<Record>,
     ) {
         if let Some((started, peak)) = self.alarm.reset() {
-            if self.pending.is_some() {
-                self.emit_alarm(k, t, records);
-            }
             records.push(Record::AlarmEnd(AlarmEnd {
                 channel: self.channel.clone(),
                 k,
@@ -723,6 +796,47 @@ mod tests {
         }
     }
 
+    fn alarms(records: &[Record]) -> Vec<&Alarm> {
+        records
+            .iter()
+            .filter_map(|r| match r {
+                Record::Alarm(a) => Some(a),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn updates(records: &[Record]) -> Vec<&IsolationUpdate> {
+        records
+            .iter()
+            .filter_map(|r| match r {
+                Record::Isolation(u) => Some(u),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn isolated(tests: &[IsolationResult]) -> Vec<&str> {
+        tests
+            .iter()
+            .filter(|i| i.isolated)
+            .map(|i| i.fault.as_str())
+            .collect()
+    }
+
+    /// The first `stat` at or after `from` whose l_k exceeds its threshold: the
+    /// crossing, as the per-sample statistic shows it.
+    fn first_crossing(records: &[Record], from: u64) -> Option<&Stat> {
+        records.iter().find_map(|r| match r {
+            Record::Stat(s)
+                if s.k >= from && s.glr.zip(s.threshold).is_some_and(|(l, h)| l > h) =>
+            {
+                Some(s)
+            }
+            _ => None,
+        })
+    }
+
     #[test]
     fn one_alarm_per_episode_isolating_the_injected_state() {
         let sc = scenarios::paper2014_unstable();
@@ -732,31 +846,158 @@ mod tests {
         for _ in 0..450 {
             mon.on_sample(&sample(&sim.next_sample()), &mut records);
         }
-        let alarms: Vec<&Alarm> = records
-            .iter()
-            .filter_map(|r| {
-                if let Record::Alarm(a) = r {
-                    Some(a)
-                } else {
-                    None
-                }
-            })
-            .collect();
+        let alarms = alarms(&records);
         assert_eq!(alarms.len(), 1);
         let a = alarms[0];
-        assert_eq!((a.k, a.onset), (203, 201));
-        let isolated: Vec<&str> = a
-            .isolation
-            .iter()
-            .filter(|i| i.isolated)
-            .map(|i| i.fault.as_str())
-            .collect();
-        assert_eq!(isolated, ["x0_jump"]);
+        // At the crossing r̂ = 200 and the x1 jump explains the data as well (a jump
+        // of x0 at 201 and of x1 at 200 give the same first innovation): the very
+        // ambiguity the update, two samples later, resolves.
+        assert_eq!((a.k, a.onset, a.update_k), (201, 200, Some(203)));
+        assert_eq!(isolated(&a.isolation), ["x1_jump"]);
+        let updates = updates(&records);
+        assert_eq!(updates.len(), 1);
+        let u = updates[0];
+        assert_eq!((u.k, u.alarm_k, u.onset), (203, 201, 201));
+        assert_eq!(isolated(&u.isolation), ["x0_jump"]);
         let ends = records
             .iter()
             .filter(|r| matches!(r, Record::AlarmEnd(_)))
             .count();
         assert_eq!(ends, 1);
+        assert_eq!(
+            (mon.counters().alarms, mon.counters().isolation_updates),
+            (1, 1)
+        );
+    }
+
+    /// Issue 19 (alarms arrived `isolation_delay` samples late): the `alarm` record is
+    /// appended by the very sample whose l_k first exceeds λ, right after that
+    /// sample's `stat`, with its l_k, r̂ and θ̂; the `isolation` record follows exactly
+    /// `isolation_delay` samples later, names the alarm and isolates the injected state.
+    #[test]
+    fn issue_19_the_alarm_is_published_at_the_crossing_and_the_isolation_delay_later() {
+        for (fault, magnitude, delay) in [
+            ("x0_jump", 4.0, 2u32),
+            ("x1_jump", 1.5, 7),
+            ("x0_jump", 4.0, 30),
+        ] {
+            let sc = scenarios::paper2014_unstable();
+            let mut sim = sc.faulty_simulator(4, fault, 201, magnitude).unwrap();
+            let mut mon = monitor();
+            mon.retune(&Tuning {
+                alarm: mon.settings.alarm,
+                isolation_delay: delay,
+                isolation_alpha: 0.01,
+                isolation_thresholds: vec![],
+            });
+            let mut records = Vec::new();
+            // The records each sample appended, by the sample's k.
+            let mut by_sample: Vec<Vec<Record>> = Vec::new();
+            for _ in 0..450 {
+                let mut step = Vec::new();
+                mon.on_sample(&sample(&sim.next_sample()), &mut step);
+                records.extend(step.iter().cloned());
+                by_sample.push(step);
+            }
+            let crossing = first_crossing(&records, 0).expect("a crossing").clone();
+            assert!(
+                crossing.k >= 201,
+                "{fault}: crossing {} before the fault",
+                crossing.k
+            );
+            let alarms = alarms(&records);
+            assert_eq!(alarms.len(), 1, "{fault}: {alarms:#?}");
+            let a = alarms[0];
+            assert_eq!(a.k, crossing.k, "{fault}: alarm k is the crossing");
+            assert_eq!(Some(a.glr), crossing.glr);
+            assert_eq!(Some(a.onset), crossing.onset);
+            assert_eq!(a.magnitude, crossing.magnitude);
+            assert!(a.glr > a.threshold, "{fault}: {} ≤ {}", a.glr, a.threshold);
+            assert_eq!(a.update_k, Some(crossing.k + u64::from(delay)));
+            let step = &by_sample[crossing.k as usize];
+            assert!(
+                matches!(step.as_slice(), [Record::Stat(s), Record::Alarm(_)] if s.k == crossing.k),
+                "{fault}: {step:#?}"
+            );
+            let updates = updates(&records);
+            assert_eq!(updates.len(), 1, "{fault}: {updates:#?}");
+            let u = updates[0];
+            assert_eq!(u.k, crossing.k + u64::from(delay), "{fault}");
+            assert_eq!(u.alarm_k, a.k);
+            assert!(matches!(
+                by_sample[u.k as usize].as_slice(),
+                [Record::Stat(s), Record::Isolation(_)] if s.k == u.k
+            ));
+            assert!(
+                u.glr >= u.threshold * 0.9,
+                "{fault}: episode on at the update"
+            );
+            assert!(
+                isolated(&u.isolation).contains(&fault),
+                "{fault}: {:#?}",
+                u.isolation
+            );
+        }
+    }
+
+    /// An episode shorter than the isolation delay: the alarm at the crossing (l_k > λ)
+    /// is its only isolation; no record comes after its end claiming an alarm, or any
+    /// isolation, with l_k below the threshold.
+    #[test]
+    fn an_episode_shorter_than_the_delay_has_its_alarm_at_the_crossing_and_no_update() {
+        let sc = scenarios::paper2014_unstable();
+        let mut sim = sc.faulty_simulator(1, "x0_jump", 201, 4.0).unwrap();
+        let mut mon = monitor();
+        mon.retune(&Tuning {
+            alarm: mon.settings.alarm,
+            isolation_delay: 1000,
+            isolation_alpha: 0.01,
+            isolation_thresholds: vec![],
+        });
+        let mut records = Vec::new();
+        for _ in 0..1500 {
+            mon.on_sample(&sample(&sim.next_sample()), &mut records);
+        }
+        let crossing = first_crossing(&records, 0).expect("a crossing").k;
+        let alarms = alarms(&records);
+        assert_eq!(alarms.len(), 1, "{alarms:#?}");
+        let a = alarms[0];
+        assert_eq!((a.k, a.update_k), (crossing, Some(crossing + 1000)));
+        assert!(a.glr > a.threshold);
+        let end = records
+            .iter()
+            .find_map(|r| match r {
+                Record::AlarmEnd(e) => Some(e),
+                _ => None,
+            })
+            .expect("the episode ends");
+        assert!(end.k < crossing + 1000, "end at {}", end.k);
+        assert_eq!((end.k - end.duration, end.onset), (a.k, a.onset));
+        assert!(updates(&records).is_empty(), "{:#?}", updates(&records));
+        assert_eq!(mon.counters().isolation_updates, 0);
+    }
+
+    /// `isolation_delay = 0`: the alarm's isolation is final; nothing is announced.
+    #[test]
+    fn without_delay_the_alarm_announces_no_update() {
+        let sc = scenarios::paper2014_unstable();
+        let mut sim = sc.faulty_simulator(1, "x0_jump", 201, 4.0).unwrap();
+        let mut mon = monitor();
+        mon.retune(&Tuning {
+            alarm: mon.settings.alarm,
+            isolation_delay: 0,
+            isolation_alpha: 0.01,
+            isolation_thresholds: vec![],
+        });
+        let mut records = Vec::new();
+        for _ in 0..450 {
+            mon.on_sample(&sample(&sim.next_sample()), &mut records);
+        }
+        let alarms = alarms(&records);
+        assert_eq!(alarms.len(), 1);
+        assert_eq!(alarms[0].k, first_crossing(&records, 0).unwrap().k);
+        assert_eq!(alarms[0].update_k, None);
+        assert!(updates(&records).is_empty());
     }
 
     /// Without `stat` records the monitor emits exactly the other records of a run
@@ -890,7 +1131,13 @@ mod tests {
             })
             .collect();
         assert_eq!(ends.first().map(|e| e.k), Some(1210), "{ends:?}");
-        assert!(alarms.iter().any(|a| a.onset == 1601), "{alarms:?}");
+        assert!(alarms.iter().any(|a| a.k == 1601), "{alarms:?}");
+        assert!(
+            records
+                .iter()
+                .any(|r| matches!(r, Record::Isolation(u) if u.alarm_k == 1601 && u.onset == 1601)),
+            "{records:?}"
+        );
         assert!(records.iter().any(|r| matches!(r, Record::Error(e)
             if e.code == ErrorCode::Gap && e.k == Some(1210) && e.message.contains("restarts"))));
     }
@@ -970,8 +1217,11 @@ lasso = { ratio = 1e-2 }
         (mon, records)
     }
 
+    /// A diagnosis follows the alarm at the crossing (over r̂..crossing) and the
+    /// isolation update 15 samples later (over its r̂..k); the latter isolates the
+    /// injected fault and sizes it.
     #[test]
-    fn a_diagnosis_follows_the_alarm_and_isolates_the_injected_fault() {
+    fn a_diagnosis_follows_the_alarm_and_its_update_and_isolates_the_injected_fault() {
         let (mon, records) = small_run(SMALL);
         let alarm = records
             .iter()
@@ -987,6 +1237,21 @@ lasso = { ratio = 1e-2 }
             );
         };
         assert_eq!((d.k, d.to, d.from), (a.k, a.k, a.onset));
+        let update = records
+            .iter()
+            .position(|r| matches!(r, Record::Isolation(_)))
+            .expect("an isolation update");
+        let Record::Isolation(u) = &records[update] else {
+            unreachable!()
+        };
+        assert_eq!((u.alarm_k, u.k), (a.k, a.k + 15));
+        let Some(Record::Diagnosis(d)) = records.get(update + 1) else {
+            panic!(
+                "no diagnosis right after the update: {:?}",
+                records.get(update + 1)
+            );
+        };
+        assert_eq!((d.k, d.to, d.from), (u.k, u.k, u.onset));
         assert_eq!(d.channel, "small");
         assert_eq!(d.residual, "kalman");
         assert_eq!(d.support, ["s1"]);
@@ -1000,8 +1265,9 @@ lasso = { ratio = 1e-2 }
             .iter()
             .filter(|r| matches!(r, Record::Diagnosis(_)))
             .count();
-        assert_eq!(diagnoses as u64, mon.counters().alarms);
-        assert_eq!(mon.counters().diagnoses, mon.counters().alarms);
+        let c = mon.counters();
+        assert_eq!(diagnoses as u64, c.alarms + c.isolation_updates);
+        assert_eq!(c.diagnoses, c.alarms + c.isolation_updates);
         assert!(
             mon.counters().errors.is_empty(),
             "{:?}",

@@ -82,6 +82,7 @@ impl Sink for McapFileSink {
         let t = match &output.record {
             Record::Stat(r) => r.t,
             Record::Alarm(r) => r.t,
+            Record::Isolation(r) => r.t,
             Record::AlarmEnd(r) => r.t,
             _ => None,
         };

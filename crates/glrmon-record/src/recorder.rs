@@ -253,6 +253,7 @@ impl Sink for Recorder {
         let t = match &output.record {
             Record::Stat(r) => r.t,
             Record::Alarm(r) => r.t,
+            Record::Isolation(r) => r.t,
             Record::AlarmEnd(r) => r.t,
             _ => None,
         };
@@ -658,10 +659,23 @@ mod tests {
         assert!(read.iter().all(|(_, _, end)| *end == ReadEnd::Finished));
 
         // The cap: a recorder over the same directory, with room for the two newest
-        // files of the first recorder and its own (empty) file.
+        // files of the first recorder and its own (empty) file, whose size (schemas,
+        // configuration, footer) is measured rather than assumed, plus 1 kB of slack.
         let size = |p: &Path| std::fs::metadata(p).unwrap().len();
+        let empty_dir = scratch("rotate-empty");
+        let empty = Recorder::start(
+            RecorderSettings {
+                directory: empty_dir.clone(),
+                ..settings.clone()
+            },
+            header(),
+        )
+        .unwrap()
+        .finish();
+        let empty_size = size(&empty[0]);
+        std::fs::remove_dir_all(&empty_dir).unwrap();
         let newest: Vec<&PathBuf> = files.iter().rev().take(2).collect();
-        let cap = newest.iter().map(|p| size(p)).sum::<u64>() + 10_000;
+        let cap = newest.iter().map(|p| size(p)).sum::<u64>() + empty_size + 1_000;
         let capped = RecorderSettings {
             max_total_bytes: Some(cap),
             max_file_bytes: Some(1_000_000),
@@ -763,6 +777,7 @@ mod tests {
                         magnitude: vec![],
                         isolation: vec![],
                         faults: vec![],
+                        update_k: None,
                     }),
                     json: b"{}".to_vec(),
                     log_time_ns: k * 1_000_000,

@@ -20,6 +20,8 @@ pub enum TopicKind {
     Stat,
     /// `alarm` records.
     Alarm,
+    /// `isolation` records (an alarm's refined isolation).
+    Isolation,
     /// `alarm_end` records.
     AlarmEnd,
     /// `diagnosis` records.
@@ -32,11 +34,12 @@ pub enum TopicKind {
 
 impl TopicKind {
     /// Every kind, in topic order.
-    pub const ALL: [TopicKind; 8] = [
+    pub const ALL: [TopicKind; 9] = [
         TopicKind::Inputs,
         TopicKind::Intake,
         TopicKind::Stat,
         TopicKind::Alarm,
+        TopicKind::Isolation,
         TopicKind::AlarmEnd,
         TopicKind::Diagnosis,
         TopicKind::Error,
@@ -51,6 +54,7 @@ impl TopicKind {
             TopicKind::Intake => "intake",
             TopicKind::Stat => "stat",
             TopicKind::Alarm => "alarm",
+            TopicKind::Isolation => "isolation",
             TopicKind::AlarmEnd => "alarm_end",
             TopicKind::Diagnosis => "diagnosis",
             TopicKind::Error => "error",
@@ -71,6 +75,7 @@ impl TopicKind {
         Some(match record {
             Record::Stat(_) => TopicKind::Stat,
             Record::Alarm(_) => TopicKind::Alarm,
+            Record::Isolation(_) => TopicKind::Isolation,
             Record::AlarmEnd(_) => TopicKind::AlarmEnd,
             Record::Diagnosis(_) => TopicKind::Diagnosis,
             Record::Error(_) => TopicKind::Error,
@@ -87,6 +92,7 @@ impl TopicKind {
             TopicKind::Intake => "glrmon.Intake",
             TopicKind::Stat => "glrmon.Stat",
             TopicKind::Alarm => "glrmon.Alarm",
+            TopicKind::Isolation => "glrmon.Isolation",
             TopicKind::AlarmEnd => "glrmon.AlarmEnd",
             TopicKind::Diagnosis => "glrmon.Diagnosis",
             TopicKind::Error => "glrmon.Error",
@@ -102,6 +108,7 @@ impl TopicKind {
             TopicKind::Intake => INTAKE,
             TopicKind::Stat => STAT,
             TopicKind::Alarm => ALARM,
+            TopicKind::Isolation => ISOLATION,
             TopicKind::AlarmEnd => ALARM_END,
             TopicKind::Diagnosis => DIAGNOSIS,
             TopicKind::Error => ERROR,
@@ -168,11 +175,12 @@ const STAT: &str = r#"{
 
 const ALARM: &str = r#"{
   "title": "glrmon alarm",
+  "description": "An alarm, published at the crossing: the first sample of the episode with l_k above the threshold, with the onset, magnitude and isolation computed there.",
   "type": "object",
   "properties": {
     "type": {"type": "string", "enum": ["alarm"]},
     "channel": {"type": "string"},
-    "k": {"type": "integer"},
+    "k": {"type": "integer", "description": "the crossing: first sample with l_k above the threshold"},
     "t": {"type": ["number", "null"]},
     "glr": {"type": "number"},
     "threshold": {"type": "number"},
@@ -190,9 +198,42 @@ const ALARM: &str = r#"{
       "required": ["fault", "minmax", "sensitivity", "threshold", "isolated"],
       "additionalProperties": false
     }},
-    "faults": {"type": "array", "items": {"type": "string"}}
+    "faults": {"type": "array", "items": {"type": "string"}},
+    "update_k": {"type": ["integer", "null"], "description": "sample of the isolation record that refines this alarm if the episode is still on then (k + isolation_delay); null: none scheduled"}
   },
   "required": ["type", "channel", "k", "glr", "threshold", "onset", "magnitude", "isolation", "faults"],
+  "additionalProperties": false
+}"#;
+
+const ISOLATION: &str = r#"{
+  "title": "glrmon isolation",
+  "description": "An alarm's isolation refined isolation_delay samples after its crossing, while its episode is still on. Not a new alarm.",
+  "type": "object",
+  "properties": {
+    "type": {"type": "string", "enum": ["isolation"]},
+    "channel": {"type": "string"},
+    "k": {"type": "integer", "description": "sample at which the isolation was computed"},
+    "t": {"type": ["number", "null"]},
+    "alarm_k": {"type": "integer", "description": "k of the alarm refined (its crossing)"},
+    "glr": {"type": "number", "description": "l_k at k"},
+    "threshold": {"type": "number"},
+    "onset": {"type": "integer", "description": "onset estimate r at k"},
+    "magnitude": {"type": "array", "items": {"type": "number"}},
+    "isolation": {"type": "array", "items": {
+      "type": "object",
+      "properties": {
+        "fault": {"type": "string"},
+        "minmax": {"type": "number"},
+        "sensitivity": {"type": "number"},
+        "threshold": {"type": "number"},
+        "isolated": {"type": "boolean"}
+      },
+      "required": ["fault", "minmax", "sensitivity", "threshold", "isolated"],
+      "additionalProperties": false
+    }},
+    "faults": {"type": "array", "items": {"type": "string"}}
+  },
+  "required": ["type", "channel", "k", "alarm_k", "glr", "threshold", "onset", "magnitude", "isolation", "faults"],
   "additionalProperties": false
 }"#;
 

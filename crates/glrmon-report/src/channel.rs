@@ -3,11 +3,12 @@
 
 use std::collections::BTreeMap;
 
-use glrmon_wire::{Alarm, AlarmEnd, Consistency, Diagnosis, ErrorRecord, Stat};
+use glrmon_wire::{Alarm, AlarmEnd, Consistency, Diagnosis, ErrorRecord, IsolationUpdate, Stat};
 
 use crate::decimate::{ColumnId, Grid};
 
-/// Alarms kept in full (markers, isolation, table); later ones are only counted.
+/// Alarms kept in full (markers, isolation, table), and as many isolation updates;
+/// later ones are only counted.
 pub(crate) const MAX_ALARMS: usize = 256;
 /// Diagnoses kept in full (with their regularisation path).
 pub(crate) const MAX_DIAGNOSES: usize = 16;
@@ -41,6 +42,9 @@ pub(crate) struct ChannelState {
     pub(crate) magnitude_len: usize,
     pub(crate) alarms: Vec<Alarm>,
     pub(crate) alarms_total: u64,
+    /// Isolation updates (`isolation` records), matched to their alarm by `alarm_k`.
+    pub(crate) updates: Vec<IsolationUpdate>,
+    pub(crate) updates_total: u64,
     pub(crate) episodes: Vec<Episode>,
     pub(crate) alarm_ends: u64,
     pub(crate) diagnoses: Vec<Diagnosis>,
@@ -73,6 +77,8 @@ impl ChannelState {
             magnitude_len: 0,
             alarms: Vec::new(),
             alarms_total: 0,
+            updates: Vec::new(),
+            updates_total: 0,
             episodes: Vec::new(),
             alarm_ends: 0,
             diagnoses: Vec::new(),
@@ -122,6 +128,19 @@ impl ChannelState {
                 end: None,
             });
         }
+    }
+
+    pub(crate) fn add_isolation(&mut self, u: &IsolationUpdate) {
+        self.updates_total = self.updates_total.saturating_add(1);
+        self.see_k(u.k);
+        if self.updates.len() < MAX_ALARMS {
+            self.updates.push(u.clone());
+        }
+    }
+
+    /// The isolation update of alarm `a`, if one came (and was kept).
+    pub(crate) fn update_of(&self, a: &Alarm) -> Option<&IsolationUpdate> {
+        self.updates.iter().find(|u| u.alarm_k == a.k)
     }
 
     pub(crate) fn add_alarm_end(&mut self, e: &AlarmEnd) {
@@ -180,6 +199,7 @@ impl ChannelState {
             .alarms
             .iter()
             .map(|a| &a.faults)
+            .chain(self.updates.iter().map(|u| &u.faults))
             .chain(self.diagnoses.iter().map(|d| &d.faults))
             .find(|f| f.len() == n);
         match known {

@@ -101,10 +101,10 @@ pub struct FaultEvaluation {
     pub magnitude: f64,
     /// Runs made.
     pub runs: u64,
-    /// Runs in which the statistic crossed the threshold at or after the onset.
+    /// Runs with an alarm (a crossing of the threshold) at or after the onset.
     pub detected: u64,
-    /// Detection delay of each detecting run: first crossing k minus the onset r, in
-    /// samples.
+    /// Detection delay of each detecting run: its first alarm's k (the crossing) minus
+    /// the onset r, in samples.
     pub delays: Vec<u64>,
     /// The 10th, 50th and 90th percentiles of `delays` (`None` without detections).
     pub delay_quantiles: Option<[f64; 3]>,
@@ -186,7 +186,7 @@ impl Evaluation {
         for (label, value) in rows {
             let _ = write!(s, "<tr><th>{label}</th><td>{value}</td></tr>");
         }
-        s.push_str("</table>\n<p class=\"note\">Monte-Carlo fault injection: each run simulates the channel with its own noise seed, injects one fault from k = r on, and runs the channel's monitor as live. Detection delay: samples from r to the first sample with l<sub>k</sub> &gt; h. Onset error: r̂ of the first alarm at or after r, minus r (Zhang &amp; Basseville 2014, §6.2, Fig. 7).</p>\n");
+        s.push_str("</table>\n<p class=\"note\">Monte-Carlo fault injection: each run simulates the channel with its own noise seed, injects one fault from k = r on, and runs the channel's monitor as live. Detection delay: samples from r to the first alarm at or after r, raised at the first sample with l<sub>k</sub> &gt; h. Onset error: r̂ of that alarm's isolation update (<code>isolation_delay</code> samples on; the alarm's own if its episode ended first), minus r (Zhang &amp; Basseville 2014, §6.2, Fig. 7).</p>\n");
         s
     }
 

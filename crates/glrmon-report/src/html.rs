@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 use std::io::{self, Write};
 
-use glrmon_wire::{Alarm, Diagnosis};
+use glrmon_wire::{Alarm, Diagnosis, IsolationResult};
 
 use crate::Report;
 use crate::channel::{ChannelState, MAX_ALARMS, MAX_COMPONENTS, MAX_DIAGNOSES, MAX_ERRORS};
@@ -96,18 +96,16 @@ fn summary_table(report: &Report) -> String {
             ch.alarms_total,
             ", ",
         );
+        // Each alarm's final isolation: its update's when one came.
         let isolated = listing(
             ch.alarms.iter().map(|a| {
-                let names = isolated_names(a);
-                format!(
-                    "k={}: {}",
-                    a.k,
-                    if names.is_empty() {
-                        "none".to_owned()
-                    } else {
-                        format!("<span class=\"isolated\">{}</span>", names.join(", "))
-                    }
-                )
+                let view = IsolationView::last(ch, a);
+                let at = if view.k == a.k {
+                    format!("k={}", a.k)
+                } else {
+                    format!("k={} (alarm k={})", view.k, a.k)
+                };
+                format!("{at}: {}", isolated_cell(view.isolation))
             }),
             ch.alarms_total,
             "<br>",
@@ -191,12 +189,57 @@ fn listing(items: impl Iterator<Item = String>, total: u64, sep: &str) -> String
     s
 }
 
-fn isolated_names(a: &Alarm) -> Vec<String> {
-    a.isolation
+fn isolated_names(isolation: &[IsolationResult]) -> Vec<String> {
+    isolation
         .iter()
         .filter(|i| i.isolated)
         .map(|i| escape(&i.fault))
         .collect()
+}
+
+/// `none`, or the isolated faults' names highlighted.
+fn isolated_cell(isolation: &[IsolationResult]) -> String {
+    let names = isolated_names(isolation);
+    if names.is_empty() {
+        "none".to_owned()
+    } else {
+        format!("<span class=\"isolated\">{}</span>", names.join(", "))
+    }
+}
+
+/// The isolation tests of an alarm (at its crossing) or of its update.
+struct IsolationView<'a> {
+    /// Where the tests ran.
+    k: u64,
+    alarm_k: u64,
+    glr: f64,
+    threshold: f64,
+    onset: u64,
+    isolation: &'a [IsolationResult],
+}
+
+impl<'a> IsolationView<'a> {
+    /// The alarm's last isolation: its update's when one came, else its own.
+    fn last(ch: &'a ChannelState, a: &'a Alarm) -> Self {
+        match ch.update_of(a) {
+            Some(u) => IsolationView {
+                k: u.k,
+                alarm_k: u.alarm_k,
+                glr: u.glr,
+                threshold: u.threshold,
+                onset: u.onset,
+                isolation: &u.isolation,
+            },
+            None => IsolationView {
+                k: a.k,
+                alarm_k: a.k,
+                glr: a.glr,
+                threshold: a.threshold,
+                onset: a.onset,
+                isolation: &a.isolation,
+            },
+        }
+    }
 }
 
 fn figure(fig: &Figure, id: &mut usize, caption: &str) -> String {
@@ -552,36 +595,46 @@ fn alarm_section(ch: &ChannelState, fig_id: &mut usize) -> String {
     if ch.alarms.is_empty() {
         return s;
     }
-    s.push_str("<table><tr><th>k</th><th>t</th><th>l<sub>k</sub></th><th>h</th><th>r̂</th><th>episode end k</th><th>θ̂</th><th>isolated</th></tr>\n");
+    s.push_str("<p class=\"note\">An alarm is raised at the crossing (k: the first sample with l<sub>k</sub> &gt; h); its isolation tests are run again at its update, <code>isolation_delay</code> samples later, if the episode is still on then.</p>\n");
+    s.push_str("<table><tr><th>k</th><th>t</th><th>l<sub>k</sub></th><th>h</th><th>r̂</th><th>episode end k</th><th>θ̂</th><th>isolated at k</th><th>update k</th><th>r̂ at update</th><th>isolated at update</th></tr>\n");
     for a in &ch.alarms {
-        let end = ch
-            .episodes
-            .iter()
-            .find(|e| e.start == a.k)
+        let episode = ch.episodes.iter().find(|e| e.start == a.k);
+        let end = episode
             .and_then(|e| e.end)
             .map_or("open".to_owned(), |e| e.to_string());
         let theta = largest_magnitudes(a);
-        let isolated = isolated_names(a);
+        let (update_k, update_onset, update_isolated) = match (ch.update_of(a), a.update_k) {
+            (Some(u), _) => (
+                u.k.to_string(),
+                u.onset.to_string(),
+                isolated_cell(&u.isolation),
+            ),
+            (None, None) => ("–".to_owned(), "–".to_owned(), "–".to_owned()),
+            (None, Some(due)) => {
+                let why = match episode.and_then(|e| e.end) {
+                    Some(end) if end <= due => "none: the episode ended first",
+                    _ => "not seen",
+                };
+                (due.to_string(), "–".to_owned(), why.to_owned())
+            }
+        };
         let _ = writeln!(
             s,
-            "<tr><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{end}</td><td>{}</td><td>{}</td></tr>",
+            "<tr><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{end}</td><td>{}</td><td>{}</td><td class=\"num\">{update_k}</td><td class=\"num\">{update_onset}</td><td>{update_isolated}</td></tr>",
             a.k,
             a.t.map_or("–".to_owned(), fmt_num),
             fmt_num(a.glr),
             fmt_num(a.threshold),
             a.onset,
             theta,
-            if isolated.is_empty() {
-                "none".to_owned()
-            } else {
-                format!("<span class=\"isolated\">{}</span>", isolated.join(", "))
-            }
+            isolated_cell(&a.isolation),
         );
     }
     s.push_str("</table>\n");
     for a in ch.alarms.iter().take(MAX_ISOLATION_FIGURES) {
-        if !a.isolation.is_empty() {
-            s.push_str(&isolation_figure(a, fig_id));
+        let view = IsolationView::last(ch, a);
+        if !view.isolation.is_empty() {
+            s.push_str(&isolation_figure(&view, fig_id));
         }
     }
     if ch.alarms.len() > MAX_ISOLATION_FIGURES {
@@ -620,7 +673,7 @@ fn largest_magnitudes(a: &Alarm) -> String {
     s
 }
 
-fn isolation_figure(a: &Alarm, fig_id: &mut usize) -> String {
+fn isolation_figure(a: &IsolationView<'_>, fig_id: &mut usize) -> String {
     let stat_max = |i: &glrmon_wire::IsolationResult| i.minmax.max(i.sensitivity);
     let mut rows: Vec<usize> = (0..a.isolation.len()).collect();
     let total = rows.len();
@@ -672,13 +725,24 @@ fn isolation_figure(a: &Alarm, fig_id: &mut usize) -> String {
             emphasis: i.isolated,
         })
         .collect();
-    let title = format!(
-        "Isolation at alarm k = {} (l_k = {} > h = {}, r̂ = {})",
-        a.k,
-        fmt_num(a.glr),
-        fmt_num(a.threshold),
-        a.onset
-    );
+    let title = if a.k == a.alarm_k {
+        format!(
+            "Isolation at alarm k = {} (l_k = {} > h = {}, r̂ = {})",
+            a.k,
+            fmt_num(a.glr),
+            fmt_num(a.threshold),
+            a.onset
+        )
+    } else {
+        format!(
+            "Isolation at k = {}, update of alarm k = {} (l_k = {}, h = {}, r̂ = {})",
+            a.k,
+            a.alarm_k,
+            fmt_num(a.glr),
+            fmt_num(a.threshold),
+            a.onset
+        )
+    };
     let mut fig = Figure::categorical(&title, x, categories, 30.0);
     fig.set_class("isolation");
     let (c_min, c_sens) = (PALETTE[0], PALETTE[1]);
@@ -723,7 +787,7 @@ fn isolation_figure(a: &Alarm, fig_id: &mut usize) -> String {
     fig.legend("sensitivity", c_sens, Swatch::Bar);
     fig.legend("threshold", RED, Swatch::Dashed);
     fig.legend("isolated fault (bold name)", RED, Swatch::Band);
-    let mut caption = "Minmax test (Zhang &amp; Basseville 2014, eq. (41)) and sensitivity test (Basseville 1996, §3.2.2) per fault against its threshold; highlighted faults are declared present.".to_owned();
+    let mut caption = "Minmax test (Zhang &amp; Basseville 2014, eq. (41)) and sensitivity test (Basseville 1996, §3.2.2) per fault against its threshold; highlighted faults are declared present. An alarm's figure shows its last isolation: at its update when one came, else at its crossing.".to_owned();
     if total > shown.len() {
         let _ = write!(
             caption,

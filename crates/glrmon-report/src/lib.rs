@@ -47,7 +47,8 @@ impl Default for ReportOptions {
 ///
 /// Memory is bounded independently of the replay's length: per channel, each per-sample
 /// series is kept as at most `width_points` points (streaming min/max decimation), and
-/// alarms, diagnoses and error records are kept up to fixed caps and counted beyond.
+/// alarms, isolation updates, diagnoses and error records are kept up to fixed caps and
+/// counted beyond.
 ///
 /// # Examples
 ///
@@ -113,6 +114,7 @@ impl Report {
         match record {
             Record::Stat(s) => ch.add_stat(s),
             Record::Alarm(a) => ch.add_alarm(a),
+            Record::Isolation(u) => ch.add_isolation(u),
             Record::AlarmEnd(e) => ch.add_alarm_end(e),
             Record::Diagnosis(d) => ch.add_diagnosis(d),
             Record::Error(e) => ch.add_error(e),

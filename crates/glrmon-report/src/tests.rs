@@ -4,7 +4,8 @@
 use std::collections::BTreeMap;
 
 use glrmon_wire::{
-    Alarm, AlarmEnd, Diagnosis, ErrorCode, ErrorRecord, IsolationResult, Record, Stage, Stat,
+    Alarm, AlarmEnd, Diagnosis, ErrorCode, ErrorRecord, IsolationResult, IsolationUpdate, Record,
+    Stage, Stat,
 };
 
 use super::*;
@@ -62,6 +63,38 @@ fn alarm() -> Record {
                 fault: "<b>x1</b>".into(),
                 minmax: 0.75,
                 sensitivity: 4.5,
+                threshold: 6.63,
+                isolated: false,
+            },
+        ],
+        faults: vec!["x0_jump".into(), "<b>x1</b>".into()],
+        update_k: Some(220),
+    })
+}
+
+/// The isolation update of [`alarm`], 5 samples after it.
+fn update() -> Record {
+    Record::from(IsolationUpdate {
+        channel: CHANNEL.into(),
+        k: 220,
+        t: Some(110.0),
+        alarm_k: 215,
+        glr: 33.5,
+        threshold: THRESHOLD,
+        onset: 200,
+        magnitude: vec![4.0, 0.01],
+        isolation: vec![
+            IsolationResult {
+                fault: "x0_jump".into(),
+                minmax: 48.5,
+                sensitivity: 50.0,
+                threshold: 6.63,
+                isolated: true,
+            },
+            IsolationResult {
+                fault: "<b>x1</b>".into(),
+                minmax: 0.5,
+                sensitivity: 3.25,
                 threshold: 6.63,
                 isolated: false,
             },
@@ -139,6 +172,7 @@ fn scenario() -> Report {
         report.add(&stat(CHANNEL, k, glr_at(k)));
         match k {
             215 => report.add(&alarm()),
+            220 => report.add(&update()),
             320 => {
                 report.add(&alarm_end());
                 report.add(&diagnosis());
@@ -230,12 +264,12 @@ fn summary_shows_the_numbers() {
         .find(|r| r.contains("pump&lt;3&gt;&amp;co"))
         .expect("row of the channel");
     for want in [
-        ">400<",     // samples
-        ">0 … 399<", // k range
-        ">1<",       // alarms, episodes ended
-        ">201<",     // onset r̂
-        "x0_jump",   // isolated fault
-        "f00=2",     // diagnosis support and estimate
+        ">400<",                                                 // samples
+        ">0 … 399<",                                             // k range
+        ">1<",                                                   // alarms, episodes ended
+        ">201<",                                                 // onset r̂
+        "k=220 (alarm k=215): <span class=\"isolated\">x0_jump", // final isolation
+        "f00=2",                                                 // diagnosis support and estimate
         "f02=1",
         "gap: 1",
         "invalid_json: 1",
@@ -248,6 +282,49 @@ fn summary_shows_the_numbers() {
         .find(|r| r.contains("&lt;script&gt;"))
         .expect("row of the error-only channel");
     assert!(script_row.contains("wrong_dimension: 1"));
+}
+
+/// The alarm table gives both isolations of an alarm: at its crossing and at its
+/// update; an alarm whose episode ended before its update says so.
+#[test]
+fn alarm_table_shows_the_crossing_and_the_update() {
+    let html = render(&scenario());
+    let table = html
+        .split("<h3>Alarms</h3>")
+        .nth(1)
+        .and_then(|s| s.split("</table>").next())
+        .expect("alarm table");
+    assert!(table.contains("<th>update k</th>"), "{table}");
+    let row = table.split("<tr>").nth(2).expect("the alarm's row");
+    for want in [
+        ">215<", // the crossing
+        ">201<", // r̂ at the crossing
+        ">320<", // the episode's end
+        ">220<", // the update
+        ">200<", // r̂ at the update
+    ] {
+        assert!(row.contains(want), "{want} missing in {row}");
+    }
+    // θ̂ names it once, each isolation column once.
+    assert_eq!(
+        row.matches("<span class=\"isolated\">x0_jump</span>")
+            .count(),
+        2,
+        "{row}"
+    );
+
+    let mut report = Report::new(ReportOptions::default());
+    let Record::Alarm(short) = alarm() else {
+        unreachable!()
+    };
+    let short = Alarm {
+        update_k: Some(400),
+        ..short
+    };
+    report.add(&Record::from(short));
+    report.add(&alarm_end());
+    let html = render(&report);
+    assert!(html.contains("none: the episode ended first"), "{html}");
 }
 
 #[test]
@@ -291,10 +368,13 @@ fn isolation_figure_highlights_isolated_faults() {
     let iso = iso.first().expect("an isolation figure");
     assert_eq!(iso.matches("class=\"isolated-row\"").count(), 1);
     assert!(iso.contains(r#"font-weight="bold">x0_jump<"#));
+    // The alarm's last isolation: its update's, 5 samples after the crossing.
+    assert!(iso.contains("update of alarm k = 215"), "{iso}");
     assert!(
-        iso.contains(">31.25<") && iso.contains(">4.5<"),
+        iso.contains(">48.5<") && iso.contains(">3.25<"),
         "bar values"
     );
+    assert!(!iso.contains(">31.25<"), "not the crossing's tests");
     assert_eq!(
         iso.matches("class=\"threshold\"").count(),
         2,

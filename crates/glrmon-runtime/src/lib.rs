@@ -19,9 +19,10 @@
 //!   predict-only steps (a `gap`), so a missing sample is never silently skipped.
 //! - **Workers** are threads, each owning the pipelines of a fixed shard of channels,
 //!   so a slow channel delays only its shard's queue, never another worker.
-//! - **Output**: records that must arrive (alarms, alarm ends, diagnoses, errors) wait
-//!   for room in the output queue; decimated `stat` records are dropped (and counted)
-//!   when it is full, unless a recorder needs every input and record.
+//! - **Output**: records that must arrive (alarms, isolation updates, alarm ends,
+//!   diagnoses, errors) wait for room in the output queue; decimated `stat` records are
+//!   dropped (and counted) when it is full, unless a recorder needs every input and
+//!   record.
 //! - **Shutdown** ([`Runtime::shutdown`]): stop intake, drain every worker queue, then the
 //!   output queue, then close the sinks, within a bounded time.
 #![warn(missing_docs)]

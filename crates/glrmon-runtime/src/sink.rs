@@ -46,7 +46,7 @@ pub struct InputOutput {
     pub log_time_ns: u64,
 }
 
-/// What a sink wants besides the alarm, end, diagnosis and error records.
+/// What a sink wants besides the records every sink receives (all but `stat`).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Interest {
     /// Every input ([`Sink::write_input`]): what recorders need to replay a run.
@@ -68,9 +68,9 @@ pub struct SinkError {
 
 /// Where results go: a Zenoh publisher, a recorder, a file, standard output…
 ///
-/// A sink receives every alarm, alarm end, diagnosis and error record, the `stat`
-/// records its [`Interest::stat_every`] keeps, and, if [`Interest::inputs`] is set,
-/// every input before the records it produced. The same sink works in the daemon
+/// A sink receives every record but `stat` (alarm, isolation, alarm end, diagnosis,
+/// error, consistency), the `stat` records its [`Interest::stat_every`] keeps, and, if
+/// [`Interest::inputs`] is set, every input before the records it produced. The same sink works in the daemon
 /// (called from its output thread) and in `glrmon replay` (called in order on the
 /// replay's thread): both feed it through a [`crate::Fanout`].
 ///

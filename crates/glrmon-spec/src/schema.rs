@@ -355,7 +355,8 @@ pub struct GlrSpec {
     /// Consecutive samples below λ(1 − h) that end an episode (default 1).
     #[serde(default = "default_clear")]
     pub clear_samples: u32,
-    /// Samples between the crossing and the isolation tests (default n).
+    /// Samples between the alarm (raised at the crossing) and its isolation update
+    /// (default n; 0: none).
     pub isolation_delay: Option<u32>,
     /// Type-I probability of each isolation test (default 0.01).
     #[serde(default = "default_isolation_alpha")]

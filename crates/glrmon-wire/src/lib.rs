@@ -17,8 +17,8 @@ pub use key::{
     validate_channel_name,
 };
 pub use record::{
-    Alarm, AlarmEnd, Consistency, Diagnosis, ErrorRecord, IsolationResult, RECORD_KINDS, Record,
-    Stat, decode_record, encode_json,
+    Alarm, AlarmEnd, Consistency, Diagnosis, ErrorRecord, IsolationResult, IsolationUpdate,
+    RECORD_KINDS, Record, Stat, decode_record, encode_json,
 };
 pub use sample::{DecodeLimits, Sample, decode_samples, encode_sample, encode_samples};
 pub use status::{ChannelStatus, InstanceStatus, StatusError};
@@ -105,11 +105,14 @@ mod tests {
         "\"plateau\":",
         "\"estimate\":",
         "\"isolation\":",
+        "\"alarm_k\":",
+        "\"update_k\":",
         "\"\\u0079\":",
     ];
     const LEAVES: &[&str] = &[
         "\"stat\"",
         "\"alarm\"",
+        "\"isolation\"",
         "\"alarm_end\"",
         "\"diagnosis\"",
         "\"error\"",

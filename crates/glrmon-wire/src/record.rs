@@ -52,16 +52,22 @@ pub struct IsolationResult {
     pub isolated: bool,
 }
 
-/// An alarm: l_k crossed the threshold (`type: "alarm"`).
+/// An alarm: l_k crossed the threshold (`type: "alarm"`), published at the crossing.
+///
+/// `k` is the crossing itself: the first sample of the episode with l_k > λ, so
+/// `glr > threshold` always holds. Onset, magnitude and isolation are those computed at
+/// that sample; when `update_k` is set, an [`IsolationUpdate`] (`type: "isolation"`)
+/// with `alarm_k` = `k` refines them at sample `update_k` if the episode is still on
+/// then (an `alarm_end` before `update_k` means none will come).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Alarm {
     /// Channel name.
     pub channel: String,
-    /// Sample index at which the alarm was raised.
+    /// The crossing: the sample at which l_k first exceeded the threshold.
     pub k: u64,
     /// Sample time in seconds, if known.
     pub t: Option<f64>,
-    /// GLR statistic l_k at the alarm.
+    /// GLR statistic l_k at the crossing (above `threshold`).
     pub glr: f64,
     /// Threshold it crossed.
     pub threshold: f64,
@@ -69,7 +75,47 @@ pub struct Alarm {
     pub onset: u64,
     /// Magnitude estimate θ̂, in the order of `faults`.
     pub magnitude: Vec<f64>,
-    /// Isolation test per fault.
+    /// Isolation test per fault (or configured group), at the crossing.
+    pub isolation: Vec<IsolationResult>,
+    /// Fault names, in the order of `magnitude`.
+    pub faults: Vec<String>,
+    /// The sample at which an `isolation` record will refine this alarm (`k` plus
+    /// `isolation_delay`) if the episode is still on then; `None` (`null` or absent)
+    /// when no refinement is scheduled (`isolation_delay = 0`, or a record of a glrmon
+    /// from before the field existed, whose alarms came `isolation_delay` samples
+    /// after the crossing).
+    pub update_k: Option<u64>,
+}
+
+/// The refined isolation of an alarm (`type: "isolation"`), `isolation_delay` samples
+/// after its crossing, published only while the alarm's episode is still on.
+///
+/// At the crossing few samples carry the fault, and faults whose signatures differ only
+/// after a few steps cannot be told apart yet; this record repeats the alarm's tests
+/// with the samples since. It is not a new alarm: `alarm_k` names the alarm (its `k`,
+/// the crossing) it refines, and `glr` may lie between λ·(1 − h) and λ (the episode's
+/// hysteresis band).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IsolationUpdate {
+    /// Channel name.
+    pub channel: String,
+    /// The sample at which the isolation was computed: `alarm_k` + `isolation_delay`
+    /// (later only when the episode, with `clear_samples` > 1, lasted through samples
+    /// without an admissible onset then: the first sample with one).
+    pub k: u64,
+    /// Sample time in seconds, if known.
+    pub t: Option<f64>,
+    /// The crossing: `k` of the alarm this record refines.
+    pub alarm_k: u64,
+    /// GLR statistic l_k at `k`.
+    pub glr: f64,
+    /// The alarm threshold λ in force at `k`.
+    pub threshold: f64,
+    /// Onset r̂ estimated at `k`.
+    pub onset: u64,
+    /// Magnitude estimate θ̂ at `k`, in the order of `faults`.
+    pub magnitude: Vec<f64>,
+    /// Isolation test per fault (or configured group), at `k`.
     pub isolation: Vec<IsolationResult>,
     /// Fault names, in the order of `magnitude`.
     pub faults: Vec<String>,
@@ -84,7 +130,8 @@ pub struct AlarmEnd {
     pub k: u64,
     /// Sample time in seconds, if known.
     pub t: Option<f64>,
-    /// Onset r̂ reported when the episode began.
+    /// Onset r̂ as last reported for the episode: by its `isolation` record if one
+    /// came, else by its `alarm`.
     pub onset: u64,
     /// Length of the episode in samples.
     pub duration: u64,
@@ -197,8 +244,8 @@ impl ErrorRecord {
     }
 }
 
-/// Any result record: one JSON object with `"type"` (`stat`, `alarm`, `alarm_end`,
-/// `diagnosis`, `error`, `consistency`) and `"channel"`, the rest of the fields flattened
+/// Any result record: one JSON object with `"type"` (`stat`, `alarm`, `isolation`,
+/// `alarm_end`, `diagnosis`, `error`, `consistency`) and `"channel"`, the rest of the fields flattened
 /// beside them.
 ///
 /// Letters are those of Zhang & Basseville (2014): l_k the GLR statistic (`glr`), r̂ the
@@ -234,6 +281,8 @@ pub enum Record {
     Stat(Stat),
     /// `"alarm"`.
     Alarm(Alarm),
+    /// `"isolation"`.
+    Isolation(IsolationUpdate),
     /// `"alarm_end"`.
     AlarmEnd(AlarmEnd),
     /// `"diagnosis"`.
@@ -245,9 +294,10 @@ pub enum Record {
 }
 
 /// Every record `type`, in the order of [`Record`]'s variants.
-pub const RECORD_KINDS: [&str; 6] = [
+pub const RECORD_KINDS: [&str; 7] = [
     "stat",
     "alarm",
+    "isolation",
     "alarm_end",
     "diagnosis",
     "error",
@@ -261,6 +311,7 @@ impl Record {
         match self {
             Record::Stat(r) => &r.channel,
             Record::Alarm(r) => &r.channel,
+            Record::Isolation(r) => &r.channel,
             Record::AlarmEnd(r) => &r.channel,
             Record::Diagnosis(r) => &r.channel,
             Record::Error(r) => &r.channel,
@@ -268,13 +319,14 @@ impl Record {
         }
     }
 
-    /// The `type` tag: `stat`, `alarm`, `alarm_end`, `diagnosis`, `error` or
-    /// `consistency`.
+    /// The `type` tag: `stat`, `alarm`, `isolation`, `alarm_end`, `diagnosis`, `error`
+    /// or `consistency`.
     #[must_use]
     pub const fn kind_str(&self) -> &'static str {
         match self {
             Record::Stat(_) => "stat",
             Record::Alarm(_) => "alarm",
+            Record::Isolation(_) => "isolation",
             Record::AlarmEnd(_) => "alarm_end",
             Record::Diagnosis(_) => "diagnosis",
             Record::Error(_) => "error",
@@ -288,6 +340,7 @@ impl Record {
         match self {
             Record::Stat(r) => Some(r.k),
             Record::Alarm(r) => Some(r.k),
+            Record::Isolation(r) => Some(r.k),
             Record::AlarmEnd(r) => Some(r.k),
             Record::Diagnosis(r) => Some(r.k),
             Record::Error(r) => r.k,
@@ -324,12 +377,14 @@ impl Record {
                 c.one("glr", r.glr)?;
                 c.one("threshold", r.threshold)?;
                 c.all("magnitude", &r.magnitude)?;
-                for (i, iso) in r.isolation.iter().enumerate() {
-                    c.one(&format!("isolation[{i}].minmax"), iso.minmax)?;
-                    c.one(&format!("isolation[{i}].sensitivity"), iso.sensitivity)?;
-                    c.one(&format!("isolation[{i}].threshold"), iso.threshold)?;
-                }
-                Ok(())
+                c.isolation(&r.isolation)
+            }
+            Record::Isolation(r) => {
+                c.opt("t", r.t)?;
+                c.one("glr", r.glr)?;
+                c.one("threshold", r.threshold)?;
+                c.all("magnitude", &r.magnitude)?;
+                c.isolation(&r.isolation)
             }
             Record::AlarmEnd(r) => {
                 c.opt("t", r.t)?;
@@ -384,6 +439,15 @@ impl FiniteCheck<'_> {
             Some((i, v)) => self.one(&format!("{field}[{i}]"), *v),
         }
     }
+
+    fn isolation(&self, tests: &[IsolationResult]) -> Result<(), EncodeError> {
+        for (i, iso) in tests.iter().enumerate() {
+            self.one(&format!("isolation[{i}].minmax"), iso.minmax)?;
+            self.one(&format!("isolation[{i}].sensitivity"), iso.sensitivity)?;
+            self.one(&format!("isolation[{i}].threshold"), iso.threshold)?;
+        }
+        Ok(())
+    }
 }
 
 macro_rules! record_from {
@@ -395,7 +459,7 @@ macro_rules! record_from {
         }
     )*};
 }
-record_from!(Stat => Stat, Alarm => Alarm, AlarmEnd => AlarmEnd, Diagnosis => Diagnosis, ErrorRecord => Error, Consistency => Consistency);
+record_from!(Stat => Stat, Alarm => Alarm, IsolationUpdate => Isolation, AlarmEnd => AlarmEnd, Diagnosis => Diagnosis, ErrorRecord => Error, Consistency => Consistency);
 
 /// Appends `record` as one JSON object (no trailing newline) to `out`.
 ///
@@ -590,6 +654,19 @@ const ALARM_SCHEMA: Schema = &[
     ("magnitude", Ty::VecF64),
     ("isolation", Ty::Isolation),
     ("faults", Ty::VecStr),
+    ("update_k", Ty::OptU64),
+];
+const ISOLATION_UPDATE_SCHEMA: Schema = &[
+    ("channel", Ty::Str),
+    ("k", Ty::U64),
+    ("t", Ty::OptF64),
+    ("alarm_k", Ty::U64),
+    ("glr", Ty::F64),
+    ("threshold", Ty::F64),
+    ("onset", Ty::U64),
+    ("magnitude", Ty::VecF64),
+    ("isolation", Ty::Isolation),
+    ("faults", Ty::VecStr),
 ];
 const ISOLATION_SCHEMA: Schema = &[
     ("fault", Ty::Str),
@@ -645,6 +722,7 @@ fn schema(kind: &str) -> Option<Schema> {
         "consistency" => Some(CONSISTENCY_SCHEMA),
         "stat" => Some(STAT_SCHEMA),
         "alarm" => Some(ALARM_SCHEMA),
+        "isolation" => Some(ISOLATION_UPDATE_SCHEMA),
         "alarm_end" => Some(ALARM_END_SCHEMA),
         "diagnosis" => Some(DIAGNOSIS_SCHEMA),
         "error" => Some(ERROR_SCHEMA),
@@ -655,7 +733,8 @@ fn schema(kind: &str) -> Option<Schema> {
 type Located = (String, DecodeErrorKind);
 
 fn locate(obj: &Map<String, Value>) -> Option<Located> {
-    const EXPECT_KIND: &str = "one of stat, alarm, alarm_end, diagnosis, error, consistency";
+    const EXPECT_KIND: &str =
+        "one of stat, alarm, isolation, alarm_end, diagnosis, error, consistency";
     let kind = match obj.get("type") {
         None => return Some(("type".to_owned(), DecodeErrorKind::MissingField)),
         Some(Value::String(kind)) => kind,
@@ -794,6 +873,28 @@ mod tests {
                 },
             ],
             faults: vec!["leak".into(), "bias".into()],
+            update_k: Some(150),
+        }
+    }
+
+    fn isolation_update() -> IsolationUpdate {
+        IsolationUpdate {
+            channel: "pump3".into(),
+            k: 150,
+            t: Some(15.0),
+            alarm_k: 140,
+            glr: 80.25,
+            threshold: 13.8,
+            onset: 100,
+            magnitude: vec![0.5, -1e-300],
+            isolation: vec![IsolationResult {
+                fault: "leak".into(),
+                minmax: 60.5,
+                sensitivity: 61.0,
+                threshold: 6.63,
+                isolated: true,
+            }],
+            faults: vec!["leak".into(), "bias".into()],
         }
     }
 
@@ -846,6 +947,12 @@ mod tests {
             stat().into(),
             stat_before_onset().into(),
             alarm().into(),
+            Alarm {
+                update_k: None,
+                ..alarm()
+            }
+            .into(),
+            isolation_update().into(),
             alarm_end().into(),
             diagnosis().into(),
             error().into(),
@@ -882,6 +989,17 @@ mod tests {
                     .for_each(&mut push);
             }
             Record::Alarm(r) => {
+                r.t.into_iter()
+                    .chain([r.glr, r.threshold])
+                    .for_each(&mut push);
+                r.magnitude.iter().copied().for_each(&mut push);
+                r.isolation.iter().for_each(|i| {
+                    [i.minmax, i.sensitivity, i.threshold]
+                        .into_iter()
+                        .for_each(&mut push)
+                });
+            }
+            Record::Isolation(r) => {
                 r.t.into_iter()
                     .chain([r.glr, r.threshold])
                     .for_each(&mut push);
@@ -960,7 +1078,23 @@ mod tests {
             "{text}"
         );
         assert!(text.contains(r#""isolation":[{"fault":"leak","minmax":40.25,"sensitivity":39.0,"threshold":6.63,"isolated":true},"#), "{text}");
-        assert!(text.ends_with(r#""faults":["leak","bias"]}"#), "{text}");
+        assert!(
+            text.ends_with(r#""faults":["leak","bias"],"update_k":150}"#),
+            "{text}"
+        );
+        let text = json(
+            &Alarm {
+                update_k: None,
+                ..alarm()
+            }
+            .into(),
+        );
+        assert!(text.ends_with(r#","update_k":null}"#), "{text}");
+
+        assert_eq!(
+            json(&isolation_update().into()),
+            r#"{"type":"isolation","channel":"pump3","k":150,"t":15.0,"alarm_k":140,"glr":80.25,"threshold":13.8,"onset":100,"magnitude":[0.5,-1e-300],"isolation":[{"fault":"leak","minmax":60.5,"sensitivity":61.0,"threshold":6.63,"isolated":true}],"faults":["leak","bias"]}"#
+        );
 
         let text = json(&diagnosis().into());
         assert!(
@@ -993,6 +1127,8 @@ mod tests {
                 "stat",
                 "stat",
                 "alarm",
+                "alarm",
+                "isolation",
                 "alarm_end",
                 "diagnosis",
                 "error",
@@ -1009,6 +1145,7 @@ mod tests {
             assert_eq!(json["channel"], "pump3");
         }
         assert_eq!(Record::from(alarm()).k(), Some(140));
+        assert_eq!(Record::from(isolation_update()).k(), Some(150));
         assert_eq!(Record::from(ErrorRecord { k: None, ..error() }).k(), None);
     }
 
@@ -1065,6 +1202,25 @@ mod tests {
                 }
                 .into(),
                 "isolation[0].sensitivity",
+            ),
+            (
+                IsolationUpdate {
+                    isolation: vec![IsolationResult {
+                        minmax: f64::NAN,
+                        ..isolation_update().isolation[0].clone()
+                    }],
+                    ..isolation_update()
+                }
+                .into(),
+                "isolation[0].minmax",
+            ),
+            (
+                IsolationUpdate {
+                    glr: f64::INFINITY,
+                    ..isolation_update()
+                }
+                .into(),
+                "glr",
             ),
             (
                 AlarmEnd {
@@ -1130,6 +1286,20 @@ mod tests {
                 peak_glr: 3.0
             })
         );
+    }
+
+    /// An `alarm` of a glrmon from before `update_k` existed (published after the
+    /// isolation delay) still decodes, with no update scheduled.
+    #[test]
+    fn an_alarm_without_update_k_decodes_with_none() {
+        let rec = decode_record(
+            br#"{"type":"alarm","channel":"c","k":9,"t":null,"glr":20.5,"threshold":13.8,"onset":7,"magnitude":[1.5],"isolation":[],"faults":["leak"]}"#,
+        )
+        .unwrap();
+        let Record::Alarm(a) = rec else {
+            panic!("{rec:?}")
+        };
+        assert_eq!((a.k, a.onset, a.update_k), (9, 7, None));
     }
 
     fn assert_record_error(json: &str, code: ErrorCode, field: Option<&str>) -> DecodeError {
@@ -1353,6 +1523,21 @@ mod tests {
                             isolated,
                         }],
                         ..alarm()
+                    })
+                }),
+            (
+                finite_f64(),
+                floats(),
+                proptest::option::of(finite_f64()),
+                any::<u64>()
+            )
+                .prop_map(|(glr, magnitude, t, alarm_k)| {
+                    Record::from(IsolationUpdate {
+                        glr,
+                        magnitude,
+                        t,
+                        alarm_k,
+                        ..isolation_update()
                     })
                 }),
             (proptest::option::of(finite_f64()), finite_f64()).prop_map(|(t, peak_glr)| {

@@ -1,8 +1,10 @@
 //! `glrmon demo`: the main job on an embedded default. One in-process peer-mode Zenoh
 //! session; the channels of the embedded `config/demo.toml` are simulated and published
 //! on their keys, one fault injected a few seconds in; the daemon's runtime monitors them
-//! and publishes results on `glrmon/<channel>/…`; a subscriber prints the alarms as
-//! `glrmon watch` does; a summary at the end.
+//! and publishes results on `glrmon/<channel>/…`; a subscriber prints the alarms and
+//! their isolation updates as `glrmon watch` does; a summary at the end, with each
+//! alarm's latency: samples from the crossing (the first l_k above λ in the `stat`
+//! records) to the sample of the `alarm` record.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -18,6 +20,7 @@ use glrmon_sim::SimSample;
 use glrmon_wire::{Record, Sample, decode_record, encode_sample};
 use glrmon_zenoh::{SessionSettings, ZenohSink, ZenohSource};
 use zenoh::Wait as _;
+use zenoh::sample::Sample as ZenohSample;
 
 use crate::log::LogEvents;
 use crate::print;
@@ -74,23 +77,30 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     })
     .await?;
 
-    // The watcher: alarms as `glrmon watch` prints them.
+    // The watcher: alarms, isolation updates and ends as `glrmon watch` prints them.
     let alarms_seen = Arc::new(AtomicU64::new(0));
     let seen = alarms_seen.clone();
-    let watcher = session
-        .declare_subscriber("glrmon/*/alarm$*")
-        .callback(move |s| {
-            if let Ok(r) = decode_record(&s.payload().to_bytes()) {
-                if let Some(line) = print::line(&r) {
-                    println!("{line}");
-                }
-                if matches!(r, Record::Alarm(_)) {
-                    seen.fetch_add(1, Ordering::Relaxed);
-                }
+    let print_record = Arc::new(move |s: ZenohSample| {
+        if let Ok(r) = decode_record(&s.payload().to_bytes()) {
+            if let Some(line) = print::line(&r) {
+                println!("{line}");
             }
-        })
-        .await
-        .map_err(|e| anyhow::anyhow!("subscribing to alarms: {e}"))?;
+            if matches!(r, Record::Alarm(_)) {
+                seen.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    });
+    let mut watchers = Vec::new();
+    for key in ["glrmon/*/alarm$*", "glrmon/*/isolation"] {
+        let print_record = print_record.clone();
+        watchers.push(
+            session
+                .declare_subscriber(key)
+                .callback(move |s| print_record(s))
+                .await
+                .map_err(|e| anyhow::anyhow!("subscribing to {key}: {e}"))?,
+        );
+    }
 
     // The daemon: runtime, Zenoh sink (and optionally a JSONL file), Zenoh source.
     let monitors = cfg
@@ -98,7 +108,16 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         .iter()
         .map(Monitor::from_channel)
         .collect::<Result<Vec<_>, _>>()?;
-    let mut sinks: Vec<Box<dyn Sink>> = vec![Box::new(ZenohSink::new(session.clone()))];
+    let latency = Arc::new(Mutex::new(Latency::default()));
+    let measured = latency.clone();
+    let mut sinks: Vec<Box<dyn Sink>> = vec![
+        Box::new(ZenohSink::new(session.clone())),
+        Box::new(FnSink::new("latency", move |o: &Output| {
+            if let Ok(mut l) = measured.lock() {
+                l.see(&o.record);
+            }
+        })),
+    ];
     if let Some(p) = &args.output {
         let file = std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?;
         let w = Mutex::new(std::io::BufWriter::new(file));
@@ -227,7 +246,7 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     while alarms_seen.load(Ordering::Relaxed) < raised && Instant::now() < deadline {
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
-    drop(watcher);
+    drop(watchers);
     println!("summary ({:.1} s):", started.elapsed().as_secs_f64());
     for c in glrmon_runtime::channel_statuses(&names, &stats) {
         println!(
@@ -239,6 +258,25 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
             c.dropped,
             c.alarm_active
         );
+    }
+    if let Ok(l) = latency.lock() {
+        for a in &l.alarms {
+            let crossing = a
+                .crossing
+                .map_or_else(|| "unseen".to_owned(), |c| format!("k={c}"));
+            let latency = a
+                .crossing
+                .map_or_else(|| "?".to_owned(), |c| a.k.saturating_sub(c).to_string());
+            let update = match a.update {
+                Some(u) => format!("isolation update at k={u}"),
+                None => "no isolation update (episode over first)".to_owned(),
+            };
+            println!(
+                "  alarm {}: l_k first above the threshold at {crossing}, alarm record at k={} \
+                 (latency {latency} samples), {update}",
+                a.channel, a.k
+            );
+        }
     }
     if let Some(p) = &args.output {
         println!("records written to {}", p.display());
@@ -260,4 +298,59 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let _ = session.close().await;
     anyhow::ensure!(in_time, "the runtime did not drain in time");
     Ok(())
+}
+
+/// One alarm as the demo measured it.
+#[derive(Debug)]
+struct MeasuredAlarm {
+    channel: String,
+    /// The alarm record's sample.
+    k: u64,
+    /// The sample at which l_k went above the threshold, from the `stat` records.
+    crossing: Option<u64>,
+    /// The sample of its `isolation` record.
+    update: Option<u64>,
+}
+
+/// Detection latency in samples, measured from the records as a consumer sees them:
+/// the `stat` records say where l_k went above the threshold, the `alarm` record where
+/// the alarm was raised.
+#[derive(Debug, Default)]
+struct Latency {
+    /// Per channel: the last sample whose l_k went from at most λ (or none) to above
+    /// it, and whether the previous `stat` was above λ.
+    rising: std::collections::HashMap<String, (Option<u64>, bool)>,
+    alarms: Vec<MeasuredAlarm>,
+}
+
+impl Latency {
+    fn see(&mut self, record: &Record) {
+        match record {
+            Record::Stat(s) => {
+                let above = s.glr.zip(s.threshold).is_some_and(|(l, h)| l > h);
+                let entry = self.rising.entry(s.channel.clone()).or_default();
+                if above && !entry.1 {
+                    entry.0 = Some(s.k);
+                }
+                entry.1 = above;
+            }
+            Record::Alarm(a) => self.alarms.push(MeasuredAlarm {
+                channel: a.channel.clone(),
+                k: a.k,
+                crossing: self.rising.get(&a.channel).and_then(|r| r.0),
+                update: None,
+            }),
+            Record::Isolation(u) => {
+                if let Some(a) = self
+                    .alarms
+                    .iter_mut()
+                    .rev()
+                    .find(|a| a.channel == u.channel && a.k == u.alarm_k)
+                {
+                    a.update = Some(u.k);
+                }
+            }
+            _ => {}
+        }
+    }
 }

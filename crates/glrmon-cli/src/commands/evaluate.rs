@@ -1,8 +1,9 @@
 //! `glrmon evaluate`: Monte-Carlo fault injection through the simulator and the
 //! channel's monitor, as live: per injected fault, the detection rate, the detection
-//! delay (samples from the onset to the first crossing of the threshold), the error of
-//! the onset estimate r̂ at the alarm, false alarms before the onset, and which faults
-//! the isolation tests named (a confusion matrix) — what a user tunes w, s and the
+//! delay (samples from the onset to the first alarm, raised at the crossing of the
+//! threshold), the error of the onset estimate r̂ and which faults the isolation tests
+//! named (a confusion matrix), both at the alarm's isolation update (else at the
+//! alarm), false alarms before the onset — what a user tunes w, s and the
 //! thresholds with (Zhang & Basseville 2014, §6: Figures 7-8 are such histograms).
 //! `--report` hands the summaries to `glrmon-report`, which draws those histograms.
 
@@ -183,7 +184,7 @@ fn text(
     // Confusion matrix: rows injected, columns isolated.
     let _ = writeln!(
         s,
-        "\nisolation at the first alarm (rows: injected, columns: isolated)"
+        "\nisolation at the first alarm, as updated isolation_delay samples on (rows: injected, columns: isolated)"
     );
     let width = columns.iter().map(String::len).max().unwrap_or(8).max(8);
     let _ = write!(s, "{:<24}", "");

@@ -65,7 +65,7 @@ impl Sink for LogSink {
 
     fn write(&mut self, output: &Output) -> Result<(), SinkError> {
         match &output.record {
-            Record::Alarm(_) | Record::AlarmEnd(_) => {
+            Record::Alarm(_) | Record::Isolation(_) | Record::AlarmEnd(_) => {
                 if let Some(line) = print::line(&output.record) {
                     tracing::info!(channel = output.record.channel(), "{line}");
                 }

@@ -1,4 +1,5 @@
-//! `glrmon watch [KEYEXPR] [--json]`: alarms and diagnoses, one line each.
+//! `glrmon watch [KEYEXPR] [--json]`: alarms (at the crossing), their isolation
+//! updates, alarm ends, diagnoses and consistency changes, one line each.
 
 use clap::Args;
 use glrmon_wire::{Record, decode_record};
