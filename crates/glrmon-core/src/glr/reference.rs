@@ -1,7 +1,7 @@
 //! The passes of eqs. (45), (32)-(35), (46): the reference every fast path must equal.
 
 use super::lanes::mul_add;
-use super::statistic::{larger, quad2};
+use super::statistic::quad2;
 use super::{WindowBank, WindowMax, forcing, tri};
 use crate::fault::Onset;
 use crate::linalg::at;
@@ -159,7 +159,7 @@ impl WindowBank {
         self.best(k)
     }
 
-    /// The LDLᵀ statistic for m = 1 in one pass: d²/C where C > τ·C.
+    /// The LDLᵀ statistic for m = 1 in one pass: d²/C where C > τ·C (C > 0).
     #[inline(always)]
     fn statistic_m1(&mut self) {
         let w = self.slots;
@@ -199,16 +199,7 @@ impl WindowBank {
     #[inline(always)]
     pub(super) fn statistic_generic(&mut self) {
         let (m, w) = (self.m, self.slots);
-        // Rank cut-off per slot: τ·max_a C_aa.
-        self.cutoff.iter_mut().for_each(|c| *c = 0.0);
-        for a in 0..m {
-            let caa = &self.info[tri(a, a) * w..(tri(a, a) + 1) * w];
-            for (c, x) in self.cutoff.iter_mut().zip(caa) {
-                *c = larger(*c, *x);
-            }
-        }
         let tol = self.tolerance;
-        self.cutoff.iter_mut().for_each(|c| *c *= tol);
         self.stat.iter_mut().for_each(|x| *x = 0.0);
         self.rank.iter_mut().for_each(|x| *x = 0.0);
         for j in 0..m {
@@ -225,15 +216,14 @@ impl WindowBank {
                 }
             }
             {
+                // Pivot j is kept when D_j > τ·C_jj: the scale-free rule of
+                // `statistic` (issue 19).
                 let djj = &self.ldl[tri(j, j) * w..(tri(j, j) + 1) * w];
+                let cjj = &self.info[tri(j, j) * w..(tri(j, j) + 1) * w];
                 let inv = &mut self.inv_pivot[j * w..(j + 1) * w];
-                for (((iv, d), c), r) in inv
-                    .iter_mut()
-                    .zip(djj)
-                    .zip(&self.cutoff)
-                    .zip(self.rank.iter_mut())
+                for (((iv, d), c), r) in inv.iter_mut().zip(djj).zip(cjj).zip(self.rank.iter_mut())
                 {
-                    let keep = *d > *c;
+                    let keep = *d > *c * tol;
                     *iv = if keep { 1.0 / d } else { 0.0 };
                     *r += if keep { 1.0 } else { 0.0 };
                 }
