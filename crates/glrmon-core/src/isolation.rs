@@ -62,7 +62,7 @@
 //!
 //! The eigenvalues are those of the **equilibrated** problem: with U = diag(F)^{-1/2}
 //! (U_jj = 0 when F_jj = 0: a fault without signature is dropped), F̂ = UFU has a unit
-//! diagonal and ζ̂ = Uζ; θ̂ = Uθ̂̂ maps back. Every test is invariant under a change of
+//! diagonal and ζ̂ = Uζ; θ̂ = U F̂⁺ζ̂ maps back. Every test is invariant under a change of
 //! fault units (F ↦ SFS, ζ ↦ Sζ for a positive diagonal S) in exact arithmetic, and so
 //! are its rank decisions only when they are taken on F̂: relative to λ_max(F) they
 //! would drop a fault whose units make its F_jj small next to another's (issue 19: a
@@ -70,8 +70,8 @@
 //! The GLR bank's LDLᵀ decides its rank by the same scale-free measure.
 //!
 //! The rank of F is decided once: F̂ is replaced by its truncation F̃ = GᵀG, where
-//! G = Λ_r^{1/2}V_rᵀ (r×m) keeps the r eigenpairs above the cut-off, and ζ by the
-//! equivalent r-vector Z̃ = Λ_r^{-1/2}V_rᵀζ (F̃ = GᵀG, ζ = GᵀZ̃: a compressed stacked
+//! G = Λ_r^{1/2}V_rᵀ (r×m) keeps the r eigenpairs above the cut-off, and ζ̂ by the
+//! equivalent r-vector Z̃ = Λ_r^{-1/2}V_rᵀζ̂ (F̃ = GᵀG, ζ̂ = GᵀZ̃: a compressed stacked
 //! problem Z̃ ~ N(Gθ, I_r) with the same information). The blocks of every test are
 //! taken from G, and the Schur complement is evaluated in Gram form,
 //! F*_a = HᵀH and ζ*_a = HᵀZ̃ with H = (I − P_b)G_a, P_b the orthogonal projector on
