@@ -105,7 +105,8 @@ use nalgebra::{DMatrix, SymmetricEigen};
 /// other fault is rejected (see the [module documentation](self)).
 pub const DEFAULT_CORRELATION_LIMIT: f64 = 0.95;
 
-/// Relative tolerance for the rank and undetectability decisions (the detector's
+/// Relative tolerance of the rank (on the correlation matrix), of the positive
+/// semi-definiteness checks and of 1 − ρ² for a pair (the detector's
 /// `DEFAULT_RANK_TOLERANCE`).
 const TOLERANCE: f64 = 1e-9;
 

@@ -1060,6 +1060,50 @@ mod tests {
         );
     }
 
+    /// Issue 19: a change of fault units F ↦ SFS, ζ ↦ Sζ (S = diag(10⁻⁸, 1, 10⁸), F_ii
+    /// spanning 32 decades) changes no degree of freedom, no test value beyond 1e-9 of
+    /// the global statistic, and gives θ̂ ↦ S⁻¹θ̂; the fault of tiny F_ii keeps its
+    /// information (it was dropped by the cut-off τ·λ_max(F) of before).
+    #[test]
+    fn fault_units_do_not_decide_the_rank_issue_19() {
+        let mut rng = SplitMix64(0x19);
+        let (n, m) = (20, 3);
+        let mm = rng.normal_matrix(n, m);
+        let theta = DVector::from_vec(vec![2.0, -1.0, 3.0]);
+        let z = &mm * &theta + rng.normal_matrix(n, 1).column(0);
+        let base = Stacked::new(mm.clone(), rng.normal_matrix(n, n) * 0.3, z).fisher();
+        let units = DVector::from_vec(vec![1e-8, 1.0, 1e8]);
+        let s = DMatrix::from_diagonal(&units);
+        let scaled = FisherStatistics::new(
+            &s * base.information() * &s,
+            base.score().component_mul(&units),
+        )
+        .unwrap();
+        let g = base.global();
+        assert_eq!(g.dof, 3);
+        assert_eq!(scaled.global().dof, 3);
+        assert!(close(scaled.global().value, g.value, 1e-9, g.value));
+        for a in [vec![0], vec![1], vec![2], vec![0, 2]] {
+            for (x, y) in [
+                (base.minmax(&a).unwrap(), scaled.minmax(&a).unwrap()),
+                (
+                    base.sensitivity(&a).unwrap(),
+                    scaled.sensitivity(&a).unwrap(),
+                ),
+            ] {
+                assert_eq!(x.dof, y.dof, "{a:?}");
+                assert!(
+                    close(x.value, y.value, 1e-9, g.value),
+                    "{a:?}: {x:?} vs {y:?}"
+                );
+            }
+        }
+        let (t, u) = (base.magnitude(), scaled.magnitude());
+        for j in 0..m {
+            assert!(close(u[j] * units[j], t[j], 1e-9, t.amax()), "θ̂_{j}");
+        }
+    }
+
     #[test]
     fn rank_tolerance_decides_near_collinear_faults() {
         // Correlation 1 − 1e-12 between the two signatures.

@@ -407,6 +407,53 @@ mod tests {
     use super::*;
     use crate::linalg::jacobi_eigen;
 
+    /// Issue 19: fault j's column times s_j (C_ab ↦ s_a s_b C_ab, d_a ↦ s_a d_a, s from
+    /// 10⁻⁸ to 10⁸) changes no rank and leaves the statistic equal to 1e-9 relative, in
+    /// the LDLᵀ of any m and in the one-division form of m = 2, over regular, rank-deficient
+    /// and zero C. (With the cut-off τ·max_a C_aa of before, a column scaled by 10⁻⁸ next
+    /// to one by 10⁸ lost its pivot.)
+    #[test]
+    fn pivot_decisions_ignore_fault_units_issue_19() {
+        for m in [2, 3, 5] {
+            for seed in 1..6 {
+                let mut base = bank_with_random_stats(m, seed);
+                let w = base.slots;
+                let units: Vec<f64> = (0..m)
+                    .map(|a| 10f64.powi(8 - 16 * (a as i32 % 2)))
+                    .collect();
+                let mut scaled = base.clone();
+                for a in 0..m {
+                    for b in 0..=a {
+                        for s in 0..w {
+                            scaled.info[tri(a, b) * w + s] *= units[a] * units[b];
+                        }
+                    }
+                    for s in 0..w {
+                        scaled.score[a * w + s] *= units[a];
+                    }
+                }
+                let passes: &[fn(&mut WindowBank)] = if m == 2 {
+                    &[WindowBank::statistic_m2, WindowBank::statistic_generic]
+                } else {
+                    &[WindowBank::statistic_generic]
+                };
+                for pass in passes {
+                    pass(&mut base);
+                    pass(&mut scaled);
+                    assert_eq!(base.rank, scaled.rank, "m = {m}, seed {seed}");
+                    for (s, (x, y)) in base.stat.iter().zip(&scaled.stat).enumerate() {
+                        assert!(
+                            (x - y).abs() <= 1e-9 * (1.0 + x.abs()),
+                            "m = {m}, seed {seed}, slot {s}: {x} vs {y}"
+                        );
+                    }
+                }
+                // Every rank from 0 to m occurs (`bank_with_random_stats`).
+                assert!((0..=m).all(|r| base.rank.contains(&(r as f64))), "m = {m}");
+            }
+        }
+    }
+
     #[test]
     fn m1_statistic_equals_generic_ldl_bit_for_bit() {
         let mut fast = bank_with_random_stats(1, 3);
