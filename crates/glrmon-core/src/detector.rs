@@ -25,8 +25,9 @@ pub struct WindowSettings {
     /// s: the youngest candidate onset is k − s (s < w), so that at least s + 1 samples
     /// carry each candidate's signature.
     pub min_lag: usize,
-    /// τ: relative cut-off for the rank of C_k(r) (pivots or eigenvalues ≤ τ·scale are
-    /// treated as zero).
+    /// τ: relative cut-off for the rank of C_k(r), free of the fault units (issue 19):
+    /// LDLᵀ pivots D_j ≤ τ·C_jj, or eigenvalues ≤ τ·λ_max of C equilibrated to a unit
+    /// diagonal, are treated as zero.
     pub rank_tolerance: f64,
     /// Relative tolerance on max|P_{k+1} − P_k| / max|P_{k+1}| below which the Riccati
     /// recursion counts as converged. When the model, the fault columns and P have been

@@ -81,16 +81,21 @@
 //! # Numerical decisions
 //!
 //! The relative tolerance τ = 10⁻⁹ is the detector's default rank tolerance
-//! (`DEFAULT_RANK_TOLERANCE`):
+//! (`DEFAULT_RANK_TOLERANCE`). Every decision is taken on unit-free numbers, so that no
+//! verdict depends on the units in which the fault magnitudes are expressed (issue 19:
+//! a gas-pipeline outlet leak of θ ≈ −4·10⁴ was called undetectable next to two
+//! inlet faults of θ ≈ 10⁻⁵, because its F_jj was below 10⁻⁹ of theirs):
 //!
-//! * a fault is **undetectable** when F_jj ≤ τ · max_i F_ii — the same rule by which the
-//!   GLR's LDLᵀ factorisation of C_k(r) drops a pivot, so such a fault is invisible to the
-//!   detector (a zero signature over the window gives F_jj = 0 exactly; a tiny but nonzero
-//!   one usually means the fault's units should be rescaled in the dictionary);
-//! * the **rank** counts eigenvalues λ > τ · λ_max(F); F is singular when the rank is
-//!   below m or a fault is undetectable.
+//! * a fault is **undetectable** when F_jj = 0 (F_jj ≤ 0): its signature vanishes over
+//!   the window, and the GLR's LDLᵀ factorisation of C_k(r), which keeps pivot j when
+//!   D_j > τ·C_jj, drops it; any F_jj > 0, however small in the chosen units, is
+//!   information the detector uses;
+//! * the **rank** counts the eigenvalues λ > τ · λ_max(R) of the correlation matrix R of
+//!   the detectable faults (F equilibrated to a unit diagonal, as the isolation tests
+//!   decide their ranks); F is singular when the rank is below m.
 //!
-//! Rank and condition number depend on the fault units; ρ and C3 do not.
+//! ρ, C3, the rank and the verdicts do not depend on the fault units; the condition
+//! number of F, C1 and C2 do.
 
 use nalgebra::{DMatrix, SymmetricEigen};
 
@@ -100,7 +105,8 @@ use nalgebra::{DMatrix, SymmetricEigen};
 /// other fault is rejected (see the [module documentation](self)).
 pub const DEFAULT_CORRELATION_LIMIT: f64 = 0.95;
 
-/// Relative tolerance for the rank and undetectability decisions (the detector's
+/// Relative tolerance of the rank (on the correlation matrix), of the positive
+/// semi-definiteness checks and of 1 − ρ² for a pair (the detector's
 /// `DEFAULT_RANK_TOLERANCE`).
 const TOLERANCE: f64 = 1e-9;
 
@@ -110,10 +116,12 @@ const SYMMETRY_TOLERANCE: f64 = 1e-8;
 /// Isolability of a fault dictionary over one window, computed by [`isolability`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct IsolabilityReport {
-    /// Numerical rank of F: the number of eigenvalues above 10⁻⁹ · λ_max(F).
+    /// Numerical rank of F: the number of eigenvalues above 10⁻⁹ · λ_max(R) of the
+    /// correlation matrix R of the detectable faults (independent of the fault units).
     pub rank: usize,
-    /// λ_max(F) / λ_min(F); `f64::INFINITY` when F is singular (rank < m or an
-    /// undetectable fault).
+    /// λ_max(F) / λ_min(F) (in the units of the dictionary); `f64::INFINITY` when F is
+    /// singular (rank < m or an undetectable fault) or λ_min(F) is not positive in
+    /// floating point.
     pub condition_number: f64,
     /// Basseville (1996) eq. (89): C1 = K(F, I) = ½ (tr F − ln|F| − m), the Kullback
     /// distance between F and the identity. 0 exactly when F = I (perfectly isolable *and*
@@ -135,8 +143,8 @@ pub struct IsolabilityReport {
     pub correlation: DMatrix<f64>,
     /// One verdict per pair i < j, in lexicographic order (0,1), (0,2), …, (1,2), ….
     pub pairs: Vec<PairVerdict>,
-    /// Faults whose information F_jj is (numerically) zero: their signature vanishes over
-    /// the window, so no test can see them. Ascending.
+    /// Faults whose information F_jj is zero: their signature vanishes over the window,
+    /// so no test can see them. Ascending.
     pub undetectable: Vec<usize>,
     /// The |ρ| limit the pair verdicts were made with.
     pub correlation_limit: f64,
@@ -179,8 +187,8 @@ pub enum IsolabilityError {
         "information matrix is not symmetric (max |F_ij − F_ji| / √(F_ii F_jj) = {max_asymmetry:e})"
     )]
     NotSymmetric {
-        /// Largest |F_ij − F_ji| / √(F_ii F_jj) (diagonal entries below 10⁻⁹ · max F_ii
-        /// are raised to that floor; infinite if all diagonal entries are 0).
+        /// Largest |F_ij − F_ji| / √(|F_ii F_jj|) (infinite when F_ij ≠ F_ji and F_ii or
+        /// F_jj is 0).
         max_asymmetry: f64,
     },
     /// The information matrix (or its correlation matrix) has a clearly negative
@@ -259,11 +267,8 @@ pub fn isolability(
         });
     }
 
-    // Symmetry, relative to the geometric mean of the diagonal entries.
-    let diag_abs_max = (0..m)
-        .map(|i| information[(i, i)].abs())
-        .fold(0.0, f64::max);
-    let floor = TOLERANCE * diag_abs_max;
+    // Symmetry, relative to the geometric mean of the two diagonal entries (unit-free:
+    // no floor taken from the other faults' entries).
     let mut max_asymmetry = 0.0_f64;
     for i in 0..m {
         for j in (i + 1)..m {
@@ -271,9 +276,7 @@ pub fn isolability(
             if diff == 0.0 {
                 continue;
             }
-            let scale = (information[(i, i)].abs().max(floor)
-                * information[(j, j)].abs().max(floor))
-            .sqrt();
+            let scale = information[(i, i)].abs().sqrt() * information[(j, j)].abs().sqrt();
             let rel = if scale > 0.0 {
                 diff / scale
             } else {
@@ -287,7 +290,7 @@ pub fn isolability(
     }
     let f = (information + information.transpose()) * 0.5;
 
-    // Spectrum of F: positive semi-definiteness, rank, condition number.
+    // Spectrum of F: positive semi-definiteness, condition number.
     let eig = f.clone().symmetric_eigenvalues();
     let lambda_max = eig.max();
     let lambda_min = eig.min();
@@ -297,18 +300,11 @@ pub fn isolability(
             relative_min_eigenvalue: lambda_min / spectral_norm,
         });
     }
-    let rank = if lambda_max > 0.0 {
-        eig.iter().filter(|&&l| l > TOLERANCE * lambda_max).count()
-    } else {
-        0
-    };
 
-    // Undetectable faults: the GLR's pivot-dropping rule F_jj ≤ τ · max F_ii.
+    // Undetectable faults: F_jj = 0, a pivot the GLR's LDLᵀ drops whatever the units
+    // (it keeps D_j > τ·C_jj).
     let d: Vec<f64> = (0..m).map(|i| f[(i, i)]).collect();
-    let d_max = d.iter().copied().fold(0.0, f64::max);
-    let undetectable: Vec<usize> = (0..m)
-        .filter(|&i| d_max <= 0.0 || d[i] <= TOLERANCE * d_max)
-        .collect();
+    let undetectable: Vec<usize> = (0..m).filter(|&i| d[i] <= 0.0).collect();
     let detectable: Vec<usize> = (0..m).filter(|i| !undetectable.contains(i)).collect();
 
     // Correlation matrix.
@@ -340,9 +336,11 @@ pub fn isolability(
             relative_min_eigenvalue: r_min / r_max,
         });
     }
+    // The rank on the correlation matrix: unit-free, as the isolation tests decide it.
+    let rank = r_eig.iter().filter(|&&l| l > TOLERANCE * r_max).count();
 
-    let singular = rank < m || !undetectable.is_empty() || r_min <= 0.0;
-    let condition_number = if singular {
+    let singular = rank < m || r_min <= 0.0;
+    let condition_number = if singular || lambda_min <= 0.0 {
         f64::INFINITY
     } else {
         lambda_max / lambda_min
@@ -797,9 +795,20 @@ mod tests {
         assert!(close(r.correlation[(0, 1)], rho, 1e-15));
         assert!(close(r.c3, -0.5 * (1.0 - rho * rho).ln(), 1e-14));
         assert!(r.c1 > r.c2 && r.c2 > r.c3);
-        // F_ii ratio 10¹⁸ > 1/τ: the GLR drops that pivot, so the small fault is reported
-        // undetectable (its units should be rescaled in the dictionary).
+        // F_ii ratio 10¹⁸ > 1/τ: a change of units only, so the small fault is as
+        // detectable and as isolable as the large one, as it is for the GLR, whose LDLᵀ
+        // keeps a pivot when D_j > τ·C_jj. (This asserted "undetectable, rank 1" while
+        // the cut-off was τ·max_i F_ii: the bug of issue 19, which made `glrmon
+        // validate` call a gas-pipeline leak undetectable for its units alone.)
         let f = DMatrix::from_row_slice(2, 2, &[1e12, 0.0, 0.0, 1e-6]);
+        let r = isolability(&f, 0.95).unwrap();
+        assert!(r.undetectable.is_empty());
+        assert_eq!(r.rank, 2);
+        assert!(r.isolable());
+        assert_eq!(r.c3, 0.0);
+        assert!(r.verdicts(&["big", "small"], 10).is_empty());
+        // A zero signature is still undetectable, whatever the other's scale.
+        let f = DMatrix::from_row_slice(2, 2, &[1e-300, 0.0, 0.0, 0.0]);
         let r = isolability(&f, 0.95).unwrap();
         assert_eq!(r.undetectable, vec![1]);
         assert_eq!(r.rank, 1);

@@ -53,16 +53,25 @@
 //! # Singular information
 //! Before the signatures are persistently exciting, or when two faults have the same
 //! signature, F (or a block of it, or a Schur complement) is singular. Every inverse above
-//! is then a Moore–Penrose pseudo-inverse computed from a symmetric eigendecomposition in
-//! which eigenvalues ≤ τ·λ_max are treated as zero ([`DEFAULT_RANK_TOLERANCE`],
+//! is then a pseudo-inverse computed from a symmetric eigendecomposition in which
+//! eigenvalues ≤ τ·λ_max are treated as zero ([`DEFAULT_RANK_TOLERANCE`],
 //! [`FisherStatistics::with_rank_tolerance`]); the number of kept eigenvalues is reported
 //! as the degrees of freedom. Because ζ = MᵀR⁻¹Z lies in range(F) (and ζ_b in
 //! range(F_bb), ζ*_a in range(F*_a)), ζᵀF⁺ζ is still exactly 2 ln of the likelihood
 //! ratio, χ² with the rank as degrees of freedom.
 //!
-//! The rank of F is decided once: F is replaced by its truncation F̃ = GᵀG, where
-//! G = Λ_r^{1/2}V_rᵀ (r×m) keeps the r eigenpairs above the cut-off, and ζ by the
-//! equivalent r-vector Z̃ = Λ_r^{-1/2}V_rᵀζ (F̃ = GᵀG, ζ = GᵀZ̃: a compressed stacked
+//! The eigenvalues are those of the **equilibrated** problem: with U = diag(F)^{-1/2}
+//! (U_jj = 0 when F_jj = 0: a fault without signature is dropped), F̂ = UFU has a unit
+//! diagonal and ζ̂ = Uζ; θ̂ = U F̂⁺ζ̂ maps back. Every test is invariant under a change of
+//! fault units (F ↦ SFS, ζ ↦ Sζ for a positive diagonal S) in exact arithmetic, and so
+//! are its rank decisions only when they are taken on F̂: relative to λ_max(F) they
+//! would drop a fault whose units make its F_jj small next to another's (issue 19: a
+//! gas-pipeline leak of θ ≈ −4·10⁴ beside faults of θ ≈ 10⁻⁵ with columns ≈ 4·10⁵).
+//! The GLR bank's LDLᵀ decides its rank by the same scale-free measure.
+//!
+//! The rank of F is decided once: F̂ is replaced by its truncation F̃ = GᵀG, where
+//! G = Λ_r^{1/2}V_rᵀ (r×m) keeps the r eigenpairs above the cut-off, and ζ̂ by the
+//! equivalent r-vector Z̃ = Λ_r^{-1/2}V_rᵀζ̂ (F̃ = GᵀG, ζ̂ = GᵀZ̃: a compressed stacked
 //! problem Z̃ ~ N(Gθ, I_r) with the same information). The blocks of every test are
 //! taken from G, and the Schur complement is evaluated in Gram form,
 //! F*_a = HᵀH and ζ*_a = HᵀZ̃ with H = (I − P_b)G_a, P_b the orthogonal projector on
@@ -88,8 +97,9 @@
 
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 
-/// Default relative eigenvalue cut-off τ: eigenvalues ≤ τ·λ_max of an information matrix
-/// are treated as zero. Same value as the GLR bank's default.
+/// Default relative eigenvalue cut-off τ: eigenvalues ≤ τ·λ_max of an equilibrated
+/// information matrix (unit diagonal, see the [module documentation](self)) are treated
+/// as zero. Same value as the GLR bank's default.
 pub const DEFAULT_RANK_TOLERANCE: f64 = 1e-9;
 
 /// Cap on the implicit-QR iterations of nalgebra's symmetric eigensolver, per unit of
@@ -203,17 +213,21 @@ pub struct FisherStatistics {
     information: DMatrix<f64>,
     /// ζ.
     score: DVector<f64>,
+    /// The diagonal of U = diag(F)^{-1/2} (0 where F_jj ≤ 0).
+    unit: DVector<f64>,
+    /// ζ̂ = Uζ.
+    unit_score: DVector<f64>,
     /// Relative eigenvalue cut-off τ.
     tol: f64,
-    /// Eigendecomposition of F (independent of τ).
+    /// Eigendecomposition of F̂ = UFU (independent of τ).
     eigen: Eigen,
     /// The compressed problem for the current τ.
     reduced: Reduced,
 }
 
-/// The rank-r compressed problem: G = Λ_r^{1/2}V_rᵀ (r×m) and Z̃ = Λ_r^{-1/2}V_rᵀζ, with
-/// GᵀG = F̃ (F truncated to its r eigenvalues > τ·λ_max) and GᵀZ̃ = ζ's projection on
-/// range F.
+/// The rank-r compressed problem of the equilibrated F̂, ζ̂: G = Λ_r^{1/2}V_rᵀ (r×m) and
+/// Z̃ = Λ_r^{-1/2}V_rᵀζ̂, with GᵀG = F̃ (F̂ truncated to its r eigenvalues > τ·λ_max) and
+/// GᵀZ̃ = ζ̂'s projection on range F̂.
 #[derive(Debug, Clone)]
 struct Reduced {
     g: DMatrix<f64>,
@@ -226,9 +240,10 @@ impl FisherStatistics {
     ///
     /// F is replaced by (F + Fᵀ)/2 to remove rounding asymmetry. It should be positive
     /// semi-definite and ζ should lie in its range, as they do when they come from data
-    /// (F = MᵀR⁻¹M, ζ = MᵀR⁻¹Z); negative eigenvalues are treated as zero, and any part
-    /// of ζ outside the range of F is ignored. m = 0 is accepted (every test is then 0
-    /// with 0 degrees of freedom). Costs one m×m eigendecomposition.
+    /// (F = MᵀR⁻¹M, ζ = MᵀR⁻¹Z); negative eigenvalues are treated as zero, a fault with
+    /// F_jj ≤ 0 is dropped, and any part of ζ outside the range of F is ignored. m = 0 is
+    /// accepted (every test is then 0 with 0 degrees of freedom). Costs one m×m
+    /// eigendecomposition, of the equilibrated F̂ (see the [module documentation](self)).
     ///
     /// # Errors
     /// [`IsolationError::DimensionMismatch`] if F is not square or ζ's length differs
@@ -245,17 +260,26 @@ impl FisherStatistics {
         if !score.iter().all(|x| x.is_finite()) {
             return Err(IsolationError::NonFinite { input: "score" });
         }
+        if !information.iter().all(|x| x.is_finite()) {
+            return Err(IsolationError::NonFinite {
+                input: "information matrix",
+            });
+        }
         let information = symmetrized(&information);
-        // `None` exactly when an entry is not finite.
-        let Some(eigen) = Eigen::new(&information) else {
+        let (unit, equilibrated) = equilibrated(&information);
+        let unit_score = score.component_mul(&unit);
+        // `None` exactly when an entry is not finite, excluded above.
+        let Some(eigen) = Eigen::new(&equilibrated) else {
             return Err(IsolationError::NonFinite {
                 input: "information matrix",
             });
         };
-        let reduced = eigen.reduce(&score, DEFAULT_RANK_TOLERANCE);
+        let reduced = eigen.reduce(&unit_score, DEFAULT_RANK_TOLERANCE);
         Ok(Self {
             information,
             score,
+            unit,
+            unit_score,
             tol: DEFAULT_RANK_TOLERANCE,
             eigen,
             reduced,
@@ -263,13 +287,14 @@ impl FisherStatistics {
     }
 
     /// Sets the relative eigenvalue cut-off τ: in every pseudo-inverse, eigenvalues
-    /// ≤ τ·λ_max are treated as zero (λ_max of F for the rank of F, of F_aa for a
-    /// sensitivity test and for the Schur complement F*_a, of F_bb for F_bb⁺). A NaN or
-    /// negative τ is replaced by [`DEFAULT_RANK_TOLERANCE`].
+    /// ≤ τ·λ_max are treated as zero (λ_max of F̂ for the rank of F, of F̂_aa for a
+    /// sensitivity test and for the Schur complement F*_a, of F̂_bb for F_bb⁺; F̂ the
+    /// equilibrated F of the [module documentation](self), so that no decision depends on
+    /// the fault units). A NaN or negative τ is replaced by [`DEFAULT_RANK_TOLERANCE`].
     #[must_use]
     pub fn with_rank_tolerance(mut self, tol: f64) -> Self {
         self.tol = sanitized_tolerance(tol);
-        self.reduced = self.eigen.reduce(&self.score, self.tol);
+        self.reduced = self.eigen.reduce(&self.unit_score, self.tol);
         self
     }
 
@@ -298,7 +323,7 @@ impl FisherStatistics {
     }
 
     /// Global test ζᵀF⁺ζ of θ = 0 against θ ≠ 0; χ² with rank F degrees of freedom under
-    /// θ = 0 (eigenvalues ≤ τ·λ_max(F) dropped). It is the GLR statistic of the alarm
+    /// θ = 0 (eigenvalues ≤ τ·λ_max(F̂) of the equilibrated F dropped). It is the GLR statistic of the alarm
     /// (Zhang & Basseville 2014, eq. (35)) up to the rank decision.
     #[must_use]
     pub fn global(&self) -> TestStatistic {
@@ -311,7 +336,7 @@ impl FisherStatistics {
     /// Sensitivity test ζ_aᵀF_aa⁺ζ_a for the faults in `subset` (Basseville 1996, §3.2,
     /// Lemma 3.5): the GLR of θ = 0 against θ = (θ_a, 0), i.e. assuming the other faults
     /// absent. χ² with rank F_aa degrees of freedom under θ = 0 (eigenvalues
-    /// ≤ τ·λ_max(F_aa) dropped; F_aa and ζ_a are those of the rank-truncated F, see the
+    /// ≤ τ·λ_max(F̂_aa) dropped; F_aa and ζ_a are those of the rank-truncated F̂, see the
     /// [module documentation](self)). The order of `subset` does not matter; if it holds
     /// every fault this is [`global`](Self::global).
     ///
@@ -336,10 +361,10 @@ impl FisherStatistics {
     /// an unknown nuisance. χ² with rank F*_a degrees of freedom under θ_a = 0, whatever
     /// θ_b.
     ///
-    /// F_bb⁺ drops eigenvalues ≤ τ·λ_max(F_bb), F*_a⁺ those ≤ τ·λ_max(F_aa): a direction
+    /// F_bb⁺ drops eigenvalues ≤ τ·λ_max(F̂_bb), F*_a⁺ those ≤ τ·λ_max(F̂_aa): a direction
     /// of θ_a whose information is (up to τ) entirely explained by the nuisance faults
     /// cannot be isolated and adds no degree of freedom. F*_a and ζ*_a are evaluated in
-    /// the Gram form HᵀH, HᵀZ̃ on the rank-truncated F (see the
+    /// the Gram form HᵀH, HᵀZ̃ on the rank-truncated F̂ (see the
     /// [module documentation](self)). The order of `subset` does not matter; if it holds
     /// every fault (b empty) this is [`global`](Self::global) (and
     /// [`sensitivity`](Self::sensitivity)).
@@ -374,13 +399,15 @@ impl FisherStatistics {
         ))
     }
 
-    /// Estimated fault magnitude θ̂ = F⁺ζ (eigenvalues ≤ τ·λ_max dropped): the
-    /// minimum-norm least-squares solution of Fθ = ζ, the maximum-likelihood estimate of θ
-    /// (Zhang & Basseville 2014, eq. (34)) when F is regular.
+    /// Estimated fault magnitude θ̂ = U F̂⁺ ζ̂ (eigenvalues ≤ τ·λ_max(F̂) dropped): a
+    /// least-squares solution of Fθ = ζ, the maximum-likelihood estimate of θ
+    /// (Zhang & Basseville 2014, eq. (34)) when F is regular; when it is not, the one of
+    /// minimum norm in the fault units of F̂ (so that a change of units S gives S⁻¹θ̂),
+    /// 0 for a fault with F_jj = 0.
     #[must_use]
     pub fn magnitude(&self) -> DVector<f64> {
         let w = self.eigen.root_pinv(self.tol, None);
-        &w * w.tr_mul(&self.score)
+        (&w * w.tr_mul(&self.unit_score)).component_mul(&self.unit)
     }
 
     /// Validates `subset` and returns (a, b): the subset sorted, and its complement.
@@ -404,9 +431,12 @@ impl FisherStatistics {
 }
 
 /// Quadratic form xᵀA⁺x and numerical rank of the symmetric positive semi-definite
-/// matrix A, through a symmetric eigendecomposition A = VΛVᵀ in which eigenvalues
+/// matrix A, through a symmetric eigendecomposition Â = VΛVᵀ of the equilibrated
+/// Â = UAU, U = diag(A)^{-1/2} (U_ii = 0 where A_ii ≤ 0), in which eigenvalues
 /// ≤ tol·λ_max (and all non-positive ones) are treated as zero:
-/// xᵀA⁺x = Σ_{λ_i > tol·λ_max} (v_iᵀx)²/λ_i, and `dof` is the number of kept eigenvalues.
+/// xᵀA⁺x = Σ_{λ_i > tol·λ_max} (v_iᵀUx)²/λ_i, and `dof` is the number of kept eigenvalues.
+/// Equilibrating first makes the rank independent of the units of x's components
+/// (A ↦ SAS, x ↦ Sx for a positive diagonal S change neither; issue 19).
 ///
 /// Only the symmetric part (A + Aᵀ)/2 is used. When x ∈ range(A) — as ζ ∈ range(F) for
 /// F = MᵀR⁻¹M, ζ = MᵀR⁻¹Z — the result does not depend on the choice of generalised
@@ -439,7 +469,28 @@ pub fn pinv_quadratic_form(a: &DMatrix<f64>, x: &DVector<f64>, tol: f64) -> Test
         a.ncols(),
         x.len()
     );
-    quadratic_form(a, x, sanitized_tolerance(tol), None)
+    if !a.iter().all(|v| v.is_finite()) {
+        return TestStatistic::NAN;
+    }
+    let (unit, equilibrated) = equilibrated(&symmetrized(a));
+    quadratic_form(
+        &equilibrated,
+        &x.component_mul(&unit),
+        sanitized_tolerance(tol),
+        None,
+    )
+}
+
+/// U = diag(A)^{-1/2} as a vector (0 where A_ii ≤ 0) and the equilibrated UAU, whose
+/// diagonal is 1 (or 0 for a dropped row and column). A finite PSD A gives a finite
+/// UAU: |A_ij| ≤ √(A_ii A_jj) keeps every entry within [−1, 1].
+fn equilibrated(a: &DMatrix<f64>) -> (DVector<f64>, DMatrix<f64>) {
+    let unit = DVector::from_fn(a.nrows(), |i, _| {
+        let d = a[(i, i)];
+        if d > 0.0 { 1.0 / d.sqrt() } else { 0.0 }
+    });
+    let scaled = DMatrix::from_fn(a.nrows(), a.ncols(), |i, j| a[(i, j)] * unit[i] * unit[j]);
+    (unit, scaled)
 }
 
 /// xᵀA⁺x with eigenvalues ≤ tol·reference dropped (reference = λ_max(A) when `None`);
@@ -683,13 +734,20 @@ mod tests {
             self.z_white.norm_squared()
         }
 
-        /// min over θ_cols of ‖Z − M_cols θ_cols‖²_{R⁻¹}, by nalgebra's SVD least squares;
-        /// singular values ≤ √τ·σ_max count as zero (the cut-off τ·λ_max on F = M̃ᵀM̃).
+        /// min over θ_cols of ‖Z − M_cols θ_cols‖²_{R⁻¹}, by nalgebra's SVD least squares
+        /// on the columns of M̃ scaled to unit norm; singular values ≤ √τ·σ_max count as
+        /// zero (the cut-off τ·λ_max on the equilibrated F̂ = UM̃ᵀM̃U).
         fn min_residual(&self, cols: &[usize]) -> f64 {
             if cols.is_empty() {
                 return self.norm2();
             }
-            let mc = self.m_white.select_columns(cols);
+            let mut mc = self.m_white.select_columns(cols);
+            for mut c in mc.column_iter_mut() {
+                let norm = c.norm();
+                if norm > 0.0 {
+                    c /= norm;
+                }
+            }
             let svd = mc.clone().svd(true, true);
             let eps = DEFAULT_RANK_TOLERANCE.sqrt() * svd.singular_values.max();
             let theta = svd.solve(&self.z_white, eps).expect("U and Vᵀ computed");
@@ -697,8 +755,9 @@ mod tests {
         }
     }
 
-    /// Whether the spectra of F and of all its principal blocks are clear of the rank
-    /// cut-off: every eigenvalue of a block is either ≥ 1e-6 of the block's λ_max (well
+    /// Whether the spectra of the equilibrated F̂ (on which the rank is decided) and of all
+    /// its principal blocks are clear of the rank cut-off: every eigenvalue of a block is
+    /// either ≥ 1e-6 of the block's λ_max (well
     /// conditioned: a backward-stable evaluation of a quadratic form then has a forward
     /// error of order ε·λ_max/λ ≈ 2e-10 relative, under the 1e-9 and 1e-8 tolerances) or
     /// ≤ 1e-13 of it (a rounding-level zero, as when N < m). Draws with an eigenvalue in
@@ -706,6 +765,7 @@ mod tests {
     /// cut-off, rank decisions taken relative to different scales (F, F_bb, F*_a, or the
     /// singular values of the stacked M) may legitimately differ.
     fn spectra_clear_of_cutoff(f: &DMatrix<f64>) -> bool {
+        let f = &equilibrated(f).1;
         let m = f.nrows();
         (1..1usize << m).all(|mask| {
             let idx: Vec<usize> = (0..m).filter(|&i| mask & (1 << i) != 0).collect();
@@ -1000,6 +1060,50 @@ mod tests {
         );
     }
 
+    /// Issue 19: a change of fault units F ↦ SFS, ζ ↦ Sζ (S = diag(10⁻⁸, 1, 10⁸), F_ii
+    /// spanning 32 decades) changes no degree of freedom, no test value beyond 1e-9 of
+    /// the global statistic, and gives θ̂ ↦ S⁻¹θ̂; the fault of tiny F_ii keeps its
+    /// information (it was dropped by the cut-off τ·λ_max(F) of before).
+    #[test]
+    fn fault_units_do_not_decide_the_rank_issue_19() {
+        let mut rng = SplitMix64(0x19);
+        let (n, m) = (20, 3);
+        let mm = rng.normal_matrix(n, m);
+        let theta = DVector::from_vec(vec![2.0, -1.0, 3.0]);
+        let z = &mm * &theta + rng.normal_matrix(n, 1).column(0);
+        let base = Stacked::new(mm.clone(), rng.normal_matrix(n, n) * 0.3, z).fisher();
+        let units = DVector::from_vec(vec![1e-8, 1.0, 1e8]);
+        let s = DMatrix::from_diagonal(&units);
+        let scaled = FisherStatistics::new(
+            &s * base.information() * &s,
+            base.score().component_mul(&units),
+        )
+        .unwrap();
+        let g = base.global();
+        assert_eq!(g.dof, 3);
+        assert_eq!(scaled.global().dof, 3);
+        assert!(close(scaled.global().value, g.value, 1e-9, g.value));
+        for a in [vec![0], vec![1], vec![2], vec![0, 2]] {
+            for (x, y) in [
+                (base.minmax(&a).unwrap(), scaled.minmax(&a).unwrap()),
+                (
+                    base.sensitivity(&a).unwrap(),
+                    scaled.sensitivity(&a).unwrap(),
+                ),
+            ] {
+                assert_eq!(x.dof, y.dof, "{a:?}");
+                assert!(
+                    close(x.value, y.value, 1e-9, g.value),
+                    "{a:?}: {x:?} vs {y:?}"
+                );
+            }
+        }
+        let (t, u) = (base.magnitude(), scaled.magnitude());
+        for j in 0..m {
+            assert!(close(u[j] * units[j], t[j], 1e-9, t.amax()), "θ̂_{j}");
+        }
+    }
+
     #[test]
     fn rank_tolerance_decides_near_collinear_faults() {
         // Correlation 1 − 1e-12 between the two signatures.
@@ -1161,14 +1265,17 @@ mod tests {
             1e-9,
         );
         assert!(nan_x.value.is_nan());
-        // Extreme but finite scales do not overflow.
+        // Extreme but finite scales do not overflow. Both directions count: the rank is
+        // decided on the equilibrated matrix (issue 19). (This asserted dof 1 when the
+        // cut-off was τ·λ_max(A), which dropped the 1e-300 direction for its units
+        // alone.)
         let huge = pinv_quadratic_form(
             &DMatrix::from_diagonal(&DVector::from_vec(vec![1e300, 1e-300])),
-            &DVector::from_vec(vec![1e300, 0.0]),
+            &DVector::from_vec(vec![1e300, 1e-300]),
             1e-9,
         );
-        assert_eq!(huge.dof, 1);
-        assert!(close(huge.value, 1e300, 1e-12, 1e300));
+        assert_eq!(huge.dof, 2);
+        assert!(close(huge.value, 1e300 + 1e-300, 1e-12, 1e300));
     }
 
     #[test]

@@ -49,15 +49,6 @@ pub(super) trait Lanes: Copy {
     fn gt(self, o: Self) -> Self::Mask;
     /// m ? a : b per lane.
     fn select(m: Self::Mask, a: Self, b: Self) -> Self;
-
-    /// [`larger`] per lane: one compare and one blend (or one `maxpd`), where
-    /// `f64::max`'s NaN rule costs two compares more.
-    ///
-    /// [`larger`]: super::statistic::larger
-    #[inline(always)]
-    fn max(self, o: Self) -> Self {
-        Self::select(o.gt(self), o, self)
-    }
 }
 
 /// One onset: the passes' per-slot loops share the fused pass's kernels ([`quad2`]) and

@@ -1,6 +1,5 @@
 //! θ̂ = C⁺d at r̂ (eq. (34)); the LDLᵀ in registers must equal the slot's stored one.
 
-use super::statistic::pivot_cutoff;
 use super::{WindowBank, tri};
 use crate::linalg::{at, jacobi_eigen};
 
@@ -11,7 +10,6 @@ impl WindowBank {
     /// at r̂ only.
     fn factor_slot(&mut self, s: usize) {
         let (m, w) = (self.m, self.slots);
-        let cut = pivot_cutoff(m, |a| self.info[tri(a, a) * w + s], self.tolerance);
         for j in 0..m {
             let mut d = self.info[tri(j, j) * w + s];
             for q in 0..j {
@@ -19,7 +17,7 @@ impl WindowBank {
                 d -= l * l * self.ldl[tri(q, q) * w + s];
             }
             self.ldl[tri(j, j) * w + s] = d;
-            let keep = d > cut;
+            let keep = d > self.info[tri(j, j) * w + s] * self.tolerance;
             let inv = if keep { 1.0 / d } else { 0.0 };
             self.inv_pivot[j * w + s] = inv;
             for i in (j + 1)..m {
@@ -86,9 +84,18 @@ impl WindowBank {
         } else {
             (&self.info, s)
         };
+        // C deficient: θ̂ = D^{-1/2}Ĉ⁺D^{-1/2}d with Ĉ = D^{-1/2}CD^{-1/2}, D = diag C,
+        // the equilibrated C (unit diagonal; a fault with C_aa = 0 keeps a zero row
+        // and column and gets θ̂_a = 0), eigenvalues ≤ τ·λ_max(Ĉ) dropped. Equilibrating
+        // first makes the decision scale-free as the statistic's (issue 19): a fault's
+        // column times s gives its θ̂ divided by s and changes no other entry.
+        for a in 0..m {
+            let caa = info[tri(a, a) * w + at_index];
+            self.eig_scale[a] = if caa > 0.0 { 1.0 / caa.sqrt() } else { 0.0 };
+        }
         for a in 0..m {
             for b in 0..=a {
-                let c = info[tri(a, b) * w + at_index];
+                let c = info[tri(a, b) * w + at_index] * self.eig_scale[a] * self.eig_scale[b];
                 self.eig_a[at(m, a, b)] = c;
                 self.eig_a[at(m, b, a)] = c;
             }
@@ -101,11 +108,16 @@ impl WindowBank {
             let lam = self.eig_vals[e];
             if lam > cut && lam > 0.0 {
                 let v = &self.eig_vecs[e * m..(e + 1) * m];
-                let proj: f64 = (0..m).map(|a| v[a] * self.score[a * w + s]).sum();
+                let proj: f64 = (0..m)
+                    .map(|a| v[a] * self.eig_scale[a] * self.score[a * w + s])
+                    .sum();
                 for a in 0..m {
                     out[a] += v[a] * proj / lam;
                 }
             }
+        }
+        for (o, scale) in out.iter_mut().zip(&self.eig_scale).take(m) {
+            *o *= scale;
         }
         true
     }
@@ -139,7 +151,6 @@ impl WindowBank {
     fn solve_regular<const M: usize>(&self, s: usize, out: &mut [f64]) {
         let w = self.slots;
         let info = |a: usize, b: usize| self.info[tri(a, b) * w + s];
-        let cut = pivot_cutoff(M, |a| info(a, a), self.tolerance);
         // L below the diagonal, D on it.
         let mut ldl = [[0.0; M]; M];
         let mut inv = [0.0; M];
@@ -150,7 +161,11 @@ impl WindowBank {
                 d -= l * l * ldl[q][q];
             }
             ldl[j][j] = d;
-            inv[j] = if d > cut { 1.0 / d } else { 0.0 };
+            inv[j] = if d > info(j, j) * self.tolerance {
+                1.0 / d
+            } else {
+                0.0
+            };
             for i in (j + 1)..M {
                 let mut x = info(i, j);
                 for q in 0..j {

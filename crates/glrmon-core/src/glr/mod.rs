@@ -36,14 +36,16 @@
 //! # Rank-deficient C
 //! Until the signatures are persistently exciting (eq. (22)), C_k(r) is singular (for a
 //! state step fault at lag 0 it is exactly 0). The statistic uses an LDLᵀ factorisation
-//! of C in which pivots D_j ≤ τ·max_i C_ii are dropped (τ = the rank tolerance). For a
-//! positive semi-definite C an exactly zero pivot comes with an exactly zero column of
-//! the Schur complement, so the dropped-pivot factorisation is a generalised inverse
-//! C⁻ (C C⁻ C = C); since d ∈ range(C), dᵀC⁻d = dᵀC⁺d is exactly 2 ln LR and is χ²
-//! with dof = rank C = the number of kept pivots. The cut-off is never negative (τ > 0,
-//! and C's diagonal is a sum of squares), so a kept pivot is positive without a test
-//! of its own. The magnitude θ̂ at r̂ uses the Moore–Penrose pseudo-inverse
-//! (eigenvalues ≤ τ·λ_max dropped) when C is deficient.
+//! of C in which pivots D_j ≤ τ·C_jj are dropped (τ = the rank tolerance): D_j/C_jj =
+//! 1 − R_j², R_j the multiple correlation of fault j's signature with the faults kept
+//! before it, so the decision does not depend on the units of the faults (issue 19;
+//! [`statistic`]). For a positive semi-definite C an exactly zero pivot comes with an
+//! exactly zero column of the Schur complement, so the dropped-pivot factorisation is a
+//! generalised inverse C⁻ (C C⁻ C = C); since d ∈ range(C), dᵀC⁻d = dᵀC⁺d is exactly
+//! 2 ln LR and is χ² with dof = rank C = the number of kept pivots. The magnitude θ̂
+//! at r̂ uses, when C is deficient, the pseudo-inverse of the equilibrated C
+//! (D^{-1/2}CD^{-1/2}, D = diag C, eigenvalues ≤ τ·λ_max of it dropped), so that θ̂
+//! follows a change of units too.
 //!
 //! # Stationary regime (LTI fast path)
 //! When A_k, F_kK_k, L_k⁻¹H_k, Ψ̃_k and Φ̃_k are constant (an LTI model whose Riccati
@@ -169,16 +171,17 @@ pub(crate) struct WindowBank {
     solved: Vec<f64>,
     stat: Vec<f64>,
     rank: Vec<f64>,
-    cutoff: Vec<f64>,
     /// Onset k + 1 announced by the last time update, entered at the next step so that
     /// the oldest onset's statistics stay readable between steps.
     pending: Option<u64>,
     /// Γ_{k+1}(k+1) = Ψ_k(k+1) for the pending onset (n×m).
     entry: Vec<f64>,
-    // Eigen scratch for θ̂ when C(r̂) is deficient.
+    // Eigen scratch for θ̂ when C(r̂) is deficient: the equilibrated C, its spectrum,
+    // and D^{-1/2} (D = diag C).
     eig_a: Vec<f64>,
     eig_vals: Vec<f64>,
     eig_vecs: Vec<f64>,
+    eig_scale: Vec<f64>,
     /// Sample index of the last measured step (the k of `lag = k − r` in the tables).
     current: u64,
     /// Whether the stationary tables are in force.
@@ -273,12 +276,12 @@ impl WindowBank {
             solved: z(m * slots),
             stat: z(slots),
             rank: z(slots),
-            cutoff: z(slots),
             pending: None,
             entry: z(n * m),
             eig_a: z(m * m),
             eig_vals: z(m),
             eig_vecs: z(m * m),
+            eig_scale: z(m),
             current: 0,
             steady: false,
             level: Level::detect(),

@@ -1,7 +1,7 @@
 //! The passes of eqs. (45), (32)-(35), (46): the reference every fast path must equal.
 
 use super::lanes::mul_add;
-use super::statistic::{larger, quad2};
+use super::statistic::quad2;
 use super::{WindowBank, WindowMax, forcing, tri};
 use crate::fault::Onset;
 use crate::linalg::at;
@@ -159,7 +159,7 @@ impl WindowBank {
         self.best(k)
     }
 
-    /// The LDLᵀ statistic for m = 1 in one pass: d²/C where C > τ·C.
+    /// The LDLᵀ statistic for m = 1 in one pass: d²/C where C > τ·C (C > 0).
     #[inline(always)]
     fn statistic_m1(&mut self) {
         let w = self.slots;
@@ -199,16 +199,7 @@ impl WindowBank {
     #[inline(always)]
     pub(super) fn statistic_generic(&mut self) {
         let (m, w) = (self.m, self.slots);
-        // Rank cut-off per slot: τ·max_a C_aa.
-        self.cutoff.iter_mut().for_each(|c| *c = 0.0);
-        for a in 0..m {
-            let caa = &self.info[tri(a, a) * w..(tri(a, a) + 1) * w];
-            for (c, x) in self.cutoff.iter_mut().zip(caa) {
-                *c = larger(*c, *x);
-            }
-        }
         let tol = self.tolerance;
-        self.cutoff.iter_mut().for_each(|c| *c *= tol);
         self.stat.iter_mut().for_each(|x| *x = 0.0);
         self.rank.iter_mut().for_each(|x| *x = 0.0);
         for j in 0..m {
@@ -225,15 +216,14 @@ impl WindowBank {
                 }
             }
             {
+                // Pivot j is kept when D_j > τ·C_jj: the scale-free rule of
+                // `statistic` (issue 19).
                 let djj = &self.ldl[tri(j, j) * w..(tri(j, j) + 1) * w];
+                let cjj = &self.info[tri(j, j) * w..(tri(j, j) + 1) * w];
                 let inv = &mut self.inv_pivot[j * w..(j + 1) * w];
-                for (((iv, d), c), r) in inv
-                    .iter_mut()
-                    .zip(djj)
-                    .zip(&self.cutoff)
-                    .zip(self.rank.iter_mut())
+                for (((iv, d), c), r) in inv.iter_mut().zip(djj).zip(cjj).zip(self.rank.iter_mut())
                 {
-                    let keep = *d > *c;
+                    let keep = *d > *c * tol;
                     *iv = if keep { 1.0 / d } else { 0.0 };
                     *r += if keep { 1.0 } else { 0.0 };
                 }
@@ -416,6 +406,53 @@ mod tests {
     use super::super::bank_with_random_stats;
     use super::*;
     use crate::linalg::jacobi_eigen;
+
+    /// Issue 19: fault j's column times s_j (C_ab ↦ s_a s_b C_ab, d_a ↦ s_a d_a, s from
+    /// 10⁻⁸ to 10⁸) changes no rank and leaves the statistic equal to 1e-9 relative, in
+    /// the LDLᵀ of any m and in the one-division form of m = 2, over regular, rank-deficient
+    /// and zero C. (With the cut-off τ·max_a C_aa of before, a column scaled by 10⁻⁸ next
+    /// to one by 10⁸ lost its pivot.)
+    #[test]
+    fn pivot_decisions_ignore_fault_units_issue_19() {
+        for m in [2, 3, 5] {
+            for seed in 1..6 {
+                let mut base = bank_with_random_stats(m, seed);
+                let w = base.slots;
+                let units: Vec<f64> = (0..m)
+                    .map(|a| 10f64.powi(8 - 16 * (a as i32 % 2)))
+                    .collect();
+                let mut scaled = base.clone();
+                for a in 0..m {
+                    for b in 0..=a {
+                        for s in 0..w {
+                            scaled.info[tri(a, b) * w + s] *= units[a] * units[b];
+                        }
+                    }
+                    for s in 0..w {
+                        scaled.score[a * w + s] *= units[a];
+                    }
+                }
+                let passes: &[fn(&mut WindowBank)] = if m == 2 {
+                    &[WindowBank::statistic_m2, WindowBank::statistic_generic]
+                } else {
+                    &[WindowBank::statistic_generic]
+                };
+                for pass in passes {
+                    pass(&mut base);
+                    pass(&mut scaled);
+                    assert_eq!(base.rank, scaled.rank, "m = {m}, seed {seed}");
+                    for (s, (x, y)) in base.stat.iter().zip(&scaled.stat).enumerate() {
+                        assert!(
+                            (x - y).abs() <= 1e-9 * (1.0 + x.abs()),
+                            "m = {m}, seed {seed}, slot {s}: {x} vs {y}"
+                        );
+                    }
+                }
+                // Every rank from 0 to m occurs (`bank_with_random_stats`).
+                assert!((0..=m).all(|r| base.rank.contains(&(r as f64))), "m = {m}");
+            }
+        }
+    }
 
     #[test]
     fn m1_statistic_equals_generic_ldl_bit_for_bit() {

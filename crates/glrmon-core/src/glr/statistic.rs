@@ -1,31 +1,17 @@
 //! dᵀC⁻d and rank C (eq. (35)), written once so that every path decides the same rank.
+//!
+//! # The rank decision is scale-free
+//! Pivot j of the dropped-pivot LDLᵀ is kept when D_j > τ·C_jj: D_j = C_jj(1 − R_j²),
+//! with R_j the multiple correlation of fault j's signature with the kept faults
+//! before it, so the test asks whether 1 − R_j² > τ, a number without units. Changing
+//! the units of a fault (its column times s, θ_j divided by s) multiplies C_jj and D_j
+//! by s² and leaves every decision unchanged (issue 19: a cut-off τ·max_a C_aa made a
+//! gas-pipeline leak of θ ≈ −4·10⁴ invisible next to faults of θ ≈ 10⁻⁵ whose columns
+//! are ≈ 4·10⁵). A fault with no signature at all (C_jj = 0, so D_j = 0) is still
+//! dropped: 0 > 0 is false. The cut-off is never negative (τ > 0, and C's diagonal is
+//! a sum of squares), so a kept pivot is positive without a test of its own.
 
 use super::lanes::Lanes;
-
-/// The rank cut-off τ·max_a C_aa of the dropped-pivot LDLᵀ, in the operation order of
-/// the statistic passes ([`WindowBank::statistic_m2`] for m = 2, else
-/// [`WindowBank::statistic_generic`]; the m = 1 pass compares C > τ·C, which decides
-/// the same for every C).
-///
-/// [`WindowBank::statistic_m2`]: super::WindowBank::statistic_m2
-/// [`WindowBank::statistic_generic`]: super::WindowBank::statistic_generic
-#[inline(always)]
-pub(super) fn pivot_cutoff(m: usize, diag: impl Fn(usize) -> f64, tol: f64) -> f64 {
-    if m == 2 {
-        larger(diag(0), diag(1)) * tol
-    } else {
-        (0..m).fold(0.0_f64, |c, a| larger(c, diag(a))) * tol
-    }
-}
-
-/// y if y > x, else x: the larger of two, as the rank cut-offs take it in every path
-/// (and `maxpd` computes it). A NaN y is passed over, so a maximum folded from 0 over
-/// C's diagonal ignores NaN entries as `f64::max` would; max(C₁₁, C₂₂) for m = 2 is NaN
-/// when C₁₁ is, and then no pivot is kept.
-#[inline(always)]
-pub(super) fn larger(x: f64, y: f64) -> f64 {
-    if y > x { y } else { x }
-}
 
 /// The dropped-pivot LDLᵀ statistic dᵀC⁻d and rank C of L onsets (eq. (35)), with the
 /// operations of [`WindowBank::statistic_generic`].
@@ -40,13 +26,6 @@ pub(super) fn ldl_statistic<const M: usize, S: Lanes>(
 ) -> (S, S) {
     let zero = S::splat(0.0);
     let one = S::splat(1.0);
-    let cut = {
-        let mut x = zero;
-        for (a, row) in info.iter().enumerate() {
-            x = x.max(row[a]);
-        }
-        x.mul(tol)
-    };
     let mut dd = [zero; M];
     let mut inv = [zero; M];
     let mut low = [[zero; M]; M];
@@ -61,7 +40,8 @@ pub(super) fn ldl_statistic<const M: usize, S: Lanes>(
             }
         }
         dd[j] = d;
-        let keep = d.gt(cut);
+        // D_j > τ·C_jj (module docs).
+        let keep = d.gt(info[j][j].mul(tol));
         inv[j] = S::select(keep, one.div(d), zero);
         rank = rank.add(S::select(keep, one, zero));
         for i in 0..M {
@@ -94,28 +74,29 @@ pub(super) fn ldl_statistic<const M: usize, S: Lanes>(
 
 /// dᵀC⁺d and rank C for m = 2, C = [[a, b], [b, c]], with one division: the
 /// dropped-pivot LDLᵀ of [`WindowBank::statistic_generic`] (eq. (35)) with its two
-/// pivots a and δ/a, δ = ac − b², kept when above the cut-off τ·max(a, c), written over
-/// one denominator: with z = a·d₂ − b·d₁,
+/// pivots a and δ/a, δ = ac − b², written over one denominator: with z = a·d₂ − b·d₁,
 ///
 ///   d₁²/a + (d₂ − (b/a)d₁)²/(δ/a) = (d₁²δ + z²) / (aδ)   (both pivots kept),
 ///
 /// d₁²/a when only the first is kept, and d₂²/c when the first is dropped (then the
 /// second pivot is c itself). A sum of two non-negative terms over a positive
-/// denominator: no cancellation beyond δ's own, which the LDLᵀ shares. The
-/// comparisons test δ against τ·max(a, c)·a instead of δ/a against the cut-off, so no
-/// division decides a rank. One division instead of the LDLᵀ's two: division is the
-/// slowest operation of the window pass (issue 9).
+/// denominator: no cancellation beyond δ's own, which the LDLᵀ shares. One division
+/// instead of the LDLᵀ's two: division is the slowest operation of the window pass
+/// (issue 9).
+///
+/// The pivots are kept by the scale-free rule of the LDLᵀ, D_j > τ·C_jj (module docs):
+/// a when a > τ·a (a > 0), δ/a when δ > τ·a·c (1 − ρ² > τ, ρ the correlation of the
+/// two signatures), and c alone when c > τ·c; no division decides a rank.
 ///
 /// [`WindowBank::statistic_generic`]: super::WindowBank::statistic_generic
 #[inline(always)]
 pub(super) fn quad2<S: Lanes>(a: S, b: S, c: S, d1: S, d2: S, tol: S) -> (S, S) {
     let zero = S::splat(0.0);
     let one = S::splat(1.0);
-    let cut = a.max(c).mul(tol);
-    let keep_a = a.gt(cut);
-    let keep_c = c.gt(cut);
-    let det = a.mul(c).sub(b.mul(b));
-    let keep_det = det.gt(cut.mul(a));
+    let (keep_a, keep_c) = quad2_pivots(a, c, tol);
+    let ac = a.mul(c);
+    let det = ac.sub(b.mul(b));
+    let keep_det = det.gt(ac.mul(tol));
     let z = a.mul(d2).sub(b.mul(d1));
     let d1s = d1.mul(d1);
     let (full_num, full_den) = (d1s.mul(det).add(z.mul(z)), a.mul(det));
@@ -130,4 +111,12 @@ pub(super) fn quad2<S: Lanes>(a: S, b: S, c: S, d1: S, d2: S, tol: S) -> (S, S) 
     );
     let rank = S::select(keep_a, one, zero).add(second);
     (num.div(den), rank)
+}
+
+/// [`quad2`]'s decisions on the diagonal: whether a is kept as the first pivot, and
+/// whether c is kept as the second when a is dropped (D_j > τ·C_jj with D_j = C_jj).
+/// The stationary tables take their generalised inverse from the same decisions.
+#[inline(always)]
+pub(super) fn quad2_pivots<S: Lanes>(a: S, c: S, tol: S) -> (S::Mask, S::Mask) {
+    (a.gt(a.mul(tol)), c.gt(c.mul(tol)))
 }

@@ -1,7 +1,7 @@
 //! The LTI stationary tables (fast path): must equal the general recursion at every lag.
 
 use super::lanes::{mul_add, mul_add_as};
-use super::statistic::{larger, quad2};
+use super::statistic::{quad2, quad2_pivots};
 use super::{WindowBank, WindowMax, forcing, tri};
 use crate::linalg::at;
 
@@ -124,11 +124,8 @@ impl WindowBank {
                     tb.info[c * w + idx] = v;
                 }
             }
-            // C(ℓ)⁻ = L⁻ᵀD⁺L⁻¹ from the dropped-pivot LDLᵀ of `statistic_generic`.
-            let cut = (0..m)
-                .map(|a| tb.info[tri(a, a) * w + idx])
-                .fold(0.0_f64, larger)
-                * tol;
+            // C(ℓ)⁻ = L⁻ᵀD⁺L⁻¹ from the dropped-pivot LDLᵀ of `statistic_generic`, with
+            // its scale-free rule D_j > τ·C_jj.
             let mut rank = 0.0;
             for j in 0..m {
                 let mut d = tb.info[tri(j, j) * w + idx];
@@ -137,7 +134,7 @@ impl WindowBank {
                     d -= l * l * tb.work_ldl[at(m, q, q)];
                 }
                 tb.work_ldl[at(m, j, j)] = d;
-                let keep = d > cut;
+                let keep = d > tb.info[tri(j, j) * w + idx] * tol;
                 tb.work_inv_pivot[j] = if keep { 1.0 / d } else { 0.0 };
                 rank += if keep { 1.0 } else { 0.0 };
                 for i in (j + 1)..m {
@@ -155,8 +152,7 @@ impl WindowBank {
                 let info = |i| tb.info[i * w + idx];
                 let (a, b, c) = (info(0), info(1), info(2));
                 let (_, r) = quad2(a, b, c, 0.0, 0.0, tol);
-                let cut = larger(a, c) * tol;
-                let (keep_a, keep_c) = (a > cut, c > cut);
+                let (keep_a, keep_c) = quad2_pivots(a, c, tol);
                 (tb.work_inv_pivot[0], tb.work_inv_pivot[1]) = match (keep_a, r as usize) {
                     (true, 2) => (1.0 / a, a / (a * c - b * b)),
                     (true, _) => (1.0 / a, 0.0),
