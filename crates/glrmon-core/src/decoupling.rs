@@ -256,6 +256,26 @@ impl Decoupling {
         }
     }
 
+    /// [`Decoupling::project`] for model columns (Φ_k): a column whose projection is below
+    /// [`UNKNOWN_INPUT_RANK_TOLERANCE`] of its norm becomes exactly zero. Not for ε_k,
+    /// which a large d can make mostly removable without its remainder being rounding.
+    pub(crate) fn project_columns(&self, x: &mut [f64], cols: usize) {
+        if !self.applied {
+            return;
+        }
+        let p = self.p;
+        for c in 0..cols {
+            let col = &mut x[c * p..(c + 1) * p];
+            let before = col.iter().map(|v| v * v).sum::<f64>().sqrt();
+            self.qr.apply_qt(col, 1);
+            col[..self.q].fill(0.0);
+            let after = col.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if after <= UNKNOWN_INPUT_RANK_TOLERANCE * before {
+                col.fill(0.0);
+            }
+        }
+    }
+
     /// Turns X = P_kH_kᵀL_k⁻ᵀ (n×p) into X Q₂Q₂ᵀ + E_{k−1}R⁻¹Q₁ᵀ, row by row, so that a
     /// right division by L gives the Kitanidis gain K̄_k.
     pub(crate) fn correct_gain(&self, x: &mut [f64]) {
@@ -846,6 +866,57 @@ mod tests {
             &mut out,
         )
         .unwrap();
+    }
+
+    /// An output-fault column in the direction H_kE_{k−1} that d reaches is whitened to
+    /// exactly zero at any scale, one outside it keeps its norm's share.
+    #[test]
+    fn output_fault_columns_along_he_whiten_to_exact_zero() {
+        let mut model = example1();
+        let mut sys = SystemMatrices::zeros(model.dims());
+        let mut filter = InnovationFilter::new(DVector::zeros(3), DMatrix::identity(3, 3), 2)
+            .unwrap()
+            .with_unknown_input(1)
+            .unwrap();
+        for k in 0..3u64 {
+            model.evaluate(
+                k,
+                &crate::model::Signals {
+                    u: &[],
+                    p: &signals(k),
+                },
+                &mut sys,
+            );
+            filter.measure(&sys, &[], &[0.1, -0.2]).unwrap();
+            filter.time_update(&sys, &[]);
+            filter.set_unknown_input(&e1());
+        }
+        model.evaluate(
+            3,
+            &crate::model::Signals {
+                u: &[],
+                p: &signals(3),
+            },
+            &mut sys,
+        );
+        filter.measure(&sys, &[], &[0.1, -0.2]).unwrap();
+        let he = &sys.h * e1();
+        let mut phi = DMatrix::from_columns(&[
+            he.column(0) * 3e7,
+            he.column(0) * 1e-7,
+            DVector::from_column_slice(&[0.0, 1.0]),
+        ]);
+        filter.whiten_in_place(phi.as_mut_slice(), 3);
+        assert_eq!(
+            phi.column(0)
+                .iter()
+                .chain(phi.column(1).iter())
+                .copied()
+                .collect::<Vec<_>>(),
+            vec![0.0; 4]
+        );
+        assert_eq!(phi[(0, 2)], 0.0);
+        assert!(phi[(1, 2)].abs() > 0.1);
     }
 
     fn qr_factor(a: &DMatrix<f64>) -> bool {

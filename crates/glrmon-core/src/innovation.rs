@@ -172,13 +172,16 @@ impl InnovationFilter {
         }
     }
 
-    /// x ← W_k x for the `cols` columns of x (p×cols): L_k⁻¹x, and with an unknown input
-    /// the projection that zeroes the directions H_kE_{k−1} ([`crate::decoupling`]).
-    /// What whitens ε_k and H_k whitens the output-fault columns Φ_k too.
+    /// x ← W_k x for the `cols` output-fault columns of x (p×cols, Φ_k): L_k⁻¹x, and
+    /// with an unknown input the projection that zeroes the directions H_kE_{k−1}
+    /// ([`crate::decoupling`]), as ε_k and H_k are whitened. A column the projection
+    /// leaves below [`crate::error::UNKNOWN_INPUT_RANK_TOLERANCE`] of its norm lies in
+    /// those directions and becomes exactly zero (not rounding noise, which the
+    /// scale-free rank decisions would count).
     pub fn whiten_in_place(&self, x: &mut [f64], cols: usize) {
         solve_lower_in_place(self.chol.as_slice(), self.p, x, cols);
         if let Some(d) = &self.unknown_input {
-            d.project(x, cols);
+            d.project_columns(x, cols);
         }
     }
 
