@@ -137,6 +137,25 @@ impl Householder {
         }
     }
 
+    /// x ← [0; Q₂ᵀx] (the component outside range(A) in Q's basis), or exactly zero when
+    /// that component is below [`UNKNOWN_INPUT_RANK_TOLERANCE`] of ‖x‖ (x in range(A)
+    /// up to rounding); `back` returns the kept component to the original basis,
+    /// (I − Q₁Q₁ᵀ)x.
+    fn cut_range(&self, x: &mut [f64], back: bool) {
+        let before = x.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if before == 0.0 {
+            return;
+        }
+        self.apply_qt(x, 1);
+        x[..self.cols].fill(0.0);
+        let after = x.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if after <= UNKNOWN_INPUT_RANK_TOLERANCE * before {
+            x.fill(0.0);
+        } else if back {
+            self.apply_q(x, 1);
+        }
+    }
+
     /// y ← yR⁻¹ for a row y of `cols` entries at `stride` (R upper triangular).
     fn solve_right_r(&self, y: &mut [f64], stride: usize) {
         let p = self.rows;
@@ -263,16 +282,8 @@ impl Decoupling {
         if !self.applied {
             return;
         }
-        let p = self.p;
-        for c in 0..cols {
-            let col = &mut x[c * p..(c + 1) * p];
-            let before = col.iter().map(|v| v * v).sum::<f64>().sqrt();
-            self.qr.apply_qt(col, 1);
-            col[..self.q].fill(0.0);
-            let after = col.iter().map(|v| v * v).sum::<f64>().sqrt();
-            if after <= UNKNOWN_INPUT_RANK_TOLERANCE * before {
-                col.fill(0.0);
-            }
+        for col in x.chunks_exact_mut(self.p).take(cols) {
+            self.qr.cut_range(col, false);
         }
     }
 
@@ -301,7 +312,6 @@ impl Decoupling {
 #[derive(Debug, Clone)]
 pub(crate) struct RangeComplement {
     n: usize,
-    q: usize,
     qr: Householder,
 }
 
@@ -309,7 +319,6 @@ impl RangeComplement {
     pub(crate) fn new(n: usize, q: usize) -> Self {
         Self {
             n,
-            q,
             qr: Householder::new(n, q),
         }
     }
@@ -322,21 +331,8 @@ impl RangeComplement {
     /// Replaces each of the `cols` columns of `psi` (n×cols) by its component outside
     /// range(E_k).
     pub(crate) fn project(&self, psi: &mut [f64], cols: usize) {
-        let n = self.n;
-        for c in 0..cols {
-            let col = &mut psi[c * n..(c + 1) * n];
-            let before = col.iter().map(|v| v * v).sum::<f64>().sqrt();
-            if before == 0.0 {
-                continue;
-            }
-            self.qr.apply_qt(col, 1);
-            col[..self.q].fill(0.0);
-            let after = col.iter().map(|v| v * v).sum::<f64>().sqrt();
-            if after <= UNKNOWN_INPUT_RANK_TOLERANCE * before {
-                col.fill(0.0);
-            } else {
-                self.qr.apply_q(col, 1);
-            }
+        for col in psi.chunks_exact_mut(self.n).take(cols) {
+            self.qr.cut_range(col, true);
         }
     }
 }
