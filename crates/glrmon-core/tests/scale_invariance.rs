@@ -676,6 +676,11 @@ fn gas_pipeline_outlet_leak_isolated_in_natural_units_2014_s6_2() {
         );
     }
     assert!(se < 0.05 * LEAK.abs(), "standard error {se}");
+    println!(
+        "2014 §6.2 units: leak θ = {LEAK}, θ̂ = {:.1} (isolation) / {:.1} (step), standard error {se:.1}",
+        fisher.magnitude()[2],
+        out.magnitude[2]
+    );
 
     // `glrmon validate`'s verdict: the information of one window on fault-free data
     // with the same inputs, and the isolability report of it.
