@@ -17,6 +17,9 @@ pub use identify::{
     Candidate, Criterion, Holdout, IdentSettings, Identification, OrderSelection, ValidationReport,
     identify, to_physical, validate,
 };
-pub use model::{InnovationModel, Prediction, solve_riccati, sorted_eigenvalues, spectral_radius};
+pub use model::{
+    InnovationModel, Prediction, RiccatiSolution, solve_riccati, sorted_eigenvalues,
+    spectral_radius,
+};
 pub use subspace::Subspace;
 pub use validation::{LjungBox, chi2_survival, ljung_box, nis_mean, nrmse};

@@ -195,13 +195,26 @@ const RICCATI_MAX_ITERATIONS: usize = 100_000;
 /// Relative change at which the Riccati iteration has converged.
 const RICCATI_TOLERANCE: f64 = 1e-12;
 
+/// The stabilising solution of the filter Riccati equation and what follows from it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RiccatiSolution {
+    /// Steady one-step prediction error covariance P.
+    pub p: DMatrix<f64>,
+    /// Kalman gain K = (A P Cᵀ + S) Re⁻¹ (predictor form).
+    pub k: DMatrix<f64>,
+    /// Innovation covariance Re = C P Cᵀ + R.
+    pub re: DMatrix<f64>,
+    /// Iterations of the difference equation until convergence.
+    pub iterations: usize,
+}
+
 /// Solves the filter-form discrete algebraic Riccati equation
 ///
 /// P = A P Aᵀ + Q − (A P Cᵀ + S)(C P Cᵀ + R)⁻¹(A P Cᵀ + S)ᵀ
 ///
 /// by iterating the Riccati difference equation from P = 0 (monotone convergence to
 /// the stabilising solution when (A, C) is detectable and the noise model is positive
-/// semi-definite), and returns (P, K, Re) with K = (A P Cᵀ + S) Re⁻¹, Re = C P Cᵀ + R.
+/// semi-definite), and returns P, K and Re with K = (A P Cᵀ + S) Re⁻¹, Re = C P Cᵀ + R.
 ///
 /// Ref.: Van Overschee & De Moor (1996), §4.3.3 (from Q, S, R to the innovation model
 /// via the forward Riccati equation); Anderson & Moore (1979), *Optimal Filtering*, §4.4.
@@ -215,11 +228,11 @@ pub fn solve_riccati(
     q: &DMatrix<f64>,
     s: &DMatrix<f64>,
     r: &DMatrix<f64>,
-) -> Result<(DMatrix<f64>, DMatrix<f64>, DMatrix<f64>), IdentError> {
+) -> Result<RiccatiSolution, IdentError> {
     let n = a.nrows();
     let mut p = DMatrix::<f64>::zeros(n, n);
     let mut change = f64::INFINITY;
-    for _ in 0..RICCATI_MAX_ITERATIONS {
+    for iteration in 1..=RICCATI_MAX_ITERATIONS {
         let re = c * &p * c.transpose() + r;
         let chol = re
             .clone()
@@ -248,7 +261,12 @@ pub fn solve_riccati(
                 })?;
             let g = a * &p * c.transpose() + s;
             let k = chol.solve(&g.transpose()).transpose();
-            return Ok((p, k, re));
+            return Ok(RiccatiSolution {
+                p,
+                k,
+                re,
+                iterations: iteration,
+            });
         }
     }
     Err(IdentError::RiccatiNotConverged {
@@ -269,7 +287,8 @@ mod tests {
         let b = r * (1.0 - a * a) - q;
         let p_exact = (-b + (b * b + 4.0 * q * r).sqrt()) / 2.0;
         let m = |v: f64| DMatrix::from_element(1, 1, v);
-        let (p, k, re) = solve_riccati(&m(a), &m(1.0), &m(q), &m(0.0), &m(r)).unwrap();
+        let RiccatiSolution { p, k, re, .. } =
+            solve_riccati(&m(a), &m(1.0), &m(q), &m(0.0), &m(r)).unwrap();
         assert!((p[(0, 0)] - p_exact).abs() < 1e-10);
         assert!((re[(0, 0)] - (p_exact + r)).abs() < 1e-10);
         assert!((k[(0, 0)] - a * p_exact / (p_exact + r)).abs() < 1e-10);
@@ -282,8 +301,12 @@ mod tests {
         let c = DMatrix::from_row_slice(1, 2, &[1.0, 1.0]);
         let k = DMatrix::from_row_slice(2, 1, &[0.4, 0.2]);
         let re = DMatrix::from_element(1, 1, 0.3);
-        let (p, k_hat, re_hat) =
-            solve_riccati(&a, &c, &(&k * &re * k.transpose()), &(&k * &re), &re).unwrap();
+        let RiccatiSolution {
+            p,
+            k: k_hat,
+            re: re_hat,
+            ..
+        } = solve_riccati(&a, &c, &(&k * &re * k.transpose()), &(&k * &re), &re).unwrap();
         assert!(p.norm() < 1e-12);
         assert!((k_hat - k).norm() < 1e-12);
         assert!((re_hat - re).norm() < 1e-12);

@@ -261,18 +261,18 @@ impl Subspace {
         let q = cov.view((0, 0), (n, n)).into_owned();
         let s = cov.view((0, n), (n, p)).into_owned();
         let r = cov.view((n, n), (p, p)).into_owned();
-        let (pp, k, re) = solve_riccati(&a, &c, &q, &s, &r)?;
+        let riccati = solve_riccati(&a, &c, &q, &s, &r)?;
         Ok(InnovationModel {
             a,
             b,
             c,
             d,
-            k,
-            re,
+            k: riccati.k,
+            re: riccati.re,
             q,
             s,
             r,
-            p: pp,
+            p: riccati.p,
         })
     }
 }
