@@ -209,9 +209,9 @@ pub fn preprocess(
 
     let mut warnings = Vec::new();
     let (input_columns, input_scale) =
-        kept_columns(experiments, Signal::Input, l, settings, &mut warnings);
+        kept_columns(experiments, Signal::Input, l, settings, &mut warnings)?;
     let (output_columns, output_scale) =
-        kept_columns(experiments, Signal::Output, p, settings, &mut warnings);
+        kept_columns(experiments, Signal::Output, p, settings, &mut warnings)?;
     if output_columns.is_empty() {
         return Err(IdentError::AllOutputsConstant { outputs: p });
     }
@@ -311,7 +311,7 @@ fn kept_columns(
     columns: usize,
     settings: &PreprocessSettings,
     warnings: &mut Vec<Warning>,
-) -> (Vec<usize>, DVector<f64>) {
+) -> Result<(Vec<usize>, DVector<f64>), IdentError> {
     let mut kept = Vec::new();
     let mut scales = Vec::new();
     for column in 0..columns {
@@ -343,6 +343,9 @@ fn kept_columns(
         } else {
             0.0
         };
+        if !std.is_finite() {
+            return Err(IdentError::Overflow { signal, column });
+        }
         let kind = if std == 0.0 || (!spread && count > 0) {
             Some(WarningKind::Constant {
                 value: first_value.unwrap_or(0.0),
@@ -364,7 +367,7 @@ fn kept_columns(
             }
         }
     }
-    (kept, DVector::from_vec(scales))
+    Ok((kept, DVector::from_vec(scales)))
 }
 
 /// The kept columns of `m`, detrended and divided by their scale; with the removed
@@ -459,6 +462,23 @@ mod tests {
         let op = &pre.scaling.operating_points[0];
         assert!((op.output_mean[0] - (3.0 + 0.5 * 19.5)).abs() < 0.2);
         assert!((op.output_slope[0] - 0.5).abs() < 0.05);
+    }
+
+    #[test]
+    fn overflowing_column_is_an_error_not_a_nan() {
+        let y = DMatrix::from_fn(10, 1, |k, _| if k % 2 == 0 { 1.7e308 } else { -1.7e308 });
+        let err = preprocess(
+            &[Experiment::time_series(y)],
+            &PreprocessSettings::default(),
+        )
+        .unwrap_err();
+        assert_eq!(
+            err,
+            IdentError::Overflow {
+                signal: Signal::Output,
+                column: 0
+            }
+        );
     }
 
     #[test]

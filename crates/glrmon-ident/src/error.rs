@@ -166,6 +166,23 @@ pub enum IdentError {
         /// Columns the model expects.
         expected: usize,
     },
+    /// A column's spread overflows f64 (values near ±1.8e308): it cannot be scaled.
+    #[error(
+        "{signal} column {column}: its values are too large to scale (standard deviation \
+         overflows); rescale the recording"
+    )]
+    Overflow {
+        /// Inputs or outputs.
+        signal: Signal,
+        /// Column of the signal.
+        column: usize,
+    },
+    /// An SVD did not converge (only on pathological, near-overflowing data).
+    #[error("the SVD of {what} did not converge")]
+    SvdNotConverged {
+        /// Which matrix.
+        what: &'static str,
+    },
     /// No candidate order gave a usable model.
     #[error("no order in 1..={max_order} gave a usable model: {why}")]
     NoUsableOrder {

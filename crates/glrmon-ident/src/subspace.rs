@@ -49,6 +49,10 @@ pub struct Subspace {
     rank: usize,
 }
 
+/// Iteration cap of every SVD: far above what finite data need, and a guarantee of
+/// termination on pathological data.
+const SVD_MAX_ITERATIONS: usize = 100_000;
+
 /// Row offsets of the blocks of a Hankel column.
 #[derive(Debug, Clone, Copy)]
 struct Layout {
@@ -155,7 +159,10 @@ impl Subspace {
         let l32 = lower
             .view((layout.yi, layout.up), (i * p, layout.yi - layout.up))
             .into_owned();
-        let svd = l32.svd(true, false);
+        let svd = nalgebra::SVD::try_new(l32, true, false, f64::EPSILON, SVD_MAX_ITERATIONS)
+            .ok_or(IdentError::SvdNotConverged {
+                what: "the PO-MOESP block L₃₂",
+            })?;
         let singular_values = svd.singular_values.clone();
         let left = svd.u.unwrap_or_else(|| DMatrix::zeros(i * p, 0));
         let s0 = singular_values.iter().copied().fold(0.0, f64::max);
@@ -338,7 +345,12 @@ pub(crate) fn pinv(m: &DMatrix<f64>) -> DMatrix<f64> {
     if r == 0 || c == 0 {
         return DMatrix::zeros(c, r);
     }
-    let svd = m.clone().svd(true, true);
+    let Some(svd) = nalgebra::SVD::try_new(m.clone(), true, true, f64::EPSILON, SVD_MAX_ITERATIONS)
+    else {
+        // Only on non-finite entries; a zero pseudo-inverse then makes the caller's
+        // covariances fail their positive-definiteness check rather than loop.
+        return DMatrix::zeros(c, r);
+    };
     let smax = svd.singular_values.iter().copied().fold(0.0, f64::max);
     let tol = smax * f64::EPSILON * r.max(c) as f64;
     match (svd.u, svd.v_t) {
