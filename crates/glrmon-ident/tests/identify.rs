@@ -302,3 +302,92 @@ fn timing_3000_samples_9_inputs_22_outputs_orders_up_to_40() {
     }
     assert!(id.is_ok());
 }
+
+#[test]
+fn bad_input_is_an_error_naming_what_never_a_panic() {
+    let ok_y = |n| DMatrix::from_fn(n, 2, |k, j| ((k * (j + 3)) as f64 * 0.37).sin());
+    let mut nan = ok_y(200);
+    nan[(150, 1)] = f64::INFINITY;
+    let cases: Vec<(Vec<Experiment>, IdentSettings, &str)> = vec![
+        (vec![], settings(), "no experiment"),
+        (
+            vec![Experiment::new(
+                DMatrix::zeros(200, 1),
+                DMatrix::zeros(200, 0),
+            )],
+            settings(),
+            "no output column",
+        ),
+        (
+            vec![Experiment::time_series(nan)],
+            settings(),
+            "output column 1, row 150 is inf",
+        ),
+        (
+            vec![Experiment::new(DMatrix::zeros(199, 1), ok_y(200))],
+            settings(),
+            "inputs have 199 rows and outputs 200",
+        ),
+        (
+            vec![Experiment::time_series(ok_y(22))],
+            settings(),
+            "horizon 10 needs at least 20",
+        ),
+        (
+            vec![Experiment::time_series(ok_y(60))],
+            settings(),
+            "Hankel columns for 40 Hankel rows",
+        ),
+        (
+            vec![Experiment::time_series(ok_y(500))],
+            IdentSettings {
+                order: Some(30),
+                ..settings()
+            },
+            "order 30 is not identifiable",
+        ),
+        (
+            vec![Experiment::time_series(ok_y(500))],
+            IdentSettings {
+                holdout: glrmon_ident::Holdout::LastExperiment,
+                ..settings()
+            },
+            "needs at least two",
+        ),
+        (
+            vec![Experiment::time_series(ok_y(500))],
+            IdentSettings {
+                horizon: Some(1),
+                ..settings()
+            },
+            "must be at least 2",
+        ),
+    ];
+    for (experiments, settings, expected) in cases {
+        let err = identify(&experiments, &settings).unwrap_err().to_string();
+        assert!(err.contains(expected), "{err:?} does not say {expected:?}");
+    }
+
+    // Random shapes and values, some extreme: Ok or Err, never a panic.
+    let mut rng = Rng::new(28);
+    for case in 0..200 {
+        let n = 5 + (rng.next_u64() % 300) as usize;
+        let l = (rng.next_u64() % 3) as usize;
+        let p = 1 + (rng.next_u64() % 3) as usize;
+        let scale = [1e-300, 1e-8, 1.0, 1e8, 1e150][(rng.next_u64() % 5) as usize];
+        let mut u = rng.normals(n, l) * scale;
+        let mut y = rng.normals(n, p) * scale;
+        if case % 7 == 0 && l > 0 {
+            u.column_mut(0).fill(2.0);
+        }
+        if case % 11 == 0 {
+            y.column_mut(0).fill(-1.0);
+        }
+        let settings = IdentSettings {
+            max_order: 1 + (rng.next_u64() % 6) as usize,
+            horizon: Some(2 + (rng.next_u64() % 6) as usize),
+            ..IdentSettings::default()
+        };
+        let _ = identify(&[Experiment::new(u, y)], &settings);
+    }
+}
