@@ -171,7 +171,7 @@ pub struct Identification {
 /// # Math
 /// Λ̂ = (1/N) Σ e_k e_kᵀ, d = n(2p + l) + pl (the free parameters of an innovation-form
 /// model up to a change of state basis; K's np included). AIC = N log det Λ̂ + 2d,
-/// BIC = N log det Λ̂ + d log N. Ref.: Ljung (1999), §16.4 (criteria of the form
+/// BIC = N log det Λ̂ + d log N. Ref.: Ljung (1999), ch. 16 (criteria of the form
 /// N log det Λ̂ + penalty, AIC and Rissanen's MDL/BIC); Akaike (1974); Schwarz (1978).
 ///
 /// # Errors

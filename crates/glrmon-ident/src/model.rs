@@ -13,8 +13,8 @@ use crate::error::{IdentError, Signal};
 /// E[w wᵀ] = Q, E[w vᵀ] = S, E[v vᵀ] = R.
 ///
 /// Ref.: Van Overschee & De Moor (1996), *Subspace Identification for Linear Systems*,
-/// §4.3 (the combined deterministic–stochastic model, eqs. (4.1)–(4.2)); Ljung (1999),
-/// *System Identification*, §4.3 (innovations form, eq. (4.84)).
+/// ch. 4 (the combined deterministic–stochastic model and its forward innovation form);
+/// Ljung (1999), *System Identification*, §4.3 (state-space models, innovations form).
 #[derive(Debug, Clone, PartialEq)]
 pub struct InnovationModel {
     /// A (n × n).
@@ -97,7 +97,7 @@ impl InnovationModel {
     /// x̂_{k+1} = A x̂_k + B u_k + K (y_k − C x̂_k − D u_k) from x̂_0 = `x0` (zero if `None`)
     /// over `inputs` (N × l) and `outputs` (N × p), in the model's (deviation) coordinates.
     ///
-    /// Ref.: Ljung (1999), §4.3, eq. (4.86) (the predictor of the innovations form).
+    /// Ref.: Ljung (1999), §4.3 (the predictor of the innovations form).
     ///
     /// # Errors
     /// [`IdentError::DimensionMismatch`] when the columns do not match l and p or `x0`
@@ -216,8 +216,10 @@ pub struct RiccatiSolution {
 /// the stabilising solution when (A, C) is detectable and the noise model is positive
 /// semi-definite), and returns P, K and Re with K = (A P Cᵀ + S) Re⁻¹, Re = C P Cᵀ + R.
 ///
-/// Ref.: Van Overschee & De Moor (1996), §4.3.3 (from Q, S, R to the innovation model
-/// via the forward Riccati equation); Anderson & Moore (1979), *Optimal Filtering*, §4.4.
+/// Ref.: Van Overschee & De Moor (1996), ch. 4 (from Q, S, R to the forward innovation
+/// model through the Riccati equation); Anderson & Moore (1979), *Optimal Filtering*,
+/// ch. 4 (the time-invariant filter and the convergence of the Riccati difference
+/// equation).
 ///
 /// # Errors
 /// [`IdentError::NotPositiveDefinite`] when C P Cᵀ + R is not positive definite,

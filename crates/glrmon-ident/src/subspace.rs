@@ -11,17 +11,17 @@
 //! (U_p = u_t..u_{t+i−1}, u_i = u_{t+i}, U_f⁻ = u_{t+i+1}..u_{t+2i−1}, same for y). The
 //! order is chosen so that, with H = L Qᵀ (L lower triangular, from the QR of Hᵀ), both
 //! oblique projections O_i = Y_f /_{U_f} W_p and O_{i−1} = Y_f⁻ /_{U_f⁻} W_p⁺ are read
-//! off L with one triangular block each (Van Overschee & De Moor 1996, §4.3.1 and
-//! §6.1.1, the LQ implementation of eqs. (4.19)–(4.20)). The PO-MOESP weighted block
+//! off L with one triangular block each (Van Overschee & De Moor 1996, ch. 4 for the
+//! projections, ch. 6 for their LQ implementation). The PO-MOESP weighted block
 //! O_i Π_{U_f}^⊥ is L₃₂ (Verhaegen 1994, *Identification of the deterministic part of
 //! MIMO state space models given in innovations form from input-output data*,
-//! Automatica 30(1), Theorem 3), whose SVD gives the extended observability matrix
+//! Automatica 30(1), 61–74: the SVD of L₃₂), whose SVD gives the extended observability matrix
 //! Γ_i = U₁ S₁^{1/2}.
 //!
 //! Experiments are never joined: each contributes its own Hankel columns (a window never
 //! spans two experiments), and the columns of all experiments are stacked before the
-//! LQ (Van Overschee & De Moor 1996, §4.3 note on multiple data sets; Verhaegen &
-//! Verdult 2007, §9.6).
+//! LQ: the usual multi-experiment extension of subspace methods (Verhaegen & Verdult
+//! 2007, *Filtering and System Identification*, ch. 9).
 
 use nalgebra::{DMatrix, DVector};
 
@@ -215,11 +215,13 @@ impl Subspace {
     /// # Math
     /// 1. Γ_i = U₁ S₁^{1/2}; C = first block row of Γ_i; A = Γ_{i−1}^† Γ̄_i (Γ_{i−1}: Γ_i
     ///    without its last block row, Γ̄_i: without its first), the shift invariance of
-    ///    Verhaegen (1994) and Van Overschee & De Moor (1996) eq. (4.21)-style step 4.
-    /// 2. States X_i = Γ_i^† O_i, X_{i+1} = Γ_{i−1}^† O_{i−1} (VODM 1996 §4.3.2,
-    ///    Theorem 12: non-steady Kalman filter states).
+    ///    Verhaegen (1994), Van Overschee & De Moor (1996) ch. 4.
+    /// 2. States X_i = Γ_i^† O_i, X_{i+1} = Γ_{i−1}^† O_{i−1} (VODM 1996 ch. 4: the
+    ///    states of a bank of non-steady Kalman filters, close to the steady ones for a
+    ///    long enough horizon).
     /// 3. B, D by least squares: [X_{i+1} − A X_i; Y_{i|i} − C X_i] = [B; D] U_{i|i} + ρ.
-    /// 4. [Q S; Sᵀ R] = ρ ρᵀ / j (VODM 1996 §4.3.3, eq. (4.29)); K, Re from the Riccati
+    /// 4. [Q S; Sᵀ R] = ρ ρᵀ / j (VODM 1996 ch. 4, the residuals of the state-sequence
+    ///    least squares); K, Re from the Riccati
     ///    equation ([`solve_riccati`]).
     ///
     /// # Errors

@@ -46,7 +46,7 @@ pub struct LjungBox {
 /// χ²_h p-value.
 ///
 /// Ref.: Ljung & Box (1978), *On a measure of lack of fit in time series models*,
-/// Biometrika 65(2), eq. (2.1); Ljung (1999), §16.6 (residual analysis).
+/// Biometrika 65(2), 297–303; Ljung (1999), ch. 16 (residual analysis).
 /// `lags` is clipped to N − 1; with N < 2 the statistic is 0 and the p-value 1.
 #[must_use]
 pub fn ljung_box(innovations: &DMatrix<f64>, lags: usize) -> Vec<LjungBox> {
