@@ -15,7 +15,7 @@
 //! projections, ch. 6 for their LQ implementation). The PO-MOESP weighted block
 //! O_i Π_{U_f}^⊥ is L₃₂ (Verhaegen 1994, *Identification of the deterministic part of
 //! MIMO state space models given in innovations form from input-output data*,
-//! Automatica 30(1), 61–74: the SVD of L₃₂), whose SVD gives the extended observability matrix
+//! Automatica 30(1), 61–74), whose SVD gives the extended observability matrix
 //! Γ_i = U₁ S₁^{1/2}.
 //!
 //! Experiments are never joined: each contributes its own Hankel columns (a window never

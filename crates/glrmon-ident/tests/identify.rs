@@ -391,3 +391,41 @@ fn bad_input_is_an_error_naming_what_never_a_panic() {
         let _ = identify(&[Experiment::new(u, y)], &settings);
     }
 }
+
+#[test]
+fn last_experiment_held_out_linear_drift_removed_and_same_bits_twice() {
+    let truth = Truth::four_state();
+    let mut experiments = Vec::new();
+    for (seed, samples) in [(29, 5000), (30, 5000), (31, 3000)] {
+        let mut rng = Rng::new(seed);
+        let u = rng.normals(samples, 2);
+        let mut y = truth.simulate(&u, &mut rng);
+        // A slow drift of 20 units over the record on output 2, a different one each time.
+        let slope = 20.0 / samples as f64 * (seed as f64 - 30.0);
+        for k in 0..samples {
+            y[(k, 2)] += 7.0 + slope * k as f64;
+        }
+        experiments.push(Experiment::new(u, y));
+    }
+    let settings = IdentSettings {
+        holdout: glrmon_ident::Holdout::LastExperiment,
+        preprocess: glrmon_ident::PreprocessSettings {
+            detrend: glrmon_ident::Detrend::Linear,
+            ..glrmon_ident::PreprocessSettings::default()
+        },
+        ..settings()
+    };
+    let id = identify(&experiments, &settings).unwrap();
+    let (poles, markov, _, re) = report("drift, last held out", &id, &truth);
+    assert_eq!(id.order.chosen, 4, "{}", id.order.reason);
+    assert_eq!(id.validation.samples, 3000 - id.horizon);
+    assert!(poles < 0.03, "pole error {poles}");
+    assert!(markov < 0.05, "Markov error {markov}");
+    assert!(re < 0.1, "Re error {re}");
+    assert_white_and_consistent(&id);
+    let slope = id.scaling.operating_points[0].output_slope[2];
+    assert!((slope + 20.0 / 5000.0).abs() < 1e-4, "slope {slope}");
+
+    let again = identify(&experiments, &settings).unwrap();
+    assert_eq!(id, again, "identification is not deterministic");
+}
