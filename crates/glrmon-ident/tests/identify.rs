@@ -8,7 +8,7 @@ use glrmon_ident::{
     Experiment, IdentSettings, Identification, Signal, WarningKind, identify, nrmse,
 };
 use nalgebra::DMatrix;
-use support::{Rng, Truth, markov_error, noise_markov_error, pole_error, re_error};
+use support::{Rng, Truth, k_error, markov_error, noise_markov_error, pole_error, re_error};
 
 const SAMPLES: usize = 10_000;
 
@@ -53,8 +53,8 @@ fn report(name: &str, id: &Identification, truth: &Truth) -> (f64, f64, f64, f64
     );
     println!("{name}: Re\n{:.4}", id.model.re);
     println!(
-        "{name}: held-out NRMSE {:.4}, NIS mean {:.3} (p = {}), Ljung–Box {:?}",
-        id.validation.nrmse.transpose(),
+        "{name}: held-out NRMSE {:.4?}, NIS mean {:.3} (p = {}), Ljung–Box {:?}",
+        id.validation.nrmse.as_slice(),
         id.validation.nis_mean.unwrap_or(f64::NAN),
         id.validation.outputs,
         id.validation
@@ -120,6 +120,33 @@ fn four_state_two_input_three_output_system_is_recovered() {
     }
     assert_white_and_consistent(&id);
     assert!(id.warnings.is_empty());
+    let k = k_error(&id.model, &truth);
+    println!("4x2x3: K error in the true basis {k:.4}");
+    assert!(k < 0.15, "K error {k}");
+
+    // A fresh record (never seen): `validate` against the true predictor on it.
+    let mut rng = Rng::new(32);
+    let u = rng.normals(3000, 2);
+    let y = truth.simulate(&u, &mut rng);
+    let fresh = glrmon_ident::validate(&id.model, &u, &y, id.horizon, 20).unwrap();
+    let best = glrmon_ident::validate(&truth.model(), &u, &y, id.horizon, 20).unwrap();
+    println!(
+        "4x2x3: fresh record NRMSE {:.4?} (true model {:.4?}), NIS {:.3}, Ljung–Box p {:.3?}",
+        fresh.nrmse.as_slice(),
+        best.nrmse.as_slice(),
+        fresh.nis_mean.unwrap_or(f64::NAN),
+        fresh
+            .ljung_box
+            .iter()
+            .map(|lb| lb.p_value)
+            .collect::<Vec<_>>()
+    );
+    for (j, (&got, &best)) in fresh.nrmse.iter().zip(best.nrmse.iter()).enumerate() {
+        assert!(
+            got < best * 1.03,
+            "fresh output {j}: NRMSE {got} vs optimal {best}"
+        );
+    }
 }
 
 #[test]

@@ -226,3 +226,27 @@ pub fn noise_markov_error(model: &InnovationModel, truth: &Truth, count: usize) 
 pub fn re_error(re: &DMatrix<f64>, truth: &DMatrix<f64>) -> f64 {
     (re - truth).amax() / truth.amax()
 }
+
+/// ‖K̂ − K‖_F / ‖K‖_F with K̂ brought into the truth's state basis: x̂ = T x, so
+/// Ô = O T⁻¹ for the extended observability matrices and T⁻¹ = O^† Ô, K = T⁻¹ K̂.
+/// ∞ when the orders differ.
+pub fn k_error(model: &InnovationModel, truth: &Truth) -> f64 {
+    let n = truth.a.nrows();
+    if model.order() != n {
+        return f64::INFINITY;
+    }
+    let observability = |a: &DMatrix<f64>, c: &DMatrix<f64>| {
+        let p = c.nrows();
+        let mut o = DMatrix::zeros(2 * n * p, n);
+        let mut ca = c.clone();
+        for j in 0..2 * n {
+            o.rows_mut(j * p, p).copy_from(&ca);
+            ca = &ca * a;
+        }
+        o
+    };
+    let o_true = observability(&truth.a, &truth.c);
+    let o_id = observability(&model.a, &model.c);
+    let t_inv = o_true.pseudo_inverse(1e-12).expect("SVD") * o_id;
+    (t_inv * &model.k - &truth.k).norm() / truth.k.norm()
+}
