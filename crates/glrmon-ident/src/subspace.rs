@@ -149,9 +149,7 @@ impl Subspace {
                 outputs: p,
             });
         }
-        let hankel_t = hankel_transpose(experiments, i, layout, columns);
-        // H = L Qᵀ ⇔ Hᵀ = Q R with L = Rᵀ; Q is never formed.
-        let lower = hankel_t.qr().r().transpose();
+        let lower = lq_factor(experiments, i, layout, columns);
 
         let m = layout.rows;
         let o_i = oblique(&lower, layout.yi, m, layout.up, layout.yi);
@@ -286,38 +284,63 @@ impl Subspace {
     }
 }
 
-/// Hᵀ/√j: one row per Hankel column (window start t in each experiment), one column per
-/// Hankel row in the [`Layout`] order. Windows never cross experiments.
-fn hankel_transpose(
-    experiments: &[Experiment],
+/// Hankel columns (window starts) per block of Hᵀ in [`lq_factor`]: memory stays
+/// O((block + m)·m) however long the recordings are.
+const BLOCK_WINDOWS: usize = 4096;
+
+/// L of H = L Qᵀ (m × m, lower triangular), through the QR of Hᵀ (Hᵀ = Q R, L = Rᵀ; Q is
+/// never formed). Hᵀ is factored a block of windows at a time: the R of [R_prev; block]
+/// is the R of all rows so far (up to row signs, which flip columns of L and leave
+/// every row inner product, hence every projection, unchanged).
+fn lq_factor(experiments: &[Experiment], i: usize, layout: Layout, columns: usize) -> DMatrix<f64> {
+    let scale = 1.0 / (columns as f64).sqrt();
+    let mut r = DMatrix::<f64>::zeros(0, layout.rows);
+    for exp in experiments {
+        let windows = exp.samples() + 1 - 2 * i;
+        let mut start = 0;
+        while start < windows {
+            let len = BLOCK_WINDOWS.min(windows - start);
+            let block = hankel_rows(exp, i, layout, start, len, scale);
+            let mut stacked = DMatrix::zeros(r.nrows() + len, layout.rows);
+            stacked.rows_mut(0, r.nrows()).copy_from(&r);
+            stacked.rows_mut(r.nrows(), len).copy_from(&block);
+            r = stacked.qr().r();
+            start += len;
+        }
+    }
+    r.transpose()
+}
+
+/// Rows `start..start + len` of Hᵀ·`scale` for one experiment: one row per window
+/// (Hankel column), one column per Hankel row in the [`Layout`] order. A window lies
+/// inside its experiment: experiments are never joined.
+fn hankel_rows(
+    exp: &Experiment,
     i: usize,
     layout: Layout,
-    columns: usize,
+    start: usize,
+    len: usize,
+    scale: f64,
 ) -> DMatrix<f64> {
     let l = layout.up / i;
     let p = (layout.rows - 2 * i * l) / (2 * i);
-    let scale = 1.0 / (columns as f64).sqrt();
-    let mut h = DMatrix::zeros(columns, layout.rows);
-    let mut row = 0;
-    for exp in experiments {
-        let (u, y) = (&exp.inputs, &exp.outputs);
-        for t in 0..=exp.samples() - 2 * i {
-            // Future inputs u_{t+i+1}..u_{t+2i−1}, then u_{t+i}, then U_p.
-            let mut col = 0;
-            for k in (i + 1..2 * i).chain(std::iter::once(i)).chain(0..i) {
-                for s in 0..l {
-                    h[(row, col)] = u[(t + k, s)] * scale;
-                    col += 1;
-                }
+    let (u, y) = (&exp.inputs, &exp.outputs);
+    let mut h = DMatrix::zeros(len, layout.rows);
+    for (row, t) in (start..start + len).enumerate() {
+        // Future inputs u_{t+i+1}..u_{t+2i−1}, then u_{t+i}, then U_p.
+        let mut col = 0;
+        for k in (i + 1..2 * i).chain(std::iter::once(i)).chain(0..i) {
+            for s in 0..l {
+                h[(row, col)] = u[(t + k, s)] * scale;
+                col += 1;
             }
-            // Y_p, then y_{t+i}, then Y_f⁻: y in natural time order.
-            for k in 0..2 * i {
-                for s in 0..p {
-                    h[(row, col)] = y[(t + k, s)] * scale;
-                    col += 1;
-                }
+        }
+        // Y_p, then y_{t+i}, then Y_f⁻: y in natural time order.
+        for k in 0..2 * i {
+            for s in 0..p {
+                h[(row, col)] = y[(t + k, s)] * scale;
+                col += 1;
             }
-            row += 1;
         }
     }
     h
@@ -372,6 +395,51 @@ pub(crate) fn pinv(m: &DMatrix<f64>) -> DMatrix<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// All of Hᵀ/√j, experiment after experiment.
+    fn hankel_transpose(
+        experiments: &[Experiment],
+        i: usize,
+        layout: Layout,
+        columns: usize,
+    ) -> DMatrix<f64> {
+        let scale = 1.0 / (columns as f64).sqrt();
+        let mut h = DMatrix::zeros(0, layout.rows);
+        for exp in experiments {
+            let windows = exp.samples() + 1 - 2 * i;
+            let block = hankel_rows(exp, i, layout, 0, windows, scale);
+            let mut next = DMatrix::zeros(h.nrows() + windows, layout.rows);
+            next.rows_mut(0, h.nrows()).copy_from(&h);
+            next.rows_mut(h.nrows(), windows).copy_from(&block);
+            h = next;
+        }
+        h
+    }
+
+    #[test]
+    fn blockwise_lq_gives_the_gram_matrix_of_the_whole_hankel_matrix() {
+        // L Lᵀ = H Hᵀ / j whatever the blocks: 3 experiments, one longer than a block.
+        let i = 2;
+        let layout = Layout::new(i, 1, 2);
+        let exps: Vec<Experiment> = [BLOCK_WINDOWS + 500, 40, 7]
+            .iter()
+            .enumerate()
+            .map(|(e, &n)| {
+                Experiment::new(
+                    DMatrix::from_fn(n, 1, |k, _| ((k * 7 + e) as f64 * 0.91).sin()),
+                    DMatrix::from_fn(n, 2, |k, j| ((k * (j + 3) + e) as f64 * 0.53).cos()),
+                )
+            })
+            .collect();
+        let columns: usize = exps.iter().map(|e| e.samples() + 1 - 2 * i).sum();
+        let h = hankel_transpose(&exps, i, layout, columns);
+        let lower = lq_factor(&exps, i, layout, columns);
+        let gram = h.transpose() * &h;
+        let err = (&lower * lower.transpose() - &gram).amax();
+        assert!(err < 1e-12 * gram.amax(), "{err}");
+        let strictly_upper = lower.upper_triangle() - DMatrix::from_diagonal(&lower.diagonal());
+        assert_eq!(strictly_upper.amax(), 0.0, "L is not lower triangular");
+    }
 
     #[test]
     fn no_hankel_window_spans_two_experiments() {
