@@ -145,20 +145,26 @@ impl InnovationModel {
         let samples = outputs.nrows();
         let mut predicted = DMatrix::zeros(samples, p);
         let mut innovations = DMatrix::zeros(samples, p);
+        // Workspaces allocated once: the loop itself allocates nothing.
         let mut u = DVector::zeros(l);
-        let mut y = DVector::zeros(p);
+        let mut yhat = DVector::zeros(p);
+        let mut e = DVector::zeros(p);
+        let mut x_next = DVector::zeros(n);
         for k in 0..samples {
             u.iter_mut()
                 .zip(inputs.row(k).iter())
                 .for_each(|(d, s)| *d = *s);
-            y.iter_mut()
-                .zip(outputs.row(k).iter())
-                .for_each(|(d, s)| *d = *s);
-            let yhat = &self.c * &x + &self.d * &u;
-            let e = &y - &yhat;
-            predicted.set_row(k, &yhat.transpose());
-            innovations.set_row(k, &e.transpose());
-            x = &self.a * &x + &self.b * &u + &self.k * &e;
+            yhat.gemv(1.0, &self.c, &x, 0.0);
+            yhat.gemv(1.0, &self.d, &u, 1.0);
+            for j in 0..p {
+                e[j] = outputs[(k, j)] - yhat[j];
+                predicted[(k, j)] = yhat[j];
+                innovations[(k, j)] = e[j];
+            }
+            x_next.gemv(1.0, &self.a, &x, 0.0);
+            x_next.gemv(1.0, &self.b, &u, 1.0);
+            x_next.gemv(1.0, &self.k, &e, 1.0);
+            std::mem::swap(&mut x, &mut x_next);
         }
         Ok(Prediction {
             predicted,
@@ -250,7 +256,11 @@ pub fn solve_riccati(
         change = (&next - &p).norm() / (1.0 + next.norm());
         p = next;
         if !change.is_finite() {
-            break;
+            // Diverged (an unstable, undetectable mode): P overflows.
+            return Err(IdentError::RiccatiNotConverged {
+                iterations: iteration,
+                change,
+            });
         }
         if change < RICCATI_TOLERANCE {
             let re = c * &p * c.transpose() + r;
@@ -294,6 +304,18 @@ mod tests {
         assert!((p[(0, 0)] - p_exact).abs() < 1e-10);
         assert!((re[(0, 0)] - (p_exact + r)).abs() < 1e-10);
         assert!((k[(0, 0)] - a * p_exact / (p_exact + r)).abs() < 1e-10);
+    }
+
+    #[test]
+    fn undetectable_unstable_mode_is_an_error_not_a_nan() {
+        // x⁺ = 2x + w never seen (C = 0): P doubles forever.
+        let m = |v: f64| DMatrix::from_element(1, 1, v);
+        let err = solve_riccati(&m(2.0), &m(0.0), &m(1.0), &m(0.0), &m(1.0)).unwrap_err();
+        assert!(
+            matches!(err, IdentError::RiccatiNotConverged { iterations, .. } if iterations < 2000),
+            "{err}"
+        );
+        assert!(err.to_string().contains("detectable"));
     }
 
     #[test]
