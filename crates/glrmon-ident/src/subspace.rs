@@ -96,7 +96,8 @@ impl Subspace {
     ///
     /// # Errors
     /// [`IdentError::InvalidSetting`] for a horizon below 2, [`IdentError::NoExperiment`],
-    /// [`IdentError::ColumnMismatch`], [`IdentError::ExperimentTooShort`] when an
+    /// [`IdentError::ColumnMismatch`], [`IdentError::RowMismatch`],
+    /// [`IdentError::ExperimentTooShort`] when an
     /// experiment has fewer than 2i samples, [`IdentError::TooFewSamples`] when the
     /// experiments give fewer Hankel columns than rows.
     pub fn new(experiments: &[Experiment], horizon: usize) -> Result<Self, IdentError> {
@@ -129,10 +130,17 @@ impl Subspace {
                 }
             }
             let n = exp.samples();
-            if n < min_samples(i) || exp.inputs.nrows() != n {
+            if exp.inputs.nrows() != n {
+                return Err(IdentError::RowMismatch {
+                    experiment: e,
+                    input_rows: exp.inputs.nrows(),
+                    output_rows: n,
+                });
+            }
+            if n < min_samples(i) {
                 return Err(IdentError::ExperimentTooShort {
                     experiment: e,
-                    samples: n.min(exp.inputs.nrows()),
+                    samples: n,
                     part: "",
                     horizon: i,
                     needed: min_samples(i),

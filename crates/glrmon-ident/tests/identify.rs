@@ -120,6 +120,16 @@ fn four_state_two_input_three_output_system_is_recovered() {
     }
     assert_white_and_consistent(&id);
     assert!(id.warnings.is_empty());
+    let aic = identify(
+        &[Experiment::new(u.clone(), y.clone())],
+        &IdentSettings {
+            criterion: glrmon_ident::Criterion::Aic,
+            ..settings()
+        },
+    )
+    .unwrap();
+    println!("4x2x3: AIC — {}", aic.order.reason);
+    assert_eq!(aic.order.chosen, 4, "{}", aic.order.reason);
     let k = k_error(&id.model, &truth);
     println!("4x2x3: K error in the true basis {k:.4}");
     assert!(k < 0.15, "K error {k}");
