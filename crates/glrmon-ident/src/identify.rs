@@ -1,0 +1,586 @@
+//! `identify`: preprocessing, subspace identification for every candidate order, order
+//! selection and validation of the chosen model.
+
+use std::fmt::Write as _;
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::data::{Experiment, PreprocessSettings, Scaling, Warning, preprocess};
+use crate::error::IdentError;
+use crate::model::InnovationModel;
+use crate::subspace::{Subspace, min_samples};
+use crate::validation::{LjungBox, ljung_box, nis_mean, nrmse};
+
+/// Which data are held out for the prediction fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Holdout {
+    /// The last fraction (in [0, 0.9]) of every experiment. The predictor still runs
+    /// over the whole experiment (it is causal, so the held-out part only warms up on
+    /// earlier data), but the model is estimated on the first part only. 0 means no
+    /// held-out data: the fit is then in-sample.
+    LastFraction(f64),
+    /// The last experiment (needs at least two).
+    LastExperiment,
+}
+
+/// The information criterion that picks the order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Criterion {
+    /// Akaike: N log det Λ̂ + 2d.
+    Aic,
+    /// Schwarz (BIC/MDL): N log det Λ̂ + d log N; consistent, penalises more.
+    Bic,
+}
+
+/// Settings of [`identify`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IdentSettings {
+    /// Preprocessing (detrend, constant-column tolerance).
+    pub preprocess: PreprocessSettings,
+    /// Past/future horizon i. `None`: max(⌈(max_order + 1)/p⌉ + 1, 10), at least one
+    /// more block row than the order needs, and long enough for the non-steady Kalman
+    /// states of the projection to be close to the steady ones.
+    pub horizon: Option<usize>,
+    /// Largest candidate order (clipped to what the data support).
+    pub max_order: usize,
+    /// A fixed order instead of the criterion's choice.
+    pub order: Option<usize>,
+    /// Held-out data.
+    pub holdout: Holdout,
+    /// The criterion that picks the order.
+    pub criterion: Criterion,
+    /// Lags of the Ljung–Box test (default 20).
+    pub ljung_box_lags: usize,
+}
+
+impl Default for IdentSettings {
+    fn default() -> Self {
+        Self {
+            preprocess: PreprocessSettings::default(),
+            horizon: None,
+            max_order: 10,
+            order: None,
+            holdout: Holdout::LastFraction(0.2),
+            criterion: Criterion::Bic,
+            ljung_box_lags: 20,
+        }
+    }
+}
+
+/// One candidate order and how it did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Candidate {
+    /// The order n.
+    pub order: usize,
+    /// N log det Λ̂ + 2d on the estimation data (+∞ if the model failed).
+    pub aic: f64,
+    /// N log det Λ̂ + d log N on the estimation data (+∞ if the model failed).
+    pub bic: f64,
+    /// Free parameters d = n(2p + l) + pl.
+    pub parameters: usize,
+    /// One-step prediction NRMSE per output on the held-out data.
+    pub holdout_nrmse: DVector<f64>,
+    /// Spectral radius of A − KC.
+    pub predictor_spectral_radius: f64,
+    /// Why this order gave no model, if it did not.
+    pub failure: Option<String>,
+}
+
+impl Candidate {
+    /// Usable: a model with a stable predictor and finite criteria.
+    #[must_use]
+    pub fn usable(&self) -> bool {
+        self.failure.is_none()
+            && self.predictor_spectral_radius < 1.0
+            && self.aic.is_finite()
+            && self.bic.is_finite()
+    }
+
+    fn criterion(&self, criterion: Criterion) -> f64 {
+        match criterion {
+            Criterion::Aic => self.aic,
+            Criterion::Bic => self.bic,
+        }
+    }
+}
+
+/// The order chosen and the evidence.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OrderSelection {
+    /// Singular values of the PO-MOESP block (descending).
+    pub singular_values: DVector<f64>,
+    /// One per order 1..=max.
+    pub candidates: Vec<Candidate>,
+    /// The criterion used.
+    pub criterion: Criterion,
+    /// The chosen order.
+    pub chosen: usize,
+    /// Why, in words (criterion value, held-out fit, the best held-out order).
+    pub reason: String,
+}
+
+/// The chosen model's innovations on the held-out data.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ValidationReport {
+    /// Samples scored.
+    pub samples: usize,
+    /// One-step prediction NRMSE per output.
+    pub nrmse: DVector<f64>,
+    /// Ljung–Box whiteness test per output.
+    pub ljung_box: Vec<LjungBox>,
+    /// Mean of e_kᵀ Re⁻¹ e_k (close to p when consistent); `None` if Re is singular.
+    pub nis_mean: Option<f64>,
+    /// p, the NIS mean's reference.
+    pub outputs: usize,
+    /// Spectral radius of A − KC.
+    pub predictor_spectral_radius: f64,
+    /// True when no data were held out and the scores are in-sample.
+    pub in_sample: bool,
+}
+
+/// The result of [`identify`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Identification {
+    /// The model in the caller's units, on deviations from each experiment's operating
+    /// point (see [`Scaling::operating_points`]), kept columns only.
+    pub model: InnovationModel,
+    /// The same model in the scaled coordinates identification worked in.
+    pub scaled_model: InnovationModel,
+    /// Kept columns, scales and operating points.
+    pub scaling: Scaling,
+    /// Dropped columns.
+    pub warnings: Vec<Warning>,
+    /// The horizon i used.
+    pub horizon: usize,
+    /// Candidate orders and the choice.
+    pub order: OrderSelection,
+    /// The chosen model on the held-out data.
+    pub validation: ValidationReport,
+}
+
+/// Identifies an innovation model from one or more experiments.
+///
+/// Steps: [`preprocess`]; split each experiment into estimation and held-out parts
+/// ([`Holdout`]); [`Subspace::new`] on the estimation parts; for every order 1..=max a
+/// [`Subspace::model`], its one-step predictor on every experiment, the criterion on the
+/// estimation parts' innovations (the first i samples of each, the predictor's
+/// transient, are skipped) and the NRMSE on the held-out parts; the order minimising
+/// the criterion among models with a stable predictor (or `settings.order`); then the
+/// validation of that model on the held-out data.
+///
+/// # Math
+/// Λ̂ = (1/N) Σ e_k e_kᵀ, d = n(2p + l) + pl (the free parameters of an innovation-form
+/// model up to a change of state basis; K's np included). AIC = N log det Λ̂ + 2d,
+/// BIC = N log det Λ̂ + d log N. Ref.: Ljung (1999), ch. 16 (criteria of the form
+/// N log det Λ̂ + penalty, AIC and Rissanen's MDL/BIC); Akaike (1974); Schwarz (1978).
+///
+/// # Errors
+/// The errors of [`preprocess`] and [`Subspace::new`]; [`IdentError::InvalidSetting`]
+/// for a bad fraction, max order 0, or [`Holdout::LastExperiment`] with one experiment;
+/// [`IdentError::ExperimentTooShort`] when an estimation part is shorter than 2i;
+/// [`IdentError::OrderAboveRank`] for a fixed order the data do not support;
+/// [`IdentError::NoUsableOrder`] when no order gave a stable predictor.
+pub fn identify(
+    experiments: &[Experiment],
+    settings: &IdentSettings,
+) -> Result<Identification, IdentError> {
+    if settings.max_order == 0 && settings.order.is_none() {
+        return Err(IdentError::InvalidSetting {
+            name: "max_order",
+            why: "must be at least 1".into(),
+        });
+    }
+    let pre = preprocess(experiments, &settings.preprocess)?;
+    let (l, p) = (
+        pre.scaling.input_columns.len(),
+        pre.scaling.output_columns.len(),
+    );
+    let max_order = settings.order.unwrap_or(settings.max_order);
+    let horizon = settings
+        .horizon
+        .unwrap_or_else(|| ((max_order + 1).div_ceil(p) + 1).max(10));
+
+    // Estimation parts and where each experiment's held-out part starts.
+    let (estimation, holdout_start) = split(&pre.experiments, settings.holdout, horizon)?;
+    let in_sample = holdout_start.iter().all(|&s| s == usize::MAX);
+    let sub = Subspace::new(&estimation, horizon)?;
+    let supported = sub.max_order();
+
+    let orders: Vec<usize> = match settings.order {
+        Some(n) => vec![n],
+        None => (1..=settings.max_order.min(supported)).collect(),
+    };
+    let mut candidates = Vec::with_capacity(orders.len());
+    let mut models = Vec::with_capacity(orders.len());
+    for &n in &orders {
+        match sub.model(n) {
+            Ok(model) => {
+                let candidate = evaluate(&model, &pre.experiments, &holdout_start, horizon, l, p)?;
+                candidates.push(candidate);
+                models.push(Some(model));
+            }
+            Err(err @ IdentError::OrderAboveRank { .. }) => return Err(err),
+            Err(err) => {
+                candidates.push(Candidate {
+                    order: n,
+                    aic: f64::INFINITY,
+                    bic: f64::INFINITY,
+                    parameters: parameters(n, l, p),
+                    holdout_nrmse: DVector::from_element(p, f64::NAN),
+                    predictor_spectral_radius: f64::NAN,
+                    failure: Some(err.to_string()),
+                });
+                models.push(None);
+            }
+        }
+    }
+
+    let best = candidates
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.usable())
+        .min_by(|(_, a), (_, b)| {
+            a.criterion(settings.criterion)
+                .total_cmp(&b.criterion(settings.criterion))
+        })
+        .map(|(k, _)| k);
+    let Some(best) = best else {
+        let why = candidates
+            .last()
+            .map(|c| {
+                c.failure.clone().unwrap_or_else(|| {
+                    format!(
+                        "order {}: predictor spectral radius {:.4} ≥ 1",
+                        c.order, c.predictor_spectral_radius
+                    )
+                })
+            })
+            .unwrap_or_else(|| "no candidate".into());
+        return Err(IdentError::NoUsableOrder {
+            max_order: orders.last().copied().unwrap_or(0),
+            why,
+        });
+    };
+    let chosen = candidates[best].order;
+    let reason = reason(&candidates, best, settings, in_sample);
+    let scaled_model = models[best].take().ok_or(IdentError::NoUsableOrder {
+        max_order: chosen,
+        why: "the chosen order lost its model".into(),
+    })?;
+
+    let validation = validate_holdout(
+        &scaled_model,
+        &pre.experiments,
+        &holdout_start,
+        horizon,
+        settings.ljung_box_lags,
+    )?;
+    let model = to_physical(&scaled_model, &pre.scaling);
+    Ok(Identification {
+        model,
+        scaled_model,
+        scaling: pre.scaling,
+        warnings: pre.warnings,
+        horizon,
+        order: OrderSelection {
+            singular_values: sub.singular_values().clone(),
+            candidates,
+            criterion: settings.criterion,
+            chosen,
+            reason,
+        },
+        validation,
+    })
+}
+
+/// d = n(2p + l) + pl.
+fn parameters(n: usize, l: usize, p: usize) -> usize {
+    n * (2 * p + l) + p * l
+}
+
+/// Estimation parts, and per experiment the first held-out row (usize::MAX: none).
+fn split(
+    experiments: &[Experiment],
+    holdout: Holdout,
+    horizon: usize,
+) -> Result<(Vec<Experiment>, Vec<usize>), IdentError> {
+    let mut estimation = Vec::with_capacity(experiments.len());
+    let mut starts = Vec::with_capacity(experiments.len());
+    match holdout {
+        Holdout::LastFraction(f) => {
+            if !(0.0..=0.9).contains(&f) {
+                return Err(IdentError::InvalidSetting {
+                    name: "holdout",
+                    why: format!("the held-out fraction must be in [0, 0.9], got {f}"),
+                });
+            }
+            for (e, exp) in experiments.iter().enumerate() {
+                let n = exp.samples();
+                let held = (n as f64 * f).floor() as usize;
+                let keep = n - held;
+                if keep < min_samples(horizon) {
+                    return Err(IdentError::ExperimentTooShort {
+                        experiment: e,
+                        samples: keep,
+                        part: " in its estimation part",
+                        horizon,
+                        needed: min_samples(horizon),
+                    });
+                }
+                estimation.push(exp.rows(0, keep));
+                starts.push(if held == 0 { usize::MAX } else { keep });
+            }
+        }
+        Holdout::LastExperiment => {
+            if experiments.len() < 2 {
+                return Err(IdentError::InvalidSetting {
+                    name: "holdout",
+                    why: "holding out the last experiment needs at least two".into(),
+                });
+            }
+            let last = experiments.len() - 1;
+            estimation.extend(experiments[..last].iter().cloned());
+            starts.extend(std::iter::repeat_n(usize::MAX, last));
+            starts.push(0);
+        }
+    }
+    Ok((estimation, starts))
+}
+
+/// Innovations of the estimation parts (after the transient) and of the held-out parts.
+struct Scored {
+    estimation: Vec<DMatrix<f64>>,
+    held_out_y: Vec<DMatrix<f64>>,
+    held_out_pred: Vec<DMatrix<f64>>,
+    held_out_innov: Vec<DMatrix<f64>>,
+}
+
+fn score(
+    model: &InnovationModel,
+    experiments: &[Experiment],
+    holdout_start: &[usize],
+    warmup: usize,
+) -> Result<Scored, IdentError> {
+    let mut s = Scored {
+        estimation: Vec::new(),
+        held_out_y: Vec::new(),
+        held_out_pred: Vec::new(),
+        held_out_innov: Vec::new(),
+    };
+    let in_sample = holdout_start.iter().all(|&h| h == usize::MAX);
+    for (exp, &start) in experiments.iter().zip(holdout_start) {
+        let pred = model.predict(&exp.inputs, &exp.outputs, None)?;
+        let n = exp.samples();
+        let est_end = start.min(n);
+        // A held-out whole experiment starts cold: skip its transient too.
+        let held_from = if start == 0 { warmup.min(n) } else { start };
+        if est_end > warmup {
+            s.estimation
+                .push(pred.innovations.rows(warmup, est_end - warmup).into_owned());
+        }
+        let (from, to) = if in_sample {
+            (warmup.min(n), n)
+        } else if start == usize::MAX {
+            continue;
+        } else {
+            (held_from, n)
+        };
+        if to > from {
+            s.held_out_y
+                .push(exp.outputs.rows(from, to - from).into_owned());
+            s.held_out_pred
+                .push(pred.predicted.rows(from, to - from).into_owned());
+            s.held_out_innov
+                .push(pred.innovations.rows(from, to - from).into_owned());
+        }
+    }
+    Ok(s)
+}
+
+fn vstack(parts: &[DMatrix<f64>], cols: usize) -> DMatrix<f64> {
+    let rows = parts.iter().map(DMatrix::nrows).sum();
+    let mut out = DMatrix::zeros(rows, cols);
+    let mut r = 0;
+    for part in parts {
+        out.rows_mut(r, part.nrows()).copy_from(part);
+        r += part.nrows();
+    }
+    out
+}
+
+fn evaluate(
+    model: &InnovationModel,
+    experiments: &[Experiment],
+    holdout_start: &[usize],
+    warmup: usize,
+    l: usize,
+    p: usize,
+) -> Result<Candidate, IdentError> {
+    let n = model.order();
+    let radius = model.predictor_spectral_radius();
+    let d = parameters(n, l, p);
+    if radius >= 1.0 {
+        return Ok(Candidate {
+            order: n,
+            aic: f64::INFINITY,
+            bic: f64::INFINITY,
+            parameters: d,
+            holdout_nrmse: DVector::from_element(p, f64::NAN),
+            predictor_spectral_radius: radius,
+            failure: Some(format!(
+                "predictor A − KC unstable (spectral radius {radius:.4})"
+            )),
+        });
+    }
+    let s = score(model, experiments, holdout_start, warmup)?;
+    let e = vstack(&s.estimation, p);
+    let samples = e.nrows() as f64;
+    let lambda = e.transpose() * &e / samples.max(1.0);
+    let log_det = lambda
+        .clone()
+        .cholesky()
+        .map(|ch| 2.0 * ch.l().diagonal().iter().map(|v| v.ln()).sum::<f64>())
+        .unwrap_or(f64::INFINITY);
+    let fit = samples * log_det;
+    let holdout_nrmse = nrmse(&vstack(&s.held_out_y, p), &vstack(&s.held_out_pred, p));
+    Ok(Candidate {
+        order: n,
+        aic: fit + 2.0 * d as f64,
+        bic: fit + d as f64 * samples.ln(),
+        parameters: d,
+        holdout_nrmse,
+        predictor_spectral_radius: radius,
+        failure: None,
+    })
+}
+
+fn mean(v: &DVector<f64>) -> f64 {
+    if v.is_empty() { f64::NAN } else { v.mean() }
+}
+
+fn reason(
+    candidates: &[Candidate],
+    best: usize,
+    settings: &IdentSettings,
+    in_sample: bool,
+) -> String {
+    let c = &candidates[best];
+    let name = match settings.criterion {
+        Criterion::Aic => "AIC",
+        Criterion::Bic => "BIC",
+    };
+    let data = if in_sample { "in-sample" } else { "held-out" };
+    let mut text = if settings.order.is_some() {
+        format!("order {} fixed by the settings", c.order)
+    } else {
+        format!(
+            "order {}: lowest {name} ({:.1}) among orders {}..={} with a stable predictor",
+            c.order,
+            c.criterion(settings.criterion),
+            candidates.first().map_or(0, |c| c.order),
+            candidates.last().map_or(0, |c| c.order),
+        )
+    };
+    let _ = write!(text, "; {data} mean NRMSE {:.4}", mean(&c.holdout_nrmse));
+    if let Some(fit_best) = candidates
+        .iter()
+        .filter(|c| c.usable())
+        .min_by(|a, b| mean(&a.holdout_nrmse).total_cmp(&mean(&b.holdout_nrmse)))
+        && fit_best.order != c.order
+    {
+        let _ = write!(
+            text,
+            " (best {data} fit {:.4} at order {})",
+            mean(&fit_best.holdout_nrmse),
+            fit_best.order
+        );
+    }
+    let unusable: Vec<usize> = candidates
+        .iter()
+        .filter(|c| !c.usable())
+        .map(|c| c.order)
+        .collect();
+    if !unusable.is_empty() {
+        let _ = write!(text, "; orders {unusable:?} gave no usable model");
+    }
+    text
+}
+
+fn validate_holdout(
+    model: &InnovationModel,
+    experiments: &[Experiment],
+    holdout_start: &[usize],
+    warmup: usize,
+    lags: usize,
+) -> Result<ValidationReport, IdentError> {
+    let p = model.outputs();
+    let s = score(model, experiments, holdout_start, warmup)?;
+    let in_sample = holdout_start.iter().all(|&h| h == usize::MAX);
+    // Whiteness and NIS per held-out part, pooled by concatenation: the few lag
+    // products across a boundary are an O(lags/N) share of each sum.
+    let innov = vstack(&s.held_out_innov, p);
+    Ok(ValidationReport {
+        samples: innov.nrows(),
+        nrmse: nrmse(&vstack(&s.held_out_y, p), &vstack(&s.held_out_pred, p)),
+        ljung_box: ljung_box(&innov, lags),
+        nis_mean: nis_mean(&innov, &model.re),
+        outputs: p,
+        predictor_spectral_radius: model.predictor_spectral_radius(),
+        in_sample,
+    })
+}
+
+/// Validates `model` on deviation data (`inputs` N × l, `outputs` N × p, in the model's
+/// units and columns): the one-step predictor from x̂₀ = 0, the first `warmup` samples
+/// skipped, then NRMSE, Ljung–Box with `lags` lags, and the NIS mean.
+///
+/// # Errors
+/// The errors of [`InnovationModel::predict`].
+pub fn validate(
+    model: &InnovationModel,
+    inputs: &DMatrix<f64>,
+    outputs: &DMatrix<f64>,
+    warmup: usize,
+    lags: usize,
+) -> Result<ValidationReport, IdentError> {
+    let pred = model.predict(inputs, outputs, None)?;
+    let n = outputs.nrows();
+    let from = warmup.min(n);
+    let innov = pred.innovations.rows(from, n - from).into_owned();
+    Ok(ValidationReport {
+        samples: n - from,
+        nrmse: nrmse(
+            &outputs.rows(from, n - from).into_owned(),
+            &pred.predicted.rows(from, n - from).into_owned(),
+        ),
+        ljung_box: ljung_box(&innov, lags),
+        nis_mean: nis_mean(&innov, &model.re),
+        outputs: model.outputs(),
+        predictor_spectral_radius: model.predictor_spectral_radius(),
+        in_sample: false,
+    })
+}
+
+/// The scaled model in the caller's units: with u_s = Σ_u⁻¹ (u − u₀), y_s = Σ_y⁻¹ (y − y₀),
+/// B = B_s Σ_u⁻¹, C = Σ_y C_s, D = Σ_y D_s Σ_u⁻¹, K = K_s Σ_y⁻¹, Re = Σ_y Re_s Σ_y,
+/// S = S_s Σ_y, R = Σ_y R_s Σ_y; A, Q, P unchanged (the state is not rescaled).
+#[must_use]
+pub fn to_physical(scaled: &InnovationModel, scaling: &Scaling) -> InnovationModel {
+    let su = &scaling.input_scale;
+    let sy = &scaling.output_scale;
+    let inv_u = DMatrix::from_diagonal(&su.map(|s| 1.0 / s));
+    let sy_m = DMatrix::from_diagonal(sy);
+    let inv_y = DMatrix::from_diagonal(&sy.map(|s| 1.0 / s));
+    InnovationModel {
+        a: scaled.a.clone(),
+        b: &scaled.b * &inv_u,
+        c: &sy_m * &scaled.c,
+        d: &sy_m * &scaled.d * &inv_u,
+        k: &scaled.k * &inv_y,
+        re: &sy_m * &scaled.re * &sy_m,
+        q: scaled.q.clone(),
+        s: &scaled.s * &sy_m,
+        r: &sy_m * &scaled.r * &sy_m,
+        p: scaled.p.clone(),
+    }
+}

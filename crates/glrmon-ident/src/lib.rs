@@ -1,0 +1,25 @@
+#![doc = include_str!("../README.md")]
+#![warn(missing_docs)]
+
+pub mod data;
+pub mod error;
+pub mod identify;
+pub mod model;
+pub mod subspace;
+pub mod validation;
+
+pub use data::{
+    Detrend, Experiment, OperatingPoint, PreprocessSettings, Preprocessed, Scaling, Warning,
+    WarningKind, preprocess,
+};
+pub use error::{IdentError, Signal};
+pub use identify::{
+    Candidate, Criterion, Holdout, IdentSettings, Identification, OrderSelection, ValidationReport,
+    identify, to_physical, validate,
+};
+pub use model::{
+    InnovationModel, Prediction, RiccatiSolution, solve_riccati, sorted_eigenvalues,
+    spectral_radius,
+};
+pub use subspace::Subspace;
+pub use validation::{LjungBox, chi2_survival, ljung_box, nis_mean, nrmse};
