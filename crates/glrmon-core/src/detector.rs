@@ -175,6 +175,8 @@ pub struct Detector {
     constant: bool,
     /// The unknown input's matrix, when the plant has one.
     unknown_input: Option<Box<UnknownInput>>,
+    /// S = E[W_kV_kᵀ], when the noises are correlated.
+    cross: Option<DMatrix<f64>>,
 }
 
 /// E_k of a plant with an unknown input E_kd_k ([`Detector::with_unknown_input`]).
@@ -289,7 +291,29 @@ impl Detector {
             steady_samples: 0,
             constant: model_constant && faults_constant,
             unknown_input: None,
+            cross: None,
         })
+    }
+
+    /// The same detector for process and measurement noises correlated as
+    /// S = E[W_kV_kᵀ] (n×p, constant; [`InnovationFilter::with_cross_covariance`]): an
+    /// identified innovation model (Q = K Re Kᵀ, R = Re, S = K Re) then runs at its own
+    /// order with the exact steady predictor, Σ_k → Re.
+    ///
+    /// # Errors
+    /// [`ModelError::Dimension`] / [`ModelError::NonFinite`] for S, and
+    /// [`ModelError::Setting`] with an unknown input (the decoupled filter is derived
+    /// for uncorrelated noises).
+    pub fn with_cross_covariance(mut self, s: DMatrix<f64>) -> Result<Self, ModelError> {
+        if self.unknown_input.is_some() {
+            return Err(ModelError::Setting {
+                what: "S",
+                detail: "correlated noises (S) cannot be combined with an unknown input (E)".into(),
+            });
+        }
+        self.filter = self.filter.with_cross_covariance(s.clone())?;
+        self.cross = Some(s);
+        Ok(self)
     }
 
     /// The same detector for a plant with an unknown input E_kd_k (E n×q, constant or
@@ -306,6 +330,12 @@ impl Detector {
     /// [`ModelError::Setting`] when q = 0, q ≥ p, or E at its base point does not have
     /// full column rank.
     pub fn with_unknown_input(mut self, e: LpvMatrix) -> Result<Self, ModelError> {
+        if self.cross.is_some() {
+            return Err(ModelError::Setting {
+                what: "E",
+                detail: "an unknown input (E) cannot be combined with correlated noises (S)".into(),
+            });
+        }
         let (n, q) = e.shape();
         if n != self.dims.states {
             return Err(ModelError::Dimension {
@@ -359,9 +389,10 @@ impl Detector {
     pub fn restart(&mut self) -> Result<(), ModelError> {
         let (n, p, m) = (self.dims.states, self.dims.outputs, self.faults.len());
         let filter = InnovationFilter::new(self.x0.clone(), self.p0.clone(), p)?;
-        self.filter = match &self.unknown_input {
-            Some(ui) => filter.with_unknown_input(ui.matrix.shape().1)?,
-            None => filter,
+        self.filter = match (&self.unknown_input, &self.cross) {
+            (Some(ui), _) => filter.with_unknown_input(ui.matrix.shape().1)?,
+            (None, Some(s)) => filter.with_cross_covariance(s.clone())?,
+            (None, None) => filter,
         };
         let kinds = self.faults.faults().iter().map(|f| f.onset).collect();
         let (level, fused) = (self.bank.level(), self.bank.fused());

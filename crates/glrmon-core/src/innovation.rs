@@ -69,6 +69,9 @@ pub struct InnovationFilter {
     chol_scratch: DMatrix<f64>,
     /// The unknown input's decoupling, when the model has one.
     unknown_input: Option<Box<Decoupling>>,
+    /// S = E[W_kV_kᵀ] and S Σ_k⁻¹ (n×p each), when process and measurement noise are
+    /// correlated ([`InnovationFilter::with_cross_covariance`]).
+    cross: Option<Box<(DMatrix<f64>, DMatrix<f64>)>>,
 }
 
 impl InnovationFilter {
@@ -119,7 +122,39 @@ impl InnovationFilter {
             tmp_pp: z(p, p),
             chol_scratch: z(p, p),
             unknown_input: None,
+            cross: None,
         })
+    }
+
+    /// The same filter for process and measurement noises correlated as S = E[W_kV_kᵀ]
+    /// (n×p, constant): the one-step predictor of Anderson & Moore (Optimal Filtering,
+    /// 1979, §5.5), K_p = F_kK_k + SΣ_k⁻¹, A_k = F_k − K_pH_k,
+    /// P_{k+1} = F_kP_kF_kᵀ + Q_k − K_pΣ_kK_pᵀ, with K_p in place of F_kK_k in the Γ
+    /// recursion (Zhang & Basseville 2014, eq. (46)). An identified innovation model
+    /// x⁺ = Ax + Bu + Ke, y = Cx + Du + e is Q = K Re Kᵀ, R = Re, S = K Re: its predictor
+    /// is exact at order n and Σ_k tends to Re.
+    ///
+    /// # Errors
+    /// [`ModelError::Dimension`] when S is not n×p, [`ModelError::NonFinite`].
+    pub fn with_cross_covariance(mut self, s: DMatrix<f64>) -> Result<Self, ModelError> {
+        if s.shape() != (self.n, self.p) {
+            return Err(ModelError::Dimension {
+                what: "S",
+                detail: format!(
+                    "S is {}×{} but the model has {} states and {} outputs",
+                    s.nrows(),
+                    s.ncols(),
+                    self.n,
+                    self.p
+                ),
+            });
+        }
+        if s.iter().any(|v| !v.is_finite()) {
+            return Err(ModelError::NonFinite { what: "S" });
+        }
+        let gain = DMatrix::zeros(self.n, self.p);
+        self.cross = Some(Box::new((s, gain)));
+        Ok(self)
     }
 
     /// The same filter for a plant with an unknown input E_kd_k of `unknown_inputs`
@@ -265,6 +300,17 @@ impl InnovationFilter {
             d.correct_gain(self.gain.as_mut_slice());
         }
         solve_right_lower_in_place(self.chol.as_slice(), p, self.gain.as_mut_slice(), n);
+        if let Some(c) = &mut self.cross {
+            let (s, s_sigma) = &mut **c;
+            copy_n(s_sigma.as_mut_slice(), s.as_slice(), n * p);
+            solve_right_lower_transpose_in_place(
+                self.chol.as_slice(),
+                p,
+                s_sigma.as_mut_slice(),
+                n,
+            );
+            solve_right_lower_in_place(self.chol.as_slice(), p, s_sigma.as_mut_slice(), n);
+        }
         Ok(())
     }
 
@@ -363,6 +409,76 @@ impl InnovationFilter {
             self.predictor_gain.as_mut_slice(),
         );
         self.propagate(s, sys, u);
+        self.correlated_noise(s, sys);
+    }
+
+    /// With correlated noises (S): K_p = FK + SΣ⁻¹ into the predictor gain, A = F − K_pH,
+    /// X̂_{k+1} += SΣ⁻¹ε and P_{k+1} −= FKSᵀ + S(FK)ᵀ + SΣ⁻¹Sᵀ, which turns
+    /// FP_{k|k}Fᵀ + Q into FPFᵀ + Q − K_pΣK_pᵀ (P_{k|k} = P − KΣKᵀ).
+    #[inline(always)]
+    fn correlated_noise(&mut self, s: impl Shape, sys: &SystemMatrices) {
+        let Some(c) = &self.cross else {
+            return;
+        };
+        let (n, p) = (s.n(), s.p());
+        let (cross, s_sigma) = &**c;
+        gemv(
+            1.0,
+            s_sigma.as_slice(),
+            n,
+            p,
+            self.innovation.as_slice(),
+            1.0,
+            self.state.as_mut_slice(),
+        );
+        gemm(
+            -1.0,
+            self.predictor_gain.as_slice(),
+            (n, p),
+            false,
+            cross.as_slice(),
+            (n, p),
+            true,
+            1.0,
+            self.cov.as_mut_slice(),
+        );
+        gemm(
+            -1.0,
+            cross.as_slice(),
+            (n, p),
+            false,
+            self.predictor_gain.as_slice(),
+            (n, p),
+            true,
+            1.0,
+            self.cov.as_mut_slice(),
+        );
+        gemm(
+            -1.0,
+            s_sigma.as_slice(),
+            (n, p),
+            false,
+            cross.as_slice(),
+            (n, p),
+            true,
+            1.0,
+            self.cov.as_mut_slice(),
+        );
+        symmetrize(self.cov.as_mut_slice(), n);
+        for (k, m) in self.predictor_gain.iter_mut().zip(s_sigma.iter()) {
+            *k += m;
+        }
+        gemm(
+            -1.0,
+            s_sigma.as_slice(),
+            (n, p),
+            false,
+            sys.h.as_slice(),
+            (p, n),
+            false,
+            1.0,
+            self.closed_loop.as_mut_slice(),
+        );
     }
 
     /// Measurement step of the stationary filter: ε_k and L⁻¹ε_k with the gain, Σ and
@@ -417,6 +533,17 @@ impl InnovationFilter {
         with_shape!(self.n, self.p, |s| {
             self.updated_state(s);
             self.propagate_state(s, sys, u);
+            if let Some(c) = &self.cross {
+                gemv(
+                    1.0,
+                    c.1.as_slice(),
+                    s.n(),
+                    s.p(),
+                    self.innovation.as_slice(),
+                    1.0,
+                    self.state.as_mut_slice(),
+                );
+            }
         });
     }
 

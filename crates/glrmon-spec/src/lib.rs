@@ -440,6 +440,8 @@ pub struct Channel {
     pub model: Lpv,
     /// Unknown-input matrix E (n×q, constant or LPV), if given.
     pub unknown_input: Option<LpvMatrix>,
+    /// Cross-covariance S = E[W_kV_kᵀ] (n×p) of the noises, if given.
+    pub cross_covariance: Option<DMatrix<f64>>,
     /// X̂_0.
     pub x0: DVector<f64>,
     /// P_0.
@@ -516,9 +518,10 @@ impl Channel {
             self.p0.clone(),
             self.window,
         )?;
-        match &self.unknown_input {
-            Some(e) => detector.with_unknown_input(e.clone()),
-            None => Ok(detector),
+        match (&self.unknown_input, &self.cross_covariance) {
+            (Some(e), _) => detector.with_unknown_input(e.clone()),
+            (None, Some(s)) => detector.with_cross_covariance(s.clone()),
+            (None, None) => Ok(detector),
         }
     }
 
@@ -846,6 +849,69 @@ impl Validator {
     /// [`PSD_TOLERANCE`] of that (a paper's rounded figures) comes back projected, with a
     /// warning, and the caller uses it instead; an LPV matrix is checked at its base
     /// point and used as written (see [`covariance`](mod@covariance)).
+    /// `model.S`: constant, n×p, not with E, and the joint noise covariance
+    /// [[Q, S], [Sᵀ, R]] positive semi-definite (checked at the base point of Q and R,
+    /// with the relative tolerance of the near-PSD rule).
+    fn cross_covariance(
+        &mut self,
+        prefix: &str,
+        model: &schema::ModelSpec,
+        (n, p): (usize, usize),
+        with_e: bool,
+        (q, r): (&LpvMatrix, &LpvMatrix),
+    ) -> Option<DMatrix<f64>> {
+        let s = model
+            .s
+            .as_ref()
+            .and_then(|s| self.matrix(prefix, "S", s, None))?;
+        let path = join(prefix, "model.S");
+        if !s.terms().is_empty() {
+            self.error(path, "cannot depend on scheduling signals".into());
+            return None;
+        }
+        if !self.shape(
+            prefix,
+            "S",
+            &s,
+            (n, p),
+            &format!("F is {n}×{n} and H has {p} rows"),
+        ) {
+            return None;
+        }
+        if with_e {
+            self.error(
+                path,
+                "cannot be combined with an unknown input (model.E): the decoupled filter \
+                 assumes uncorrelated noises"
+                    .into(),
+            );
+            return None;
+        }
+        let s = s.base().clone();
+        if q.base().shape() == (n, n) && r.base().shape() == (p, p) {
+            let mut joint = DMatrix::zeros(n + p, n + p);
+            joint.view_mut((0, 0), (n, n)).copy_from(q.base());
+            joint.view_mut((n, n), (p, p)).copy_from(r.base());
+            joint.view_mut((0, n), (n, p)).copy_from(&s);
+            joint.view_mut((n, 0), (p, n)).copy_from(&s.transpose());
+            let eig = joint.symmetric_eigenvalues();
+            let top = eig.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+            let low = eig.iter().copied().fold(f64::INFINITY, f64::min);
+            if low < -covariance::PSD_TOLERANCE * top {
+                self.error(
+                    path,
+                    format!(
+                        "makes the joint noise covariance [[Q, S], [Sᵀ, R]] indefinite \
+                         (smallest eigenvalue {low:.3e}, largest {top:.3e}): |S| is too large \
+                         for Q and R (for an innovation model, Q = K·Re·Kᵀ, R = Re, S = K·Re)"
+                    ),
+                );
+                return None;
+            }
+        }
+        Some(s)
+    }
+
     fn covariance(
         &mut self,
         prefix: &str,
@@ -1055,6 +1121,7 @@ impl Validator {
             .and_then(|e| self.matrix(prefix, "E", e, None));
         let e =
             e.filter(|e| self.shape(prefix, "E", e, (n, e.shape().1), &format!("F is {n}×{n}")));
+        let cross = self.cross_covariance(prefix, model, (n, p), e.is_some(), (&q, &r));
         let diagnosis = self.diagnosis(prefix, spec, &h, e.as_ref().map(LpvMatrix::base));
         // Signals: explicit, or the highest LPV index + 1.
         let lpv_max = [&f, &g, &h, &j, &q, &r]
@@ -1278,6 +1345,7 @@ impl Validator {
             dims,
             model: lpv,
             unknown_input: e,
+            cross_covariance: cross,
             x0,
             p0: p0
                 .map(|m| m.base().clone())

@@ -492,3 +492,30 @@ fn lpv_q_is_checked_at_its_base_point_without_projection() {
         "model.Q is not positive semi-definite at its base point",
     );
 }
+
+/// An identified innovation model (Q = K·Re·Kᵀ, R = Re, S = K·Re) is accepted and its
+/// detector runs with the cross-covariance; S with the wrong shape, with E, or too large
+/// for Q and R is an error naming model.S.
+#[test]
+fn cross_covariance_s_is_checked_and_reaches_the_detector() {
+    // K = [0.5, 0.2]ᵀ, Re = 0.04: Q = K Re Kᵀ, S = K Re.
+    let innovation = with(
+        "Q = 0.01\nR = 0.04",
+        "Q = [[0.01, 0.004], [0.004, 0.0016]]\nR = 0.04\nS = [[0.02], [0.008]]",
+    );
+    let cfg = glrmon_spec::parse(&innovation).unwrap();
+    let ch = &cfg.channels[0];
+    assert_eq!(
+        ch.cross_covariance.as_ref().map(|s| s.shape()),
+        Some((2, 1))
+    );
+    assert!(ch.detector().is_ok());
+    assert_error(
+        &with("R = 0.04", "R = 0.04\nS = [[0.02, 0.0]]"),
+        "model.S is 1×2 but F is 2×2 and H has 1 rows (expected 2×1)",
+    );
+    assert_error(
+        &with("R = 0.04", "R = 0.04\nS = [[0.5], [0.0]]"),
+        "model.S: makes the joint noise covariance [[Q, S], [Sᵀ, R]] indefinite",
+    );
+}

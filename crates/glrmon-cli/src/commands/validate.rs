@@ -199,6 +199,12 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
             channel.dims.outputs
         );
     }
+    if channel.cross_covariance.is_some() {
+        let _ = writeln!(
+            s,
+            "  correlated noises: S = E[w vᵀ] given, the predictor gain is (F P Hᵀ + S) Σ⁻¹ (an innovation model runs at its own order; sparse diagnosis's residual filters ignore S)"
+        );
+    }
     let (info, steady, samples) = channel_information(channel)?;
     match steady {
         Some(sigma) => {
