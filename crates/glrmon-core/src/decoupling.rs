@@ -36,11 +36,11 @@
 //! ```
 //!
 //! Γ_k(r) is the 2021 paper's Υ_{k|k−1}: the prediction of eq. (27a). Keeping p rows
-//! (the first q zero) leaves every window pass of [`crate::glr`] as it is; the
+//! (the first q zero) leaves every window pass of the GLR bank as it is; the
 //! innovation's χ² law has p − q degrees of freedom.
 //!
 //! A state fault's component in the range of E_k is invisible (an unknown input can
-//! produce it at any sample): [`RangeComplement`] removes it before the Γ recursion, so
+//! produce it at any sample): it is removed before the Γ recursion, so
 //! that a fault entirely in that range has a signature of exactly zero and is reported
 //! as not detectable, instead of carrying rounding errors into the statistic.
 

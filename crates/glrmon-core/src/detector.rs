@@ -175,7 +175,7 @@ pub struct Detector {
     constant: bool,
     /// The unknown input's matrix, when the plant has one.
     unknown_input: Option<Box<UnknownInput>>,
-    /// S = E[W_kV_kᵀ], when the noises are correlated.
+    /// S = E(W_kV_kᵀ), when the noises are correlated.
     cross: Option<DMatrix<f64>>,
 }
 
@@ -296,7 +296,7 @@ impl Detector {
     }
 
     /// The same detector for process and measurement noises correlated as
-    /// S = E[W_kV_kᵀ] (n×p, constant; [`InnovationFilter::with_cross_covariance`]): an
+    /// S = E(W_kV_kᵀ) (n×p, constant; [`InnovationFilter::with_cross_covariance`]): an
     /// identified innovation model (Q = K Re Kᵀ, R = Re, S = K Re) then runs at its own
     /// order with the exact steady predictor, Σ_k → Re.
     ///

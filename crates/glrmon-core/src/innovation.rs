@@ -69,7 +69,7 @@ pub struct InnovationFilter {
     chol_scratch: DMatrix<f64>,
     /// The unknown input's decoupling, when the model has one.
     unknown_input: Option<Box<Decoupling>>,
-    /// S = E[W_kV_kᵀ] and S Σ_k⁻¹ (n×p each), when process and measurement noise are
+    /// S = E(W_kV_kᵀ) and S Σ_k⁻¹ (n×p each), when process and measurement noise are
     /// correlated ([`InnovationFilter::with_cross_covariance`]).
     cross: Option<Box<(DMatrix<f64>, DMatrix<f64>)>>,
 }
@@ -126,7 +126,7 @@ impl InnovationFilter {
         })
     }
 
-    /// The same filter for process and measurement noises correlated as S = E[W_kV_kᵀ]
+    /// The same filter for process and measurement noises correlated as S = E(W_kV_kᵀ)
     /// (n×p, constant): the one-step predictor of Anderson & Moore (Optimal Filtering,
     /// 1979, §5.5), K_p = F_kK_k + SΣ_k⁻¹, A_k = F_k − K_pH_k,
     /// P_{k+1} = F_kP_kF_kᵀ + Q_k − K_pΣ_kK_pᵀ, with K_p in place of F_kK_k in the Γ

@@ -4,7 +4,7 @@
 pub mod alarm;
 pub mod calibration;
 pub mod consistency;
-mod decoupling;
+pub mod decoupling;
 pub mod detector;
 pub mod error;
 pub mod fault;

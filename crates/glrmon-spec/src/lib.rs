@@ -440,7 +440,7 @@ pub struct Channel {
     pub model: Lpv,
     /// Unknown-input matrix E (n×q, constant or LPV), if given.
     pub unknown_input: Option<LpvMatrix>,
-    /// Cross-covariance S = E[W_kV_kᵀ] (n×p) of the noises, if given.
+    /// Cross-covariance S = E(W_kV_kᵀ) (n×p) of the noises, if given.
     pub cross_covariance: Option<DMatrix<f64>>,
     /// X̂_0.
     pub x0: DVector<f64>,
@@ -850,7 +850,7 @@ impl Validator {
     /// warning, and the caller uses it instead; an LPV matrix is checked at its base
     /// point and used as written (see [`covariance`](mod@covariance)).
     /// `model.S`: constant, n×p, not with E, and the joint noise covariance
-    /// [[Q, S], [Sᵀ, R]] positive semi-definite (checked at the base point of Q and R,
+    /// `[[Q, S], [Sᵀ, R]]` positive semi-definite (checked at the base point of Q and R,
     /// with the relative tolerance of the near-PSD rule).
     fn cross_covariance(
         &mut self,

@@ -272,7 +272,7 @@ pub struct ModelSpec {
     /// decoupled from E·d_k, and sparse diagnosis on the Kitanidis residual.
     #[serde(rename = "E")]
     pub e: Option<MatrixSpec>,
-    /// Cross-covariance S = E[W_kV_kᵀ] (n×p, constant) of correlated process and
+    /// Cross-covariance S = E(W_kV_kᵀ) (n×p, constant) of correlated process and
     /// measurement noises: an identified innovation model x⁺ = Ax + Bu + Ke,
     /// y = Cx + Du + e is written Q = K·Re·Kᵀ, R = Re, S = K·Re, and runs at its own
     /// order with the exact predictor.
