@@ -13,9 +13,10 @@
 //! - a per-sample false-alarm fraction f ([`calibrate_sample_far`]): the (1 − f)
 //!   empirical quantile of l_k, so that a fraction f of the samples has l_k > λ. Its
 //!   interval comes from the order statistics, with the count of exceedances taken as
-//!   clusters (runs closer than the window) of Poisson count, because consecutive l_k
-//!   share w − 1 innovations and exceed λ in runs: a plain binomial interval would treat
-//!   each sample of a run as independent evidence and be several times too narrow.
+//!   compound Poisson (Poisson clusters, runs closer than the window, of unequal
+//!   sizes), because consecutive l_k share w − 1 innovations and exceed λ in runs: a
+//!   plain binomial interval would treat each sample of a run as independent evidence
+//!   and be several times too narrow.
 //!
 //! l_k itself does not depend on λ: the detector never restarts or clears its window at
 //! an alarm (only a gap or a numerical failure restarts it), so one run's statistics
@@ -54,7 +55,14 @@ pub fn count_episodes(glr: &[f64], settings: AlarmSettings) -> u64 {
 /// segment or of a run of inadmissible onsets, ends a cluster).
 #[must_use]
 pub fn count_exceedances(glr: &[f64], threshold: f64, memory: usize) -> (u64, u64) {
-    let (mut exceedances, mut clusters) = (0, 0);
+    let (exceedances, clusters, _) = clusters(glr, threshold, memory);
+    (exceedances, clusters)
+}
+
+/// [`count_exceedances`] with the sum of the squared cluster sizes.
+fn clusters(glr: &[f64], threshold: f64, memory: usize) -> (u64, u64, f64) {
+    let (mut exceedances, mut clusters, mut squares) = (0, 0, 0.0);
+    let mut size = 0.0;
     let mut since: Option<usize> = None;
     for &l in glr {
         if l.is_nan() {
@@ -63,13 +71,16 @@ pub fn count_exceedances(glr: &[f64], threshold: f64, memory: usize) -> (u64, u6
             exceedances += 1;
             if since.is_none_or(|s| s >= memory) {
                 clusters += 1;
+                squares += size * size;
+                size = 0.0;
             }
+            size += 1.0;
             since = Some(0);
         } else if let Some(s) = &mut since {
             *s += 1;
         }
     }
-    (exceedances, clusters)
+    (exceedances, clusters, squares + size * size)
 }
 
 /// What a threshold is calibrated for.
@@ -101,8 +112,9 @@ pub struct Calibration {
     pub expected: f64,
     /// 95 % confidence interval of the rate achieved at λ, in the target's unit
     /// `(low, high)`: mean samples between episodes (Garwood interval of a Poisson
-    /// count), or the fraction of samples above λ (the clusters' Garwood interval times
-    /// their mean size). An end the data cannot bound is infinite.
+    /// count), or the fraction of samples above λ (the exceedance count taken as
+    /// compound Poisson: the Garwood interval of r² / Σ size² equivalent clusters,
+    /// times r over that number). An end the data cannot bound is infinite.
     pub rate_interval: (f64, f64),
     /// Thresholds giving the ends of that interval's rates on the data: the uncertainty
     /// of λ itself `(low, high)`; `high` is infinite when the data hold too few events
@@ -111,10 +123,17 @@ pub struct Calibration {
 }
 
 impl Calibration {
-    /// Whether the data hold at least [`MIN_EVENTS`] events at the target.
+    /// Whether the data hold at least [`MIN_EVENTS`] events at the target: expected
+    /// episodes, or expected exceedances forming as many clusters (a few long runs of
+    /// exceedances are little evidence, however many samples they hold).
     #[must_use]
     pub fn well_supported(&self) -> bool {
-        self.expected >= MIN_EVENTS
+        match self.target {
+            Target::Mtbfa(_) => self.expected >= MIN_EVENTS,
+            Target::SampleFar(_) => {
+                self.expected >= MIN_EVENTS && self.episodes as f64 >= MIN_EVENTS
+            }
+        }
     }
 }
 
@@ -160,8 +179,12 @@ fn admissible(glr: &[f64]) -> Result<(u64, f64), CalibrationError> {
 
 /// Garwood 95 % interval `(low, high)` of a Poisson mean with `events` counted.
 fn garwood(events: u64) -> (f64, f64) {
-    let e = events as f64;
-    let low = if events == 0 {
+    garwood_events(events as f64)
+}
+
+/// [`garwood`] for a count that may be fractional (an equivalent number of events).
+fn garwood_events(e: f64) -> (f64, f64) {
+    let low = if e <= 0.0 {
         0.0
     } else {
         chi2_quantile(2.0 * e, 0.025).map_or(0.0, |q| q / 2.0)
@@ -275,16 +298,25 @@ pub fn calibrate_sample_far(
     let mut sorted: Vec<f64> = glr.iter().copied().filter(|l| !l.is_nan()).collect();
     sorted.sort_by(f64::total_cmp);
     let n = sorted.len();
-    // The value with `above` samples above it (ties aside); beyond the data, unbounded.
+    // l_k repeats exactly while its maximising onset stays in the window (and in the
+    // stationary regime), so values tie in blocks: of the two thresholds around the
+    // block holding the wanted rank, the one whose count above is nearer `above` (the
+    // higher on a draw). Beyond the data, unbounded.
     let with_above = |above: f64| -> f64 {
         let above = above.ceil().max(0.0);
         if above < 1.0 {
             return f64::INFINITY;
         }
-        sorted
-            .get(n.saturating_sub(above as usize + 1))
-            .copied()
-            .unwrap_or(f64::NAN)
+        let Some(&x) = sorted.get(n.saturating_sub(above as usize + 1)) else {
+            return f64::NAN;
+        };
+        let first = sorted.partition_point(|&v| v < x);
+        let past = sorted.partition_point(|&v| v <= x);
+        let (at, below) = ((n - past) as f64, (n - first) as f64);
+        match first.checked_sub(1).and_then(|i| sorted.get(i)) {
+            Some(&lower) if below - above < above - at => lower,
+            _ => x,
+        }
     };
     let expected = n as f64 * fraction;
     let threshold = if expected < 1.0 {
@@ -300,14 +332,22 @@ pub fn calibrate_sample_far(
             1.0 - fraction
         )));
     }
-    let (exceedances, clusters) = count_exceedances(glr, threshold, memory);
-    let (low, high) = garwood(clusters);
-    let size = if clusters == 0 {
-        1.0
+    let (exceedances, clusters, squares) = clusters(glr, threshold, memory);
+    // The count of exceedances is compound Poisson: Poisson clusters of unequal sizes,
+    // with variance Σ size². As many equal clusters with that variance relative to the
+    // mean, r² / Σ size², carry its Garwood interval.
+    let effective = if clusters == 0 {
+        0.0
     } else {
-        exceedances as f64 / clusters as f64
+        (exceedances as f64).powi(2) / squares
     };
-    let rate = ((size * low / n as f64).min(1.0), (size * high / n as f64).min(1.0));
+    let (low, high) = garwood_events(effective);
+    let per_event = if clusters == 0 {
+        1.0 / n as f64
+    } else {
+        exceedances as f64 / effective / n as f64
+    };
+    let rate = ((per_event * low).min(1.0), (per_event * high).min(1.0));
     Ok(Calibration {
         threshold,
         target: Target::SampleFar(fraction),
@@ -401,7 +441,10 @@ mod tests {
         // χ²(2) tail: P(l > λ) = exp(−λ/2) = 1/1000 → λ ≈ 13.8.
         assert!((c.threshold - 13.8155).abs() < 0.2, "{c:?}");
         assert!(c.threshold_interval.0 < c.threshold && c.threshold < c.threshold_interval.1);
-        assert!(c.rate_interval.0 < 1000.0 && 1000.0 < c.rate_interval.1, "{c:?}");
+        assert!(
+            c.rate_interval.0 < 1000.0 && 1000.0 < c.rate_interval.1,
+            "{c:?}"
+        );
         assert!(c.well_supported());
         assert_eq!(c.target, Target::Mtbfa(1000.0));
     }
@@ -416,7 +459,10 @@ mod tests {
         assert_eq!(c.expected, 5.0);
         assert!(c.episodes.abs_diff(5) <= 1, "{c:?}");
         // Garwood for 5 events: 1.62–11.67, so a mean of 428–3080 samples.
-        assert!(c.rate_interval.0 < 500.0 && c.rate_interval.1 > 2500.0, "{c:?}");
+        assert!(
+            c.rate_interval.0 < 500.0 && c.rate_interval.1 > 2500.0,
+            "{c:?}"
+        );
         let c = calibrate(&glr[..500], 1000.0, 0.0, 1).unwrap();
         assert_eq!(c.episodes, 0, "{c:?}");
         let max = glr[..500].iter().copied().fold(0.0, f64::max);
@@ -438,6 +484,18 @@ mod tests {
         ));
     }
 
+    /// Tied l_k: λ sits below or at the tied block, whichever count is nearer N·f.
+    #[test]
+    fn the_sample_far_threshold_steps_over_ties_to_the_nearer_count() {
+        let mut v: Vec<f64> = (1..=90).map(f64::from).collect();
+        v.extend([95.0; 8]);
+        v.extend([96.0, 97.0]);
+        let c = calibrate_sample_far(&v, 0.07, 1).unwrap();
+        assert_eq!((c.threshold, c.exceedances), (90.0, 10), "{c:?}");
+        let c = calibrate_sample_far(&v, 0.05, 1).unwrap();
+        assert_eq!((c.threshold, c.exceedances), (95.0, 2), "{c:?}");
+    }
+
     #[test]
     fn exceedances_are_clustered_within_the_memory_and_split_by_nan() {
         let glr = [5.0, 0.0, 5.0, 0.0, 0.0, 0.0, 5.0, f64::NAN, 5.0];
@@ -456,9 +514,15 @@ mod tests {
         assert_eq!(c.exceedances, 1000, "{c:?}");
         assert_eq!(c.expected, 1000.0);
         assert!((c.threshold - (-2.0 * 0.01f64.ln())).abs() < 0.1, "{c:?}");
-        assert!(c.rate_interval.0 < 0.01 && 0.01 < c.rate_interval.1, "{c:?}");
+        assert!(
+            c.rate_interval.0 < 0.01 && 0.01 < c.rate_interval.1,
+            "{c:?}"
+        );
         // 1000 independent exceedances: Garwood ±6 %.
-        assert!(c.rate_interval.0 > 0.0093 && c.rate_interval.1 < 0.0107, "{c:?}");
+        assert!(
+            c.rate_interval.0 > 0.0093 && c.rate_interval.1 < 0.0107,
+            "{c:?}"
+        );
         assert!(c.threshold_interval.0 < c.threshold && c.threshold < c.threshold_interval.1);
         // Every sample doubled into a run of two: 2000 exceedances that carry the
         // evidence of 1000, so the interval of the 1000 independent ones, √2 wider than

@@ -463,7 +463,11 @@ mod tests {
         };
         let e = calibrate_channel(&channel, stats, Target::SampleFar(0.01)).unwrap_err();
         assert!(e.is_invalid_input(), "{e:?}");
-        assert!(e.to_string().starts_with("channel \"unstable\": no fault-free sample"), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("channel \"unstable\": no fault-free sample"),
+            "{e}"
+        );
     }
 
     #[test]
