@@ -224,3 +224,25 @@ fn issue_20_a_file_with_no_usable_sample_is_an_error_naming_it() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 20, item 4: l_k does not depend on the threshold in force. The same samples
+/// through a monitor whose λ = 10 keeps raising alarms (episodes, isolation updates)
+/// and one whose λ = 10⁹ never does give the same l_k bit for bit: nothing restarts
+/// or clears the detector at an alarm, so a quantile read off one replay holds at any
+/// threshold.
+#[test]
+fn issue_20_the_statistic_does_not_depend_on_the_threshold_in_force() {
+    let base = channel(0.0025, 100);
+    let samples = simulate(&base, [1.0, 0.5], 5, 3_000);
+    let run = |threshold: f64| {
+        let mut c = base.clone();
+        c.alarm.threshold = threshold;
+        let stats = one_run(&c, &samples.iter().collect::<Vec<_>>());
+        (glrmon_core::calibration::count_episodes(&stats.glr, c.alarm), stats)
+    };
+    let (low_episodes, low) = run(10.0);
+    let (high_episodes, high) = run(1e9);
+    assert!(low_episodes > 10, "{low_episodes}");
+    assert_eq!(high_episodes, 0);
+    assert_eq!(bits(&low.glr), bits(&high.glr));
+}
