@@ -238,7 +238,10 @@ fn issue_20_the_statistic_does_not_depend_on_the_threshold_in_force() {
         let mut c = base.clone();
         c.alarm.threshold = threshold;
         let stats = one_run(&c, &samples.iter().collect::<Vec<_>>());
-        (glrmon_core::calibration::count_episodes(&stats.glr, c.alarm), stats)
+        (
+            glrmon_core::calibration::count_episodes(&stats.glr, c.alarm),
+            stats,
+        )
     };
     let (low_episodes, low) = run(10.0);
     let (high_episodes, high) = run(1e9);

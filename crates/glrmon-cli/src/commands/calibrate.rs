@@ -138,7 +138,12 @@ fn support_warning(channel: &str, c: &Calibration) -> Option<String> {
     if c.well_supported() {
         return None;
     }
-    let per_event = c.samples as f64 / c.expected.max(f64::MIN_POSITIVE);
+    // Samples per event at the target: per expected episode or exceedance, and for a
+    // per-sample target per cluster found, whichever is scarcer.
+    let mut per_event = c.samples as f64 / c.expected.max(f64::MIN_POSITIVE);
+    if matches!(c.target, Target::SampleFar(_)) && c.episodes > 0 {
+        per_event = per_event.max(c.samples as f64 / c.episodes as f64);
+    }
     let needed = (MIN_EVENTS * per_event).ceil();
     Some(match c.target {
         Target::Mtbfa(m) => format!(
@@ -156,9 +161,10 @@ fn support_warning(channel: &str, c: &Calibration) -> Option<String> {
         ),
         Target::SampleFar(f) => format!(
             "channel \"{channel}\": {} fault-free samples hold {} samples above the threshold \
-             ({} clusters), the target fraction {f} expects {:.1}: fewer than {MIN_EVENTS}, so the \
+             in {} clusters, the target fraction {f} expects {:.1}: fewer than {MIN_EVENTS} \
+             clusters, so the \
              threshold is loosely supported (95 % interval of the fraction {:.2e}–{:.2e}, \
-             threshold {:.4}–{:.4}); {needed} samples would hold 10",
+             threshold {:.4}–{:.4}); about {needed} samples would hold 10 clusters",
             c.samples,
             c.exceedances,
             c.episodes,
