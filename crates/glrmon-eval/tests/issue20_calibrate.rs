@@ -245,6 +245,10 @@ fn issue_20_the_statistic_does_not_depend_on_the_threshold_in_force() {
     };
     let (low_episodes, low) = run(10.0);
     let (high_episodes, high) = run(1e9);
+    eprintln!(
+        "λ = 10: {low_episodes} episodes; λ = 10⁹: {high_episodes}; {} l_k",
+        low.glr.len()
+    );
     assert!(low_episodes > 10, "{low_episodes}");
     assert_eq!(high_episodes, 0);
     assert_eq!(bits(&low.glr), bits(&high.glr));
