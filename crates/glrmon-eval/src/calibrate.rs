@@ -35,7 +35,7 @@ use glrmon_core::calibration::{
     Calibration, CalibrationError, Quantile, Target, calibrate, calibrate_sample_far,
     count_episodes, upper_quantile,
 };
-use glrmon_input::{InputError, Samples, is_mcap, recorded_config};
+use glrmon_input::{InputError, McapInput, Samples, is_mcap};
 use glrmon_monitor::Monitor;
 use glrmon_sim::SimSample;
 use glrmon_spec::Channel;
@@ -253,9 +253,22 @@ pub fn recorded(
     progress: Option<Progress<'_>>,
 ) -> Result<Statistics, CalibrateError> {
     // Capture mode keeps inputs only around alarms: the data were chosen by the
-    // threshold in force, and would bias l_k's tail upwards.
-    if is_mcap(path) && recorded_config(path)?.recording.capture.is_some() {
-        return Err(CalibrateError::Captured(path.to_owned()));
+    // threshold in force, and would bias l_k's tail upwards. Only the daemon's
+    // recorder captures; it alone names its `instance` in the file's header
+    // (`glrmon simulate` and `replay` write whole runs, whatever the configuration).
+    if is_mcap(path) {
+        let input = McapInput::open(path)?;
+        let by_daemon = input
+            .header
+            .as_ref()
+            .is_some_and(|h| h.extra.contains_key("instance"));
+        if by_daemon
+            && input
+                .recorded_config()
+                .is_ok_and(|c| c.recording.capture.is_some())
+        {
+            return Err(CalibrateError::Captured(path.to_owned()));
+        }
     }
     let mut samples = Samples::open(path, &channel.name, channel.dims)?;
     let (mut skipped, mut first_skip) = (0u64, None);

@@ -253,3 +253,42 @@ fn issue_20_the_statistic_does_not_depend_on_the_threshold_in_force() {
     assert_eq!(high_episodes, 0);
     assert_eq!(bits(&low.glr), bits(&high.glr));
 }
+
+/// Issue 20, item 4: a recording the daemon made in capture mode holds inputs chosen
+/// by the threshold then in force, and is refused, naming the file; the same
+/// configuration in a file `glrmon simulate` wrote (whole runs) is not.
+#[test]
+fn issue_20_a_capture_mode_recording_is_refused_naming_it() {
+    let channel = channel(0.0025, 100);
+    let dir = temp_dir("issue20-capture");
+    let config = format!(
+        "{}\n[recording.capture]\nbefore_seconds = 1.0\nafter_seconds = 1.0\n",
+        include_str!("../../../config/demo.toml")
+    );
+    let write = |name: &str, key: &str| {
+        let path = dir.join(name);
+        let header = glrmon_record::FileHeader {
+            config: config.clone(),
+            channels: vec!["unstable".into()],
+            extra: std::collections::BTreeMap::from([(key.to_owned(), "x".to_owned())]),
+        };
+        glrmon_record::McapFile::create(&path, glrmon_record::FileOptions::default(), &header)
+            .unwrap()
+            .finish()
+            .unwrap();
+        path
+    };
+    let daemon = write("daemon.mcap", "instance");
+    let e = recorded(&channel, &daemon, None).unwrap_err();
+    assert!(matches!(e, CalibrateError::Captured(_)), "{e:?}");
+    assert!(e.is_invalid_input());
+    assert!(
+        e.to_string()
+            .starts_with(&format!("{}: recorded in capture mode", daemon.display())),
+        "{e}"
+    );
+    let simulated = write("simulated.mcap", "source");
+    let e = recorded(&channel, &simulated, None).unwrap_err();
+    assert!(matches!(e, CalibrateError::NoUsableSample { .. }), "{e:?}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
