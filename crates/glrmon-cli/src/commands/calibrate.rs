@@ -24,7 +24,8 @@ use crate::common::{InvalidInput, input_error, load_config};
 #[derive(Debug, Args)]
 #[command(group(clap::ArgGroup::new("target").required(true).args(["mtbfa", "sample_far"])))]
 pub(crate) struct CalibrateArgs {
-    /// Configuration file (optional for MCAP input: the recorded one is used).
+    /// Configuration file (optional when the first input is an MCAP recording: its
+    /// recorded one is used).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Channel to calibrate (optional when the configuration has one channel).
@@ -131,6 +132,18 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Samples per independent event at the target: per expected episode or exceedance,
+/// and for a per-sample target per cluster found, whichever is scarcer.
+fn samples_per_event(c: &Calibration) -> f64 {
+    let per_event = c.samples as f64 / c.expected.max(f64::MIN_POSITIVE);
+    match c.target {
+        Target::SampleFar(_) if c.episodes > 0 => {
+            per_event.max(c.samples as f64 / c.episodes as f64)
+        }
+        _ => per_event,
+    }
+}
+
 /// How loosely the data support λ when they hold fewer than [`MIN_EVENTS`] events at
 /// the target: the count, the 95 % interval of the rate, and how much data 10 events
 /// need. `None` when the support is enough.
@@ -138,13 +151,7 @@ fn support_warning(channel: &str, c: &Calibration) -> Option<String> {
     if c.well_supported() {
         return None;
     }
-    // Samples per event at the target: per expected episode or exceedance, and for a
-    // per-sample target per cluster found, whichever is scarcer.
-    let mut per_event = c.samples as f64 / c.expected.max(f64::MIN_POSITIVE);
-    if matches!(c.target, Target::SampleFar(_)) && c.episodes > 0 {
-        per_event = per_event.max(c.samples as f64 / c.episodes as f64);
-    }
-    let needed = (MIN_EVENTS * per_event).ceil();
+    let needed = (MIN_EVENTS * samples_per_event(c)).ceil();
     Some(match c.target {
         Target::Mtbfa(m) => format!(
             "channel \"{channel}\": {} fault-free samples hold {} false-alarm episodes at the \
@@ -302,7 +309,7 @@ fn text(
         Target::SampleFar(_) => c.episodes.min(c.exceedances),
     };
     let precision = 1.96 / (events.max(1) as f64).sqrt();
-    let per_event = c.samples as f64 / c.expected.max(f64::MIN_POSITIVE);
+    let per_event = samples_per_event(c);
     let (head, found, rate, target_line) = match c.target {
         Target::Mtbfa(m) => (
             format!("one false-alarm episode per {m} samples"),
