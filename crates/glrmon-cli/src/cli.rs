@@ -33,7 +33,8 @@ pub(crate) enum Command {
     /// configuration) to the same numbers as live; JSON lines, MCAP, HTML report.
     Replay(replay::ReplayArgs),
     /// Find a channel's detection threshold for a target mean time between false
-    /// alarms, on fault-free data (recorded or simulated).
+    /// alarms or a per-sample false-alarm fraction, on fault-free data (recordings,
+    /// each an independent run, or simulated).
     Calibrate(calibrate::CalibrateArgs),
     /// Monte-Carlo fault injection through the simulator and the monitor: detection
     /// rate, delay, onset error, false alarms and the isolation confusion matrix.

@@ -2,27 +2,40 @@
 //! monitor, so that gaps, restarts and the hysteresis count as they do live: what
 //! `glrmon calibrate` prints and writes.
 //!
-//! The data are recorded ([`recorded`]) or simulated from the channel's model
-//! ([`simulated`]); either gives the monitor's [`Statistics`]. [`calibrate_channel`]
-//! then finds the detection threshold for a target mean time between false-alarm
-//! episodes ([`glrmon_core::calibration::calibrate`]) and each isolation test's
-//! threshold for the channel's type-I probability α ([`calibrate_isolation`]).
+//! The data are recorded ([`recorded`], several files with [`recorded_files`]) or
+//! simulated from the channel's model ([`simulated`]); either gives the monitor's
+//! [`Statistics`]. Independent runs (files, simulated parts) are separate segments: each
+//! gets a fresh monitor, as a new run of the plant gets a fresh start live, and a NaN
+//! between their l_k keeps an episode from spanning two of them. [`calibrate_channel`]
+//! then finds the detection threshold for a [`Target`] (a mean time between false-alarm
+//! episodes, [`glrmon_core::calibration::calibrate`], or a per-sample false-alarm
+//! fraction, [`glrmon_core::calibration::calibrate_sample_far`]) and each isolation
+//! test's threshold for the channel's type-I probability α ([`calibrate_isolation`]).
+//!
+//! l_k does not depend on the threshold in force: the monitor restarts its detector at a
+//! gap or a numerical failure, never at an alarm, so statistics gathered at one
+//! threshold serve any other. A recording made in capture mode (`[recording.capture]`)
+//! is the exception, as its inputs were kept only around alarms: [`recorded`] refuses it.
 //!
 //! ```
+//! use glrmon_core::calibration::Target;
+//!
 //! let cfg = glrmon_spec::parse(include_str!("../../../config/demo.toml")).unwrap();
 //! let channel = cfg.pick_channel(Some("unstable")).unwrap();
 //! let stats = glrmon_eval::calibrate::simulated(channel, 20_000, 1, None).unwrap();
-//! let c = glrmon_eval::calibrate::calibrate_channel(channel, stats, 1_000.0).unwrap();
+//! let c = glrmon_eval::calibrate::calibrate_channel(channel, stats, Target::Mtbfa(1_000.0))
+//!     .unwrap();
 //! assert!(c.alarm.threshold > 0.0);
 //! ```
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use glrmon_core::calibration::{
-    Calibration, CalibrationError, Quantile, calibrate, count_episodes, upper_quantile,
+    Calibration, CalibrationError, Quantile, Target, calibrate, calibrate_sample_far,
+    count_episodes, upper_quantile,
 };
-use glrmon_input::{InputError, Samples};
+use glrmon_input::{InputError, McapInput, Samples, is_mcap};
 use glrmon_monitor::Monitor;
 use glrmon_sim::SimSample;
 use glrmon_spec::Channel;
@@ -58,6 +71,34 @@ pub enum CalibrateError {
         /// What is wrong.
         reason: CalibrationError,
     },
+    /// A recorded file holds no sample that gives the channel an l_k.
+    #[error(
+        "{}: no usable sample of channel \"{channel}\": {skipped} rows or payloads could not \
+         be used{}, {processed} samples processed by the monitor, none with an admissible \
+         onset",
+        path.display(),
+        first_skip.as_ref().map_or_else(String::new, |r| format!(" (first: {r})"))
+    )]
+    NoUsableSample {
+        /// The file.
+        path: PathBuf,
+        /// The channel calibrated.
+        channel: String,
+        /// Rows or payloads of the channel that could not be used.
+        skipped: u64,
+        /// Why the first of them could not be used.
+        first_skip: Option<String>,
+        /// Samples the monitor processed (each without an admissible onset).
+        processed: u64,
+    },
+    /// A recording made in capture mode: its inputs were kept only around alarms.
+    #[error(
+        "{}: recorded in capture mode ([recording.capture]): its inputs were kept only \
+         around alarms at the threshold then in force, so its l_k are not a fault-free \
+         sample; calibrate on a continuous recording",
+        .0.display()
+    )]
+    Captured(PathBuf),
     /// A worker thread panicked.
     #[error("a calibration thread panicked")]
     Panicked,
@@ -69,7 +110,7 @@ impl CalibrateError {
     pub fn is_invalid_input(&self) -> bool {
         match self {
             Self::Input(e) => e.is_invalid_input(),
-            Self::Calibration { .. } => true,
+            Self::Calibration { .. } | Self::NoUsableSample { .. } | Self::Captured(_) => true,
             Self::Simulator(_) | Self::Monitor(_) | Self::Panicked => false,
         }
     }
@@ -84,6 +125,18 @@ pub struct Statistics {
     /// The minmax isolation statistic at r̂ (§5) of each isolation test, by test name,
     /// one value per sample with an admissible onset.
     pub isolation: BTreeMap<String, Vec<f64>>,
+}
+
+impl Statistics {
+    /// Appends the statistics of an independent run as a separate segment: its l_k,
+    /// then a NaN so that no episode spans the two; its isolation statistics pooled.
+    pub fn append(&mut self, run: Statistics) {
+        self.glr.extend(run.glr);
+        self.glr.push(f64::NAN);
+        for (test, values) in run.isolation {
+            self.isolation.entry(test).or_default().extend(values);
+        }
+    }
 }
 
 /// The statistics of `channel`'s monitor fed with the samples `next` writes into its
@@ -180,40 +233,89 @@ pub fn simulated(
     });
     let mut all = Statistics::default();
     for r in results {
-        let r = r?;
-        all.glr.extend(r.glr);
-        all.glr.push(f64::NAN);
-        for (test, values) in r.isolation {
-            all.isolation.entry(test).or_default().extend(values);
-        }
+        all.append(r?);
     }
     Ok(all)
 }
 
 /// The statistics of `channel`'s recorded samples in `path` (CSV or MCAP, read with
-/// [`glrmon_input::Samples`]); a row or payload that cannot be used is skipped, as the
-/// monitor never sees it live.
+/// [`glrmon_input::Samples`]) through a fresh monitor; a row or payload that cannot be
+/// used is skipped, as the monitor never sees it live.
 ///
 /// # Errors
 /// [`CalibrateError::Input`] when the file cannot be opened or read,
+/// [`CalibrateError::Captured`] for a recording made in capture mode,
+/// [`CalibrateError::NoUsableSample`] when no sample gives an l_k,
 /// [`CalibrateError::Monitor`] when the monitor cannot be built.
 pub fn recorded(
     channel: &Channel,
     path: &Path,
     progress: Option<Progress<'_>>,
 ) -> Result<Statistics, CalibrateError> {
+    // Capture mode keeps inputs only around alarms: the data were chosen by the
+    // threshold in force, and would bias l_k's tail upwards. Only the daemon's
+    // recorder captures; it alone names its `instance` in the file's header
+    // (`glrmon simulate` and `replay` write whole runs, whatever the configuration).
+    if is_mcap(path) {
+        let input = McapInput::open(path)?;
+        let by_daemon = input
+            .header
+            .as_ref()
+            .is_some_and(|h| h.extra.contains_key("instance"));
+        if by_daemon
+            && input
+                .recorded_config()
+                .is_ok_and(|c| c.recording.capture.is_some())
+        {
+            return Err(CalibrateError::Captured(path.to_owned()));
+        }
+    }
     let mut samples = Samples::open(path, &channel.name, channel.dims)?;
-    statistics(
+    let (mut skipped, mut first_skip) = (0u64, None);
+    let stats = statistics(
         channel,
         |s| loop {
             match samples.next_into(s)? {
                 None => return Ok::<_, CalibrateError>(false),
                 Some(Ok(())) => return Ok(true),
-                Some(Err(_)) => {}
+                Some(Err(why)) => {
+                    skipped += 1;
+                    first_skip.get_or_insert(why);
+                }
             }
         },
         progress,
-    )
+    )?;
+    if stats.glr.iter().all(|l| l.is_nan()) {
+        return Err(CalibrateError::NoUsableSample {
+            path: path.to_owned(),
+            channel: channel.name.clone(),
+            skipped,
+            first_skip,
+            processed: stats.glr.len() as u64,
+        });
+    }
+    Ok(stats)
+}
+
+/// The statistics of several independent recordings of `channel` ([`recorded`] on
+/// each, in order), pooled as separate segments: each file starts a fresh monitor, and
+/// a NaN follows each file's l_k so that no episode spans two files. Two fault-free runs
+/// joined in one file would instead meet at a jump of the state, which the monitor
+/// rightly reads as a fault.
+///
+/// # Errors
+/// The first file's error of [`recorded`] (each names its file).
+pub fn recorded_files(
+    channel: &Channel,
+    paths: &[PathBuf],
+    progress: Option<Progress<'_>>,
+) -> Result<Statistics, CalibrateError> {
+    let mut all = Statistics::default();
+    for path in paths {
+        all.append(recorded(channel, path, progress)?);
+    }
+    Ok(all)
 }
 
 /// The calibrated threshold of one isolation test.
@@ -285,25 +387,36 @@ pub struct ChannelCalibration {
     pub isolation: Vec<IsolationCalibration>,
 }
 
-/// Calibrates `channel` on its fault-free `stats`: the detection threshold for one
-/// false-alarm episode per `mtbfa` samples (episodes as the channel's hysteresis and
-/// clearing make them) and each isolation test's threshold.
+/// Calibrates `channel` on its fault-free `stats`: the detection threshold for the
+/// `target` (episodes as the channel's hysteresis and clearing make them, or
+/// exceedances clustered within the window) and each isolation test's threshold.
+/// Fewer than 10 events expected at the target still give a threshold: see
+/// [`Calibration::well_supported`].
 ///
 /// # Errors
-/// [`CalibrateError::Calibration`] when `mtbfa` is impossible or the data are too
-/// few for it.
+/// [`CalibrateError::Calibration`] when the target is impossible, no sample has an
+/// admissible onset, or no false alarm can be formed on the data.
 pub fn calibrate_channel(
     channel: &Channel,
     stats: Statistics,
-    mtbfa: f64,
+    target: Target,
 ) -> Result<ChannelCalibration, CalibrateError> {
     let g = &channel.alarm;
     let current_episodes = count_episodes(&stats.glr, *g);
-    let alarm = calibrate(&stats.glr, mtbfa, g.hysteresis, g.clear_samples).map_err(|reason| {
-        CalibrateError::Calibration {
-            channel: channel.name.clone(),
-            reason,
-        }
+    // l_k shares the innovations of its window with its neighbours; the plain χ²
+    // detector's has no memory.
+    let memory = if channel.chi2_detector {
+        1
+    } else {
+        channel.window.window
+    };
+    let alarm = match target {
+        Target::Mtbfa(m) => calibrate(&stats.glr, m, g.hysteresis, g.clear_samples),
+        Target::SampleFar(f) => calibrate_sample_far(&stats.glr, f, memory),
+    }
+    .map_err(|reason| CalibrateError::Calibration {
+        channel: channel.name.clone(),
+        reason,
     })?;
     Ok(ChannelCalibration {
         alarm,
@@ -348,13 +461,26 @@ mod tests {
         assert_eq!(bits(&stats.glr), bits(&again.glr));
     }
 
+    /// Issue 20: too few episodes for the target give a loosely supported threshold;
+    /// no admissible sample is the user's error, naming the channel.
     #[test]
-    fn too_little_data_is_the_users_fault_and_names_the_channel() {
+    fn issue_20_too_little_data_warns_and_no_sample_is_an_error_naming_the_channel() {
         let channel = channel();
-        let stats = simulated(&channel, 100, 1, None).unwrap();
-        let e = calibrate_channel(&channel, stats, 1_000.0).unwrap_err();
+        let stats = simulated(&channel, 2_000, 1, None).unwrap();
+        let c = calibrate_channel(&channel, stats, Target::Mtbfa(1_000.0)).unwrap();
+        assert!(!c.alarm.well_supported(), "{c:?}");
+        assert!(c.alarm.expected < 2.1, "{c:?}");
+        let stats = Statistics {
+            glr: vec![f64::NAN; 10],
+            isolation: BTreeMap::new(),
+        };
+        let e = calibrate_channel(&channel, stats, Target::SampleFar(0.01)).unwrap_err();
         assert!(e.is_invalid_input(), "{e:?}");
-        assert!(e.to_string().starts_with("channel \"unstable\": "), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("channel \"unstable\": no fault-free sample"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -3,7 +3,7 @@
 //! blank lines, quoting), and the result is validated before it is returned.
 //!
 //! ```
-//! use glrmon_core::calibration::Calibration;
+//! use glrmon_core::calibration::{Calibration, Target};
 //!
 //! let text = r#"# the tank
 //! [[channels]]
@@ -16,12 +16,13 @@
 //! "#;
 //! let c = Calibration {
 //!     threshold: 12.5,
+//!     target: Target::Mtbfa(10_000.0),
 //!     samples: 100_000,
 //!     episodes: 10,
-//!     mtbfa: 10_000.0,
-//!     mtbfa_interval: (5_000.0, 20_000.0),
+//!     exceedances: 25,
+//!     expected: 10.0,
+//!     rate_interval: (5_000.0, 20_000.0),
 //!     threshold_interval: (12.0, 13.0),
-//!     expected_episodes: 10.0,
 //! };
 //! let edited =
 //!     glrmon_spec::edit::set_calibrated(text, "tank", &c, &[("level_bias", 7.5)], "a.csv")
@@ -32,7 +33,7 @@
 //! assert_eq!(cfg.channels[0].alarm.threshold, 12.5);
 //! ```
 
-use glrmon_core::calibration::Calibration;
+use glrmon_core::calibration::{Calibration, Target};
 
 use crate::SpecErrors;
 
@@ -99,16 +100,21 @@ pub fn set_calibrated(
         glr.remove(key);
     }
     let mut cal = toml_edit::Table::new();
+    let count = |n: u64| toml_edit::value(i64::try_from(n).unwrap_or(i64::MAX));
     cal.insert("threshold", toml_edit::value(c.threshold));
-    cal.insert("mtbfa", toml_edit::value(c.mtbfa));
-    cal.insert(
-        "samples",
-        toml_edit::value(i64::try_from(c.samples).unwrap_or(i64::MAX)),
-    );
-    cal.insert(
-        "episodes",
-        toml_edit::value(i64::try_from(c.episodes).unwrap_or(i64::MAX)),
-    );
+    match c.target {
+        Target::Mtbfa(m) => {
+            cal.insert("mtbfa", toml_edit::value(m));
+        }
+        Target::SampleFar(f) => {
+            cal.insert("sample_far", toml_edit::value(f));
+        }
+    }
+    cal.insert("samples", count(c.samples));
+    cal.insert("episodes", count(c.episodes));
+    if matches!(c.target, Target::SampleFar(_)) {
+        cal.insert("exceedances", count(c.exceedances));
+    }
     let mut interval = toml_edit::Array::new();
     interval.push(c.threshold_interval.0);
     interval.push(c.threshold_interval.1);
@@ -146,12 +152,13 @@ threshold = 9.0
     fn calibration() -> Calibration {
         Calibration {
             threshold: 12.5,
+            target: Target::Mtbfa(10_000.0),
             samples: 100_000,
             episodes: 10,
-            mtbfa: 10_000.0,
-            mtbfa_interval: (5_000.0, 20_000.0),
+            exceedances: 25,
+            expected: 10.0,
+            rate_interval: (5_000.0, 20_000.0),
             threshold_interval: (12.0, 13.0),
-            expected_episodes: 10.0,
         }
     }
 
@@ -192,6 +199,44 @@ isolation = { level_bias = 7.5 }
             cfg.channels[0].isolation_thresholds,
             [("level_bias".to_owned(), 7.5)]
         );
+    }
+
+    /// Issue 20: a per-sample target is written as `sample_far` with the exceedances,
+    /// and reads back as such; a file with both targets, or neither, is refused.
+    #[test]
+    fn issue_20_a_sample_far_target_is_recorded_and_read_back() {
+        let c = Calibration {
+            target: Target::SampleFar(0.01),
+            exceedances: 40,
+            ..calibration()
+        };
+        let edited = set_calibrated(TEXT, "tank", &c, &[], "a.csv, b.csv").unwrap();
+        assert!(
+            edited.contains(
+                "threshold = 12.5\nsample_far = 0.01\nsamples = 100000\nepisodes = 10\n\
+                 exceedances = 40\n"
+            ),
+            "{edited}"
+        );
+        assert!(!edited.contains("mtbfa"), "{edited}");
+        let cfg = crate::parse(&edited).unwrap();
+        assert!(matches!(
+            cfg.channels[0].threshold_source,
+            crate::ThresholdSource::Calibrated {
+                target: Target::SampleFar(f),
+                exceedances: Some(40),
+                ..
+            } if f == 0.01
+        ));
+        let both = edited.replace("sample_far = 0.01", "sample_far = 0.01\nmtbfa = 100.0");
+        let e = crate::parse(&both).unwrap_err().to_string();
+        assert!(
+            e.contains("glr.calibrated") && e.contains("exactly one target") && e.contains("both"),
+            "{e}"
+        );
+        let neither = edited.replace("sample_far = 0.01\n", "");
+        let e = crate::parse(&neither).unwrap_err().to_string();
+        assert!(e.contains("neither"), "{e}");
     }
 
     #[test]

@@ -27,6 +27,7 @@ pub mod schema;
 use std::fmt;
 use std::path::Path;
 
+use glrmon_core::calibration::Target;
 use glrmon_core::kitanidis::unknown_input_rank;
 use glrmon_core::sparse::LassoSettings;
 use glrmon_core::threshold::chi2_upper_quantile;
@@ -338,12 +339,15 @@ pub enum ThresholdSource {
     },
     /// Found by `glrmon calibrate` on fault-free data.
     Calibrated {
-        /// Target mean number of samples between false-alarm episodes.
-        mtbfa: f64,
+        /// What it was calibrated for: a mean number of samples between false-alarm
+        /// episodes, or a fraction of samples above λ.
+        target: glrmon_core::calibration::Target,
         /// Samples used.
         samples: u64,
-        /// Episodes at λ on them.
+        /// Episodes at λ on them (for a per-sample target, clusters of exceedances).
         episodes: u64,
+        /// Samples above λ among them, when recorded.
+        exceedances: Option<u64>,
         /// 95 % confidence interval of λ.
         interval: [f64; 2],
     },
@@ -1228,12 +1232,47 @@ impl Validator {
                     ),
                 );
             }
+            let target = match (c.mtbfa, c.sample_far) {
+                (Some(m), None) => {
+                    if !(m.is_finite() && m > 1.0) {
+                        self.error(
+                            gpath("calibrated.mtbfa"),
+                            format!("{m} must be more than 1 sample"),
+                        );
+                    }
+                    Target::Mtbfa(m)
+                }
+                (None, Some(f)) => {
+                    if !(f > 0.0 && f < 1.0) {
+                        self.error(
+                            gpath("calibrated.sample_far"),
+                            format!("{f} must be in (0, 1)"),
+                        );
+                    }
+                    Target::SampleFar(f)
+                }
+                (m, f) => {
+                    self.error(
+                        gpath("calibrated"),
+                        format!(
+                            "give exactly one target, mtbfa or sample_far (got {})",
+                            if m.is_some() && f.is_some() {
+                                "both"
+                            } else {
+                                "neither"
+                            }
+                        ),
+                    );
+                    Target::Mtbfa(f64::NAN)
+                }
+            };
             (
                 c.threshold,
                 ThresholdSource::Calibrated {
-                    mtbfa: c.mtbfa,
+                    target,
                     samples: c.samples,
                     episodes: c.episodes,
+                    exceedances: c.exceedances,
                     interval: c.interval,
                 },
             )

@@ -557,12 +557,21 @@ fn default_consistency_alpha() -> f64 {
 pub struct CalibratedSpec {
     /// λ.
     pub threshold: f64,
-    /// Target mean number of samples between false-alarm episodes.
-    pub mtbfa: f64,
+    /// Target mean number of samples between false-alarm episodes (this or
+    /// `sample_far`).
+    #[serde(default)]
+    pub mtbfa: Option<f64>,
+    /// Target fraction of fault-free samples whose l_k exceeds λ (this or `mtbfa`).
+    #[serde(default)]
+    pub sample_far: Option<f64>,
     /// Fault-free samples it was calibrated on.
     pub samples: u64,
-    /// Episodes at λ on those samples.
+    /// Episodes at λ on those samples (for `sample_far`, the clusters of exceedances
+    /// within the window).
     pub episodes: u64,
+    /// Samples above λ among them (written for `sample_far`).
+    #[serde(default)]
+    pub exceedances: Option<u64>,
     /// 95 % confidence interval of λ.
     pub interval: [f64; 2],
     /// Where the data came from (free text).

@@ -1,14 +1,15 @@
 //! `glrmon calibrate`: the detection threshold of a channel for a target mean time
-//! between false alarms, found on fault-free data (a recording, or data simulated from
-//! the channel's model) with the channel's own monitor, so that gaps, restarts and the
-//! hysteresis count as they do live. See [`glrmon_core::calibration`].
+//! between false alarms or a per-sample false-alarm fraction, found on fault-free data
+//! (recordings, each an independent run, or data simulated from the channel's model)
+//! with the channel's own monitor, so that gaps, restarts and the hysteresis count as
+//! they do live. See [`glrmon_core::calibration`].
 
 use std::io::IsTerminal as _;
 use std::path::{Path, PathBuf};
 
 use clap::Args;
 
-use glrmon_core::calibration::Calibration;
+use glrmon_core::calibration::{Calibration, MIN_EVENTS, Target};
 use glrmon_eval::calibrate::{
     CalibrateError, ChannelCalibration, IsolationCalibration, Statistics, calibrate_channel,
 };
@@ -21,16 +22,19 @@ use crate::common::pick;
 use crate::common::{InvalidInput, input_error, load_config};
 
 #[derive(Debug, Args)]
+#[command(group(clap::ArgGroup::new("target").required(true).args(["mtbfa", "sample_far"])))]
 pub(crate) struct CalibrateArgs {
-    /// Configuration file (optional for MCAP input: the recorded one is used).
+    /// Configuration file (optional when the first input is an MCAP recording: its
+    /// recorded one is used).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Channel to calibrate (optional when the configuration has one channel).
     #[arg(long)]
     channel: Option<String>,
-    /// Fault-free recorded samples: CSV or MCAP.
+    /// Fault-free recorded samples: CSV or MCAP files, each an independent run (the
+    /// monitor starts afresh at each file; no episode spans two).
     #[arg(conflicts_with = "simulate", required_unless_present = "simulate")]
-    input: Option<PathBuf>,
+    input: Vec<PathBuf>,
     /// Simulate this many fault-free samples from the channel's model instead (split
     /// over the cores, each part with its own seed).
     #[arg(long)]
@@ -38,9 +42,13 @@ pub(crate) struct CalibrateArgs {
     /// Seed of the first simulated part.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Target mean number of samples between false-alarm episodes.
+    /// Target mean number of samples between false-alarm episodes (or --sample-far).
     #[arg(long)]
-    mtbfa: f64,
+    mtbfa: Option<f64>,
+    /// Target fraction of fault-free samples whose l_k exceeds the threshold, e.g. 0.01:
+    /// the (1 − f) quantile of l_k (or --mtbfa).
+    #[arg(long)]
+    sample_far: Option<f64>,
     /// Write the result into the configuration file as `[channels.glr.calibrated]`
     /// (comments and layout kept).
     #[arg(long)]
@@ -51,7 +59,12 @@ pub(crate) struct CalibrateArgs {
 }
 
 pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
-    let cfg = match (&args.config, &args.input) {
+    let target = match (args.mtbfa, args.sample_far) {
+        (Some(m), None) => Target::Mtbfa(m),
+        (None, Some(f)) => Target::SampleFar(f),
+        _ => unreachable!("clap requires exactly one of --mtbfa and --sample-far"),
+    };
+    let cfg = match (&args.config, args.input.first()) {
         (Some(path), _) => load_config(path)?,
         (None, Some(input)) if is_mcap(input) => recorded_config(input).map_err(input_error)?,
         _ => {
@@ -65,21 +78,31 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         return Err(InvalidInput("--write needs --config: the file to update".into()).into());
     }
     let channel = pick(&cfg, args.channel.as_deref())?;
-    let (stats, source) = match (args.simulate, &args.input) {
-        (Some(n), _) => (
+    let (stats, source) = match args.simulate {
+        Some(n) => (
             simulated(channel, n, args.seed)?,
             format!("{n} samples simulated from seed {}", args.seed),
         ),
-        (None, Some(input)) => (recorded(channel, input)?, format!("{}", input.display())),
-        (None, None) => unreachable!("clap requires one"),
+        None => (
+            recorded(channel, &args.input)?,
+            args.input
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+        ),
     };
     let g = &channel.alarm;
     let ChannelCalibration {
         alarm: c,
         current_episodes,
         isolation,
-    } = calibrate_channel(channel, stats, args.mtbfa).map_err(calibrate_error)?;
+    } = calibrate_channel(channel, stats, target).map_err(calibrate_error)?;
     let alpha = channel.isolation_alpha;
+    let warning = support_warning(&channel.name, &c);
+    if let Some(w) = &warning {
+        eprintln!("glrmon calibrate: warning: {w}");
+    }
     if args.json {
         println!(
             "{}",
@@ -89,7 +112,8 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
                 g.threshold,
                 current_episodes,
                 alpha,
-                &isolation
+                &isolation,
+                warning.as_deref(),
             ))?
         );
     } else {
@@ -108,21 +132,82 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The `--json` line: the calibrated alarm threshold with its intervals, the data's
-/// episode counts, and one entry per isolation test.
+/// Samples per independent event at the target: per expected episode or exceedance,
+/// and for a per-sample target per cluster found, whichever is scarcer.
+fn samples_per_event(c: &Calibration) -> f64 {
+    let per_event = c.samples as f64 / c.expected.max(f64::MIN_POSITIVE);
+    match c.target {
+        Target::SampleFar(_) if c.episodes > 0 => {
+            per_event.max(c.samples as f64 / c.episodes as f64)
+        }
+        _ => per_event,
+    }
+}
+
+/// How loosely the data support λ when they hold fewer than [`MIN_EVENTS`] events at
+/// the target: the count, the 95 % interval of the rate, and how much data 10 events
+/// need. `None` when the support is enough.
+fn support_warning(channel: &str, c: &Calibration) -> Option<String> {
+    if c.well_supported() {
+        return None;
+    }
+    let needed = (MIN_EVENTS * samples_per_event(c)).ceil();
+    Some(match c.target {
+        Target::Mtbfa(m) => format!(
+            "channel \"{channel}\": {} fault-free samples hold {} false-alarm episodes at the \
+             threshold, the target of one per {m} samples expects {:.1}: fewer than {MIN_EVENTS}, \
+             so the threshold is loosely supported (95 % interval of the mean samples between \
+             false alarms {:.0}–{:.0}, threshold {:.4}–{:.4}); {needed} samples would hold 10",
+            c.samples,
+            c.episodes,
+            c.expected,
+            c.rate_interval.0,
+            c.rate_interval.1,
+            c.threshold_interval.0,
+            c.threshold_interval.1,
+        ),
+        Target::SampleFar(f) => format!(
+            "channel \"{channel}\": {} fault-free samples hold {} samples above the threshold \
+             in {} clusters, the target fraction {f} expects {:.1}: fewer than {MIN_EVENTS} \
+             clusters, so the \
+             threshold is loosely supported (95 % interval of the fraction {:.2e}–{:.2e}, \
+             threshold {:.4}–{:.4}); about {needed} samples would hold 10 clusters",
+            c.samples,
+            c.exceedances,
+            c.episodes,
+            c.expected,
+            c.rate_interval.0,
+            c.rate_interval.1,
+            c.threshold_interval.0,
+            c.threshold_interval.1,
+        ),
+    })
+}
+
+/// The `--json` line: the calibrated alarm threshold with its intervals, the target,
+/// the data's event counts, and one entry per isolation test.
 #[derive(Debug, Serialize)]
 struct CalibrationJson<'a> {
     channel: &'a str,
     threshold: f64,
-    /// The uncertainty of the threshold (low, high).
+    /// The uncertainty of the threshold (low, high); an unbounded end is `null`.
     interval: [Option<f64>; 2],
-    mtbfa: f64,
-    /// The 95 % interval of the mean samples between false alarms; an unbounded end
-    /// (no episode on the data) is `null`, as JSON has no infinity.
-    mtbfa_interval: [Option<f64>; 2],
+    /// `mtbfa` or `sample_far`: which of the next two is set.
+    target: &'static str,
+    mtbfa: Option<f64>,
+    sample_far: Option<f64>,
+    /// The 95 % interval of the rate at the threshold in the target's unit (mean
+    /// samples between false alarms, or the fraction of samples above it); an unbounded
+    /// end is `null`, as JSON has no infinity.
+    rate_interval: [Option<f64>; 2],
     samples: u64,
+    /// Episodes at the threshold (for `sample_far`, clusters of exceedances).
     episodes: u64,
-    expected_episodes: f64,
+    exceedances: u64,
+    /// Events (episodes, or exceedances) the target expects on the data.
+    expected: f64,
+    /// The support warning (fewer than 10 expected events), or `null`.
+    warning: Option<&'a str>,
     current_threshold: f64,
     current_episodes: u64,
     isolation_alpha: f64,
@@ -152,7 +237,12 @@ fn calibration_json<'a>(
     current_episodes: u64,
     isolation_alpha: f64,
     isolation: &'a [IsolationCalibration],
+    warning: Option<&'a str>,
 ) -> CalibrationJson<'a> {
+    let (target, mtbfa, sample_far) = match c.target {
+        Target::Mtbfa(m) => ("mtbfa", Some(m), None),
+        Target::SampleFar(f) => ("sample_far", None, Some(f)),
+    };
     CalibrationJson {
         channel,
         threshold: c.threshold,
@@ -160,11 +250,15 @@ fn calibration_json<'a>(
             finite(c.threshold_interval.0),
             finite(c.threshold_interval.1),
         ],
-        mtbfa: c.mtbfa,
-        mtbfa_interval: [finite(c.mtbfa_interval.0), finite(c.mtbfa_interval.1)],
+        target,
+        mtbfa,
+        sample_far,
+        rate_interval: [finite(c.rate_interval.0), finite(c.rate_interval.1)],
         samples: c.samples,
         episodes: c.episodes,
-        expected_episodes: c.expected_episodes,
+        exceedances: c.exceedances,
+        expected: c.expected,
+        warning,
         current_threshold,
         current_episodes,
         isolation_alpha,
@@ -210,26 +304,57 @@ fn text(
     current_episodes: u64,
     source: &str,
 ) -> String {
-    let precision = 1.96 / (c.episodes.max(1) as f64).sqrt();
+    let events = match c.target {
+        Target::Mtbfa(_) => c.episodes,
+        Target::SampleFar(_) => c.episodes.min(c.exceedances),
+    };
+    let precision = 1.96 / (events.max(1) as f64).sqrt();
+    let per_event = samples_per_event(c);
+    let (head, found, rate, target_line) = match c.target {
+        Target::Mtbfa(m) => (
+            format!("one false-alarm episode per {m} samples"),
+            format!(
+                "{} episodes at the threshold (the target expects {:.1})",
+                c.episodes, c.expected
+            ),
+            format!(
+                "mean samples between false alarms {:.0}–{:.0}",
+                c.rate_interval.0, c.rate_interval.1
+            ),
+            format!("mtbfa = {m:?}\n"),
+        ),
+        Target::SampleFar(f) => (
+            format!("a fraction {f} of the samples above it"),
+            format!(
+                "{} samples above the threshold in {} clusters within the window (the target \
+                 expects {:.1})",
+                c.exceedances, c.episodes, c.expected
+            ),
+            format!(
+                "fraction of samples above it {:.3e}–{:.3e}",
+                c.rate_interval.0, c.rate_interval.1
+            ),
+            format!("sample_far = {f:?}\n"),
+        ),
+    };
+    let exceedances = match c.target {
+        Target::Mtbfa(_) => String::new(),
+        Target::SampleFar(_) => format!("exceedances = {}\n", c.exceedances),
+    };
     format!(
-        "channel \"{channel}\": threshold {:.4} for one false-alarm episode per {} samples\n  \
-         data: {} fault-free samples ({source}), {} episodes at the threshold (the target \
-         expects {:.1})\n  95 % interval: threshold {:.4}–{:.4}, mean samples between false \
-         alarms {:.0}–{:.0} (about ±{:.0} % on the rate; {} samples would give ±30 %)\n  \
-         current threshold {current:.4}: {current_episodes} episodes on this data\n\n[channels.glr.calibrated]\nthreshold = {:?}\nmtbfa = {:?}\nsamples = {}\nepisodes = {}\ninterval = [{:?}, {:?}]\n",
+        "channel \"{channel}\": threshold {:.4} for {head}\n  \
+         data: {} fault-free samples ({source}), {found}\n  95 % interval: threshold \
+         {:.4}–{:.4}, {rate} (about ±{:.0} % on the rate; {} samples would give ±30 %)\n  \
+         current threshold {current:.4}: {current_episodes} episodes on this data\n\n\
+         [channels.glr.calibrated]\nthreshold = {:?}\n{target_line}samples = {}\n\
+         episodes = {}\n{exceedances}interval = [{:?}, {:?}]\n",
         c.threshold,
-        c.mtbfa,
         c.samples,
-        c.episodes,
-        c.expected_episodes,
         c.threshold_interval.0,
         c.threshold_interval.1,
-        c.mtbfa_interval.0,
-        c.mtbfa_interval.1,
         precision * 100.0,
-        (43.0 * c.mtbfa).ceil(),
+        (43.0 * per_event).ceil(),
         c.threshold,
-        c.mtbfa,
         c.samples,
         c.episodes,
         c.threshold_interval.0,
@@ -274,15 +399,15 @@ fn simulated(channel: &glrmon_spec::Channel, n: u64, seed: u64) -> anyhow::Resul
     stats.map_err(calibrate_error)
 }
 
-/// [`glrmon_eval::calibrate::recorded`] with a progress bar.
-fn recorded(channel: &glrmon_spec::Channel, input: &Path) -> anyhow::Result<Statistics> {
+/// [`glrmon_eval::calibrate::recorded_files`] with a progress bar.
+fn recorded(channel: &glrmon_spec::Channel, inputs: &[PathBuf]) -> anyhow::Result<Statistics> {
     let progress = bar(0);
     let inc = |d: u64| {
         if let Some(b) = &progress {
             b.inc(d);
         }
     };
-    let stats = glrmon_eval::calibrate::recorded(channel, input, Some(&inc));
+    let stats = glrmon_eval::calibrate::recorded_files(channel, inputs, Some(&inc));
     if let Some(b) = progress {
         b.finish_and_clear();
     }
@@ -320,12 +445,13 @@ mod tests {
     fn json_keeps_the_keys_and_writes_an_unbounded_interval_as_null() {
         let c = Calibration {
             threshold: 12.5,
+            target: Target::Mtbfa(10000.0),
             samples: 1000,
             episodes: 0,
-            mtbfa: 10000.0,
-            mtbfa_interval: (270.0, f64::INFINITY),
-            threshold_interval: (11.0, 14.0),
-            expected_episodes: 0.1,
+            exceedances: 0,
+            expected: 0.1,
+            rate_interval: (270.0, f64::INFINITY),
+            threshold_interval: (11.0, f64::INFINITY),
         };
         let isolation = [IsolationCalibration {
             test: "a\"b".into(),
@@ -333,16 +459,32 @@ mod tests {
             current: 6.63,
             current_rate: 0.5,
         }];
-        let text =
-            serde_json::to_string(&calibration_json("m", &c, 13.0, 2, 0.01, &isolation)).unwrap();
+        let warning = support_warning("m", &c);
+        let text = serde_json::to_string(&calibration_json(
+            "m",
+            &c,
+            13.0,
+            2,
+            0.01,
+            &isolation,
+            warning.as_deref(),
+        ))
+        .unwrap();
         assert_eq!(
             text,
             concat!(
-                r#"{"channel":"m","threshold":12.5,"interval":[11.0,14.0],"mtbfa":10000.0,"#,
-                r#""mtbfa_interval":[270.0,null],"samples":1000,"episodes":0,"expected_episodes":0.1,"#,
+                r#"{"channel":"m","threshold":12.5,"interval":[11.0,null],"target":"mtbfa","#,
+                r#""mtbfa":10000.0,"sample_far":null,"rate_interval":[270.0,null],"samples":1000,"#,
+                r#""episodes":0,"exceedances":0,"expected":0.1,"#,
+                r#""warning":"channel \"m\": 1000 fault-free samples hold 0 false-alarm episodes at the threshold, the target of one per 10000 samples expects 0.1: fewer than 10, so the threshold is loosely supported (95 % interval of the mean samples between false alarms 270–inf, threshold 11.0000–inf); 100000 samples would hold 10","#,
                 r#""current_threshold":13.0,"current_episodes":2,"isolation_alpha":0.01,"#,
                 r#""isolation":[{"test":"a\"b","threshold":null,"samples":0,"current_threshold":6.63,"current_rate":0.5}]}"#
             )
         );
+        let well = Calibration {
+            expected: 10.0,
+            ..c
+        };
+        assert_eq!(support_warning("m", &well), None);
     }
 }

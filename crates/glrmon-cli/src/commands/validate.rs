@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 use glrmon_core::Onset;
+use glrmon_core::calibration::Target;
 use glrmon_core::information::window_information;
 use glrmon_core::isolability::{DEFAULT_CORRELATION_LIMIT, isolability};
 use glrmon_spec::{Channel, ThresholdSource};
@@ -132,14 +133,30 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
             channel.fault_names.len()
         ),
         ThresholdSource::Calibrated {
-            mtbfa,
+            target: Target::Mtbfa(mtbfa),
             samples,
             episodes,
             interval,
+            ..
         } => format!(
             "{:.4} (calibrated for one false-alarm episode per {mtbfa} samples on {samples} \
              fault-free samples, {episodes} episodes; 95 % interval {:.4}–{:.4})",
             channel.alarm.threshold, interval[0], interval[1]
+        ),
+        ThresholdSource::Calibrated {
+            target: Target::SampleFar(fraction),
+            samples,
+            episodes,
+            exceedances,
+            interval,
+        } => format!(
+            "{:.4} (calibrated for a fraction {fraction} of fault-free samples above it on \
+             {samples} fault-free samples, {} above in {episodes} clusters; 95 % interval \
+             {:.4}–{:.4})",
+            channel.alarm.threshold,
+            exceedances.map_or_else(|| "?".to_owned(), |n| n.to_string()),
+            interval[0],
+            interval[1]
         ),
     };
     let _ = writeln!(s, "  model: {model}; {window}; threshold {threshold}");
