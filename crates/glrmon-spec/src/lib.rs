@@ -1604,13 +1604,20 @@ impl Validator {
                 "the fault dictionary is empty".into(),
             );
         }
+        let expanded = self.expand_shortcuts(prefix, &spec.faults, dims);
         let mut out = Vec::new();
-        for (i, f) in spec.faults.iter().enumerate() {
-            let path = join(prefix, &format!("faults[{i}]"));
-            if spec.faults[..i].iter().any(|g| g.name == f.name) {
+        for (i, (path, f)) in expanded.iter().enumerate() {
+            if expanded[..i].iter().any(|(_, g)| g.name == f.name) {
                 self.error(path.clone(), format!("duplicate fault name \"{}\"", f.name));
             }
-            if let Some(plan) = self.fault(&path, f, dims, j) {
+            if f.name.is_empty() {
+                self.error(
+                    format!("{path}.name"),
+                    "is missing: every fault needs a name".into(),
+                );
+                continue;
+            }
+            if let Some(plan) = self.fault(path, f, dims, j) {
                 out.push(plan);
             }
         }
@@ -1621,6 +1628,66 @@ impl Validator {
                 "known-profile faults cannot be mixed with step/impulse/ramp faults in one channel"
                     .into(),
             );
+        }
+        out
+    }
+
+    /// The dictionary with the `all_sensors` / `all_actuators` shortcuts expanded into
+    /// one `sensor_bias` per output / `actuator_bias` per input, each with its path
+    /// (`faults[i]`, or `faults[i] (y2)` for an expanded entry).
+    fn expand_shortcuts(
+        &mut self,
+        prefix: &str,
+        faults: &[FaultSpec],
+        dims: Dims,
+    ) -> Vec<(String, FaultSpec)> {
+        let mut out = Vec::with_capacity(faults.len());
+        for (i, f) in faults.iter().enumerate() {
+            let path = join(prefix, &format!("faults[{i}]"));
+            let (kind, letter, count) = match f.kind.as_deref() {
+                Some("all_sensors") => ("sensor_bias", 'y', dims.outputs),
+                Some("all_actuators") => ("actuator_bias", 'u', dims.inputs),
+                _ => {
+                    out.push((path, f.clone()));
+                    continue;
+                }
+            };
+            if f.input.is_some() || f.output.is_some() || f.psi.is_some() || f.phi.is_some() {
+                self.error(
+                    path,
+                    format!(
+                        "kind \"{}\" makes one fault per signal: remove input/output/psi/phi",
+                        f.kind.as_deref().unwrap_or_default()
+                    ),
+                );
+                continue;
+            }
+            if count == 0 {
+                self.error(
+                    format!("{path}.kind"),
+                    "\"all_actuators\": the channel has no inputs".into(),
+                );
+                continue;
+            }
+            for s in 0..count {
+                let name = if f.name.is_empty() {
+                    format!("{letter}{s}_bias")
+                } else {
+                    format!("{}{s}", f.name)
+                };
+                out.push((
+                    format!("{path} ({letter}{s})"),
+                    FaultSpec {
+                        name,
+                        kind: Some(kind.to_owned()),
+                        onset: f.onset.clone(),
+                        input: (letter == 'u').then_some(s),
+                        output: (letter == 'y').then_some(s),
+                        psi: None,
+                        phi: None,
+                    },
+                ));
+            }
         }
         out
     }
@@ -1757,7 +1824,7 @@ impl Validator {
             other => {
                 self.error(
                     format!("{path}.kind"),
-                    format!("\"{other}\" is not one of custom, actuator_bias, actuator_gain, sensor_bias, sensor_drift"),
+                    format!("\"{other}\" is not one of custom, actuator_bias, actuator_gain, sensor_bias, sensor_drift, all_sensors, all_actuators"),
                 );
                 return None;
             }

@@ -311,10 +311,14 @@ pub enum EntrySpec {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FaultSpec {
-    /// Unique name within the channel.
+    /// Unique name within the channel (required, except for the `all_sensors` and
+    /// `all_actuators` shortcuts, where it is an optional prefix).
+    #[serde(default)]
     pub name: String,
     /// `custom` (default when `psi`/`phi` are given), `actuator_bias`, `actuator_gain`,
-    /// `sensor_bias` or `sensor_drift`.
+    /// `sensor_bias` or `sensor_drift`; or a shortcut for one fault per signal:
+    /// `all_sensors` (a `sensor_bias` per output, named `y0_bias`, …) and
+    /// `all_actuators` (an `actuator_bias` per input, `u0_bias`, …).
     pub kind: Option<String>,
     /// Onset profile: `step` (default), `impulse`, `ramp` (default of `sensor_drift`) or
     /// `known`.

@@ -519,3 +519,43 @@ fn cross_covariance_s_is_checked_and_reaches_the_detector() {
         "model.S: makes the joint noise covariance [[Q, S], [Sᵀ, R]] indefinite",
     );
 }
+
+/// `kind = "all_sensors"` / `"all_actuators"` make one sensor bias per output and one
+/// actuator bias per input, named y0_bias, u0_bias (or after a given prefix), next to
+/// hand-written faults; misuse names the entry.
+#[test]
+fn all_sensors_and_all_actuators_expand_to_one_fault_per_signal() {
+    let text = with(
+        "[[channels.faults]]\nname = \"bias\"",
+        "[[channels.faults]]\nkind = \"all_sensors\"\n\n[[channels.faults]]\nname = \"act\"\nkind = \"all_actuators\"\nonset = \"ramp\"\n\n[[channels.faults]]\nname = \"bias\"",
+    );
+    let cfg = glrmon_spec::parse(&text).unwrap();
+    let ch = &cfg.channels[0];
+    assert_eq!(ch.fault_names, ["y0_bias", "act0", "bias", "custom"]);
+    assert_eq!(
+        ch.onsets()[..2],
+        [glrmon_core::Onset::Step, glrmon_core::Onset::Ramp]
+    );
+    assert!(ch.detector().is_ok());
+    assert_error(
+        &with(
+            "[[channels.faults]]\nname = \"bias\"",
+            "[[channels.faults]]\nkind = \"all_sensors\"\noutput = 0\n\n[[channels.faults]]\nname = \"bias\"",
+        ),
+        "faults[0]: kind \"all_sensors\" makes one fault per signal: remove input/output/psi/phi",
+    );
+    assert_error(
+        &with(
+            "name = \"bias\"\nkind = \"actuator_bias\"",
+            "kind = \"actuator_bias\"",
+        ),
+        "faults[0].name is missing: every fault needs a name",
+    );
+    assert_error(
+        &with(
+            "[[channels.faults]]\nname = \"bias\"",
+            "[[channels.faults]]\nkind = \"all_sensors\"\n\n[[channels.faults]]\nname = \"y0_bias\"",
+        ),
+        "duplicate fault name \"y0_bias\"",
+    );
+}
