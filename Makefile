@@ -51,7 +51,7 @@ check-deps: ## glrmon-core's and glrmon-ident's normal dependencies are nalgebra
 
 check-config: ## glrmon validate every file in config/
 	@$(CARGO) build -q -p glrmon-cli
-	@for f in config/*.toml config/examples/*.toml; do ./target/debug/glrmon validate $$f >/dev/null || { ./target/debug/glrmon validate $$f; exit 1; }; echo "valid: $$f"; done
+	@g=$${CARGO_TARGET_DIR:-target}/debug/glrmon; for f in config/*.toml config/examples/*.toml; do $$g validate $$f >/dev/null || { $$g validate $$f; exit 1; }; echo "valid: $$f"; done
 
 fuzz-build: ## build the fuzz targets (fuzz/: sample, record, status, config and MCAP decoders) so they keep compiling
 	$(CARGO) build --manifest-path fuzz/Cargo.toml --target-dir target
