@@ -18,6 +18,7 @@ mod linalg;
 mod simd;
 pub use simd::{VectorLevel, fused_multiply_add};
 pub mod model;
+pub mod scaling;
 pub mod sparse;
 pub mod threshold;
 
@@ -29,3 +30,4 @@ pub use glr::DEFAULT_RANK_TOLERANCE;
 pub use innovation::InnovationFilter;
 pub use isolation::{FisherStatistics, TestStatistic};
 pub use model::{Dims, Lpv, LpvMatrix, Signals, StateSpace, SystemMatrices};
+pub use scaling::SignalScaling;

@@ -59,7 +59,9 @@ pub use diagnosis::{DiagnosisEngine, DiagnosisError, SpanDiagnosis};
 
 use glrmon_core::consistency::Consistency;
 use glrmon_core::threshold::chi2_upper_quantile;
-use glrmon_core::{AlarmSettings, AlarmState, AlarmTransition, Detector, StepError, StepOutput};
+use glrmon_core::{
+    AlarmSettings, AlarmState, AlarmTransition, Detector, SignalScaling, StepError, StepOutput,
+};
 use glrmon_wire::{
     Alarm, AlarmEnd, ErrorCode, ErrorRecord, IsolationResult, IsolationUpdate, Record, Sample,
     Stage, Stat,
@@ -173,6 +175,16 @@ pub struct Monitor {
     consistency: Option<Consistency>,
     /// Whether a `stat` record is appended for each processed sample.
     stat_records: bool,
+    /// Raw plant units → model units, when the channel has `[channels.scaling]`.
+    intake: Option<Intake>,
+}
+
+/// The intake scaling and its buffers of model-unit U_k, Y_k.
+#[derive(Debug)]
+struct Intake {
+    scaling: SignalScaling,
+    u: Vec<f64>,
+    y: Vec<f64>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -224,7 +236,22 @@ impl Monitor {
             diagnosis_failing: false,
             consistency: None,
             stat_records: true,
+            intake: None,
         }
+    }
+
+    /// Turns every sample's raw U_k, Y_k into model units, (raw − offset) / scale,
+    /// before the detector and the diagnosis see them (`[channels.scaling]`). Records
+    /// carry model-unit innovations; magnitudes are in the units the fault columns were
+    /// written in (raw units for the `sensor_*`/`actuator_*` kinds of a configuration).
+    #[must_use]
+    pub fn with_scaling(mut self, scaling: SignalScaling) -> Self {
+        self.intake = Some(Intake {
+            u: vec![0.0; scaling.inputs()],
+            y: vec![0.0; scaling.outputs()],
+            scaling,
+        });
+        self
     }
 
     /// Whether [`Monitor::on_sample`] appends a `stat` record per processed sample (the
@@ -283,6 +310,9 @@ impl Monitor {
             max_gap: channel.max_gap,
         };
         let mut monitor = Self::new(&channel.name, channel.detector()?, settings);
+        if let Some(scaling) = &channel.scaling {
+            monitor = monitor.with_scaling(scaling.clone());
+        }
         if let Some(c) = channel.consistency {
             monitor = monitor.with_consistency(Consistency::new(channel.innovation_dof(), c)?);
         }
@@ -391,6 +421,26 @@ impl Monitor {
     /// assert_eq!(monitor.counters().samples, 1);
     /// ```
     pub fn on_sample(&mut self, sample: &Sample, records: &mut Vec<Record>) {
+        // The scaled values live in the monitor (no allocation per sample); they are
+        // taken out for the step so that the step may borrow the monitor mutably.
+        match self.intake.take() {
+            None => self.process(sample, &sample.u, &sample.y, records),
+            Some(mut intake) => {
+                if sample.u.len() == intake.u.len() && sample.y.len() == intake.y.len() {
+                    let Intake { scaling, u, y } = &mut intake;
+                    scaling.to_model(&sample.u, &sample.y, u, y);
+                    self.process(sample, &intake.u, &intake.y, records);
+                } else {
+                    // Wrong dimensions: the detector names them on the raw sample.
+                    self.process(sample, &sample.u, &sample.y, records);
+                }
+                self.intake = Some(intake);
+            }
+        }
+    }
+
+    /// [`Monitor::on_sample`] with U_k, Y_k already in model units.
+    fn process(&mut self, sample: &Sample, u: &[f64], y: &[f64], records: &mut Vec<Record>) {
         let k = sample.k.unwrap_or(self.arrivals);
         self.arrivals = self.arrivals.max(k + 1);
         if let Some(next) = self.detector.next_index() {
@@ -459,8 +509,8 @@ impl Monitor {
         }
         let core_sample = glrmon_core::Sample {
             k,
-            u: &sample.u,
-            y: &sample.y,
+            u,
+            y,
             p: &sample.p,
         };
         if self.diagnosis_restart {

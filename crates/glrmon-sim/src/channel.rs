@@ -82,7 +82,9 @@ pub fn expression_source(exprs: Vec<Expr>, seed: u64) -> SignalFn {
 
 /// The fault-free simulator of `channel`: X_0 = x̂_0, the `simulation` plan's inputs,
 /// signals, controller and unknown input (through E, when the channel has one), noise
-/// and expressions drawn from independent streams derived from `seed`.
+/// (correlated through S, when given) and expressions drawn from independent streams
+/// derived from `seed`. With `[channels.scaling]` the plan's inputs and the published
+/// outputs are in raw units, as the plant's would be.
 ///
 /// # Errors
 /// [`SimError::Dimension`] when x̂_0, the controller or E do not fit the model.
@@ -102,6 +104,12 @@ pub fn from_channel(channel: &Channel, seed: u64) -> Result<Simulator, SimError>
             kp: c.kp,
             ki: c.ki,
         })?;
+    }
+    if let Some(s) = &channel.cross_covariance {
+        sim = sim.with_cross_covariance(s.clone())?;
+    }
+    if let Some(s) = &channel.scaling {
+        sim = sim.with_scaling(s.clone())?;
     }
     if let Some(e) = &channel.unknown_input {
         sim = sim.with_unknown_input(
@@ -233,6 +241,52 @@ input = 0
         assert_eq!(
             err.to_string(),
             "channel \"plant\" has no fault \"nope\" (faults: bias)"
+        );
+    }
+
+    /// An innovation model x⁺ = Ax + Ke, y = Cx + e written Q = K·Re·Kᵀ, S = K·Re,
+    /// R = Re: the simulated W_k must equal K·V_k, so the exact predictor's innovation
+    /// is V_k itself and its normalised square has mean p (here 2). Independent noises
+    /// with the same Q and R would leave the filter with a larger, coloured innovation.
+    #[test]
+    fn correlated_noises_follow_the_cross_covariance() {
+        // K = [[0.5, 0.1], [0.0, 0.3]], Re = diag(1, 4): K·Re = [[0.5, 0.4], [0, 1.2]],
+        // K·Re·Kᵀ = [[0.29, 0.12], [0.12, 0.36]].
+        let text = r#"
+[[channels]]
+name = "innovation"
+[channels.model]
+F = [[0.9, 0.2], [0.0, 0.7]]
+H = [[1.0, 0.0], [0.0, 1.0]]
+Q = [[0.29, 0.12], [0.12, 0.36]]
+R = [[1.0, 0.0], [0.0, 4.0]]
+S = [[0.5, 0.4], [0.0, 1.2]]
+P0 = 1e-9
+[[channels.faults]]
+kind = "all_sensors"
+"#;
+        let c = glrmon_spec::parse(text).unwrap().channels[0].clone();
+        let mut sim = from_channel(&c, 5).unwrap();
+        let mut detector = c.detector().unwrap();
+        let mut out = glrmon_core::StepOutput::new(2, detector.fault_count());
+        let n = 20_000;
+        let mut nis = 0.0;
+        for _ in 0..n {
+            let x = sim.next_sample();
+            let s = glrmon_core::Sample {
+                k: x.k,
+                u: &x.u,
+                y: &x.y,
+                p: &x.p,
+            };
+            detector.step(&s, &mut out).unwrap();
+            nis += out.normalized_innovation;
+        }
+        // NIS ~ χ²(2): variance 4, so the mean's σ is √(4/n) = 0.014.
+        let mean = nis / f64::from(n);
+        assert!(
+            (mean - 2.0).abs() < 4.0 * (4.0 / f64::from(n)).sqrt(),
+            "mean NIS {mean}"
         );
     }
 }

@@ -16,7 +16,9 @@ pub mod channel;
 pub mod rng;
 pub mod scenarios;
 
-use glrmon_core::{Dims, FaultDictionary, LpvMatrix, Onset, Signals, StateSpace, SystemMatrices};
+use glrmon_core::{
+    Dims, FaultDictionary, LpvMatrix, Onset, SignalScaling, Signals, StateSpace, SystemMatrices,
+};
 use nalgebra::{DMatrix, DVector};
 
 pub use channel::{ChannelError, expression_source, fault_magnitudes, from_channel, inject};
@@ -95,6 +97,12 @@ pub struct Simulator {
     noise_v: DVector<f64>,
     sqrt_q: DMatrix<f64>,
     sqrt_r: DMatrix<f64>,
+    /// S = E(W_kV_kᵀ), when the noises are correlated.
+    cross_covariance: Option<DMatrix<f64>>,
+    /// Raw plant units ↔ model units: inputs are produced and outputs published raw.
+    scaling: Option<SignalScaling>,
+    /// U_k in model units (the raw U_k is the sample's).
+    u_model: Vec<f64>,
 }
 
 impl std::fmt::Debug for Simulator {
@@ -145,7 +153,53 @@ impl Simulator {
             noise_v: DVector::zeros(p),
             sqrt_q: DMatrix::zeros(n, n),
             sqrt_r: DMatrix::zeros(p, p),
+            cross_covariance: None,
+            scaling: None,
+            u_model: Vec::new(),
         })
+    }
+
+    /// Correlated process and measurement noises, E(W_kV_kᵀ) = S (n×p): W_k is drawn as
+    /// S R_k⁻¹ V_k + (Q_k − S R_k⁻¹ Sᵀ)^{1/2} ξ_k, so that cov(W_k) = Q_k and
+    /// cov(W_k, V_k) = S (an identified innovation model, Q = K Re Kᵀ, S = K Re,
+    /// R = Re, gives W_k = K V_k exactly).
+    ///
+    /// # Errors
+    /// [`SimError::Dimension`] when S is not n×p.
+    pub fn with_cross_covariance(mut self, s: DMatrix<f64>) -> Result<Self, SimError> {
+        if s.shape() != (self.dims.states, self.dims.outputs) {
+            return Err(SimError::Dimension(format!(
+                "S is {}×{}, model has {} states and {} outputs",
+                s.nrows(),
+                s.ncols(),
+                self.dims.states,
+                self.dims.outputs
+            )));
+        }
+        self.cross_covariance = Some(s);
+        Ok(self)
+    }
+
+    /// Signals in the plant's raw units: U_k (from the input functions and the
+    /// controller) is raw and enters the model as (U_k − offset) / scale; Y_k is
+    /// computed in model units and published as offset + scale·Y_k, as a scaled
+    /// channel's monitor expects (`[channels.scaling]`).
+    ///
+    /// # Errors
+    /// [`SimError::Dimension`] when the scaling does not have the model's inputs and
+    /// outputs.
+    pub fn with_scaling(mut self, scaling: SignalScaling) -> Result<Self, SimError> {
+        if scaling.inputs() != self.dims.inputs || scaling.outputs() != self.dims.outputs {
+            return Err(SimError::Dimension(format!(
+                "the scaling has {} inputs and {} outputs, model has {} and {}",
+                scaling.inputs(),
+                scaling.outputs(),
+                self.dims.inputs,
+                self.dims.outputs
+            )));
+        }
+        self.scaling = Some(scaling);
+        Ok(self)
     }
 
     /// Injects `injection` of the faults in `faults` (a dictionary built like the
@@ -260,8 +314,13 @@ impl Simulator {
             Some(f) => f(k, &mut out.p),
             None => out.p.iter_mut().for_each(|x| *x = 0.0),
         }
+        self.u_model.clear();
+        self.u_model.extend_from_slice(&out.u);
+        if let Some(s) = &self.scaling {
+            s.input_to_model(&mut self.u_model);
+        }
         let signals = Signals {
-            u: &out.u,
+            u: &self.u_model,
             p: &out.p,
         };
         self.model.evaluate(k, &signals, &mut self.sys);
@@ -280,8 +339,8 @@ impl Simulator {
             *v = self.rng.normal();
         }
         let v = &self.sqrt_r * &self.noise_v;
-        let u = DVector::from_column_slice(&out.u);
-        let mut y = &self.sys.h * &self.x + &self.sys.j * &u + v;
+        let mut u = DVector::from_column_slice(&self.u_model);
+        let mut y = &self.sys.h * &self.x + &self.sys.j * &u + &v;
         if let (Some(f), Some(inj)) = (&self.faults, &self.injection) {
             for (j, fault) in f.faults().iter().enumerate() {
                 let factor = profile_factor(fault.onset, k, inj.onset, false);
@@ -291,21 +350,40 @@ impl Simulator {
             }
         }
         out.y.copy_from_slice(y.as_slice());
-        // Closed loop: U_k from Y_k.
-        let mut u = u;
+        if let Some(s) = &self.scaling {
+            s.to_raw(&mut [], &mut out.y);
+        }
+        // Closed loop: U_k from Y_k, both raw.
         if let Some(c) = self.controller {
-            let e = c.setpoint - y[c.output];
-            u[c.input] = c.kp * e + self.integral;
+            let e = c.setpoint - out.y[c.output];
+            let control = c.kp * e + self.integral;
             self.integral += c.ki * e;
-            out.u[c.input] = u[c.input];
-            self.held_control = u[c.input];
+            out.u[c.input] = control;
+            self.held_control = control;
+            u[c.input] = match &self.scaling {
+                Some(s) => (control - s.u_offset()[c.input]) / s.u_scale()[c.input],
+                None => control,
+            };
         }
         // X_{k+1}
         psd_sqrt(&self.sys.q, &mut self.sqrt_q);
         for w in self.noise_w.iter_mut() {
             *w = self.rng.normal();
         }
-        let mut x = &self.sys.f * &self.x + &self.sys.g * &u + &self.sqrt_q * &self.noise_w;
+        let w = match &self.cross_covariance {
+            None => &self.sqrt_q * &self.noise_w,
+            Some(cross) => {
+                // S R⁻¹ through R's Cholesky factor; R is positive definite (validated).
+                let gain = self.sys.r.clone().cholesky().map_or_else(
+                    || DMatrix::zeros(cross.nrows(), cross.ncols()),
+                    |ch| ch.solve(&cross.transpose()).transpose(),
+                );
+                let conditional = &self.sys.q - &gain * cross.transpose();
+                psd_sqrt(&conditional, &mut self.sqrt_q);
+                &gain * &v + &self.sqrt_q * &self.noise_w
+            }
+        };
+        let mut x = &self.sys.f * &self.x + &self.sys.g * &u + w;
         if let Some((e, d, buf, at_k)) = &mut self.unknown {
             d(k, buf.as_mut_slice());
             e.evaluate_into(&out.p, at_k);

@@ -33,7 +33,7 @@ use glrmon_core::sparse::LassoSettings;
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{
     AlarmSettings, Column, DEFAULT_RANK_TOLERANCE, Detector, Dims, Fault, FaultDictionary, Lpv,
-    LpvMatrix, ModelError, Onset, WindowSettings,
+    LpvMatrix, ModelError, Onset, SignalScaling, WindowSettings,
 };
 use nalgebra::{DMatrix, DVector};
 
@@ -446,6 +446,8 @@ pub struct Channel {
     pub unknown_input: Option<LpvMatrix>,
     /// Cross-covariance S = E(W_kV_kᵀ) (n×p) of the noises, if given.
     pub cross_covariance: Option<DMatrix<f64>>,
+    /// Raw plant units → model units (`[channels.scaling]`), applied on intake.
+    pub scaling: Option<SignalScaling>,
     /// X̂_0.
     pub x0: DVector<f64>,
     /// P_0.
@@ -1150,7 +1152,11 @@ impl Validator {
             outputs: p,
             signals,
         };
-        let faults = self.faults(prefix, spec, dims, &j);
+        let scaling = spec
+            .scaling
+            .as_ref()
+            .and_then(|sc| self.scaling(prefix, sc, dims));
+        let faults = self.faults(prefix, spec, dims, (&g, &j), scaling.as_ref());
         if self.errors.len() > before {
             return None;
         }
@@ -1385,6 +1391,7 @@ impl Validator {
             model: lpv,
             unknown_input: e,
             cross_covariance: cross,
+            scaling,
             x0,
             p0: p0
                 .map(|m| m.base().clone())
@@ -1591,12 +1598,76 @@ impl Validator {
         }
     }
 
+    /// `[channels.scaling]` into a [`SignalScaling`]: absent lists are offset 0 and
+    /// scale 1, present ones have one entry per input (u_*) or output (y_*).
+    fn scaling(
+        &mut self,
+        prefix: &str,
+        spec: &schema::ScalingSpec,
+        dims: Dims,
+    ) -> Option<SignalScaling> {
+        let before = self.errors.len();
+        let list =
+            |v: &mut Self, field: &str, given: &Option<Vec<f64>>, len: usize, default: f64| {
+                let path = join(prefix, &format!("scaling.{field}"));
+                let what = if field.starts_with('u') {
+                    "inputs"
+                } else {
+                    "outputs"
+                };
+                match given {
+                    Some(x) if x.len() != len => {
+                        v.error(
+                            path,
+                            format!("has {} entries but the channel has {len} {what}", x.len()),
+                        );
+                        Vec::new()
+                    }
+                    Some(x) => {
+                        let scale = field.ends_with("scale");
+                        for (i, value) in x.iter().enumerate() {
+                            if !value.is_finite() || (scale && *value <= 0.0) {
+                                v.error(
+                                    format!("{path}[{i}]"),
+                                    format!(
+                                        "{value} must be {}",
+                                        if scale {
+                                            "finite and positive"
+                                        } else {
+                                            "finite"
+                                        }
+                                    ),
+                                );
+                            }
+                        }
+                        x.clone()
+                    }
+                    None => vec![default; len],
+                }
+            };
+        let u_offset = list(self, "u_offset", &spec.u_offset, dims.inputs, 0.0);
+        let u_scale = list(self, "u_scale", &spec.u_scale, dims.inputs, 1.0);
+        let y_offset = list(self, "y_offset", &spec.y_offset, dims.outputs, 0.0);
+        let y_scale = list(self, "y_scale", &spec.y_scale, dims.outputs, 1.0);
+        if self.errors.len() > before {
+            return None;
+        }
+        match SignalScaling::new(u_offset, u_scale, y_offset, y_scale) {
+            Ok(s) => Some(s),
+            Err(e) => {
+                self.error(join(prefix, "scaling"), e.to_string());
+                None
+            }
+        }
+    }
+
     fn faults(
         &mut self,
         prefix: &str,
         spec: &ChannelSpec,
         dims: Dims,
-        j: &LpvMatrix,
+        (g, j): (&LpvMatrix, &LpvMatrix),
+        scaling: Option<&SignalScaling>,
     ) -> Vec<FaultPlan> {
         if spec.faults.is_empty() {
             self.error(
@@ -1618,7 +1689,9 @@ impl Validator {
                 continue;
             }
             if let Some(plan) = self.fault(path, f, dims, j) {
-                out.push(plan);
+                if let Some(plan) = self.in_raw_units(path, f, plan, g, scaling) {
+                    out.push(plan);
+                }
             }
         }
         let known = out.iter().filter(|f| f.onset == Onset::Known).count();
@@ -1690,6 +1763,72 @@ impl Validator {
             }
         }
         out
+    }
+
+    /// A `sensor_*` / `actuator_*` fault of a scaled channel, with its magnitude in the
+    /// signal's raw units: a raw bias b of y_j is b / y_scale_j in model units, so the
+    /// column is e_j / y_scale_j (G·e_i / u_scale_i, J·e_i / u_scale_i for an input).
+    /// An actuator gain loss θ is unit-free, but with an input offset the model input is
+    /// no longer proportional to the raw one, so that case is refused.
+    fn in_raw_units(
+        &mut self,
+        path: &str,
+        f: &FaultSpec,
+        plan: FaultPlan,
+        g: &LpvMatrix,
+        scaling: Option<&SignalScaling>,
+    ) -> Option<FaultPlan> {
+        let Some(scaling) = scaling else {
+            return Some(plan);
+        };
+        let divide = |c: ColumnPlan, s: f64| match c {
+            ColumnPlan::Constant(v) => ColumnPlan::Constant(v / s),
+            other => other,
+        };
+        match (f.kind.as_deref(), f.input, f.output) {
+            (Some("sensor_bias" | "sensor_drift"), _, Some(j)) => {
+                let s = scaling.y_scale().get(j).copied().unwrap_or(1.0);
+                Some(FaultPlan {
+                    output: divide(plan.output, s),
+                    ..plan
+                })
+            }
+            (Some("actuator_bias"), Some(i), _) => {
+                let s = scaling.u_scale().get(i).copied().unwrap_or(1.0);
+                if s == 1.0 {
+                    return Some(plan);
+                }
+                if !g.terms().is_empty() {
+                    self.error(
+                        path.to_owned(),
+                        format!(
+                            "kind \"actuator_bias\" on a scaled input (scaling.u_scale[{i}] = {s}) \
+                             needs a constant G: write psi/phi for an LPV G"
+                        ),
+                    );
+                    return None;
+                }
+                Some(FaultPlan {
+                    state: ColumnPlan::Constant(g.base().column(i) / s),
+                    output: divide(plan.output, s),
+                    ..plan
+                })
+            }
+            (Some("actuator_gain"), Some(i), _) => {
+                if scaling.u_offset().get(i).is_some_and(|o| *o != 0.0) {
+                    self.error(
+                        path.to_owned(),
+                        format!(
+                            "kind \"actuator_gain\" on an input with an operating point \
+                             (scaling.u_offset[{i}] ≠ 0) is not supported: write psi/phi"
+                        ),
+                    );
+                    return None;
+                }
+                Some(plan)
+            }
+            _ => Some(plan),
+        }
     }
 
     fn fault(

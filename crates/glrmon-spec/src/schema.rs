@@ -225,6 +225,9 @@ pub struct ChannelSpec {
     pub signals: Option<usize>,
     /// The state-space model.
     pub model: ModelSpec,
+    /// Natural units: the operating point and scale that turn the plant's raw U, Y
+    /// into the model's (`[channels.scaling]`).
+    pub scaling: Option<ScalingSpec>,
     /// The fault dictionary.
     #[serde(default)]
     pub faults: Vec<FaultSpec>,
@@ -283,6 +286,22 @@ pub struct ModelSpec {
     /// P_0 (default I), symmetric positive definite (rounded matrices as for R).
     #[serde(rename = "P0")]
     pub p0: Option<MatrixSpec>,
+}
+
+/// `[channels.scaling]`: model value = (raw value − offset) / scale, per input and
+/// output, applied to every sample on intake (and inverted for simulated samples). An
+/// absent list means offset 0 or scale 1 for each signal of that kind.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScalingSpec {
+    /// Operating point of each input u0…u{l−1}.
+    pub u_offset: Option<Vec<f64>>,
+    /// Scale of each input (finite, positive).
+    pub u_scale: Option<Vec<f64>>,
+    /// Operating point of each output y0…y{p−1}.
+    pub y_offset: Option<Vec<f64>>,
+    /// Scale of each output (finite, positive).
+    pub y_scale: Option<Vec<f64>>,
 }
 
 /// A matrix: scalar × identity, dense rows, or LPV table.
