@@ -54,11 +54,12 @@ pub const DEFAULT_SENSOR_BIAS: f64 = 0.125;
 /// within tens of samples.
 pub const DEFAULT_ACTUATOR_BIAS: f64 = 0.25;
 
-/// Default leak area, 0.003 cm² (≈ 4 % of the outlet areas 0.057–0.071 cm², a hole of
-/// about 0.6 mm diameter). A leak from a lower tank lowers its level by ≈ 8 % (≈ 1 cm,
-/// 0.5 V) at steady state; from an upper tank by ≈ 8 % of a smaller level, which also
-/// reaches the lower tank it drains into. A leak is not in the linear fault dictionary
-/// (it changes the dynamics, not an additive input), a realistic extra.
+/// Default leak area, 0.003 cm² (≈ 4–5 % of the outlet areas 0.057–0.071 cm², a hole of
+/// about 0.6 mm diameter). At the P− operating point a leak from lower tank 0 or 1
+/// lowers its level at steady state by 1.0 or 1.25 cm (0.5 or 0.6 V, 20–25 sensor-noise
+/// stds); a leak from upper tank 2 or 3 lowers it by 0.13–0.14 cm (≈ 8 %, 3 stds) and
+/// the lower tank it drains into by 0.36–0.42 cm. A leak is not in the linear fault
+/// dictionary (it changes the dynamics, not an additive input), a realistic extra.
 pub const DEFAULT_LEAK_AREA: f64 = 0.003;
 
 /// The quadruple-tank plant's physical parameters (Johansson 2000, Table I).
@@ -465,12 +466,11 @@ impl TankRun {
             min_hold,
             max_hold,
         } = self.excitation
+            && (min_hold == 0 || max_hold < min_hold || amplitude.is_nan() || amplitude < 0.0)
         {
-            if min_hold == 0 || max_hold < min_hold || !(amplitude >= 0.0) {
-                return bad(format!(
-                    "random steps need amplitude ≥ 0 and 1 ≤ min_hold ≤ max_hold, got {amplitude}, {min_hold}, {max_hold}"
-                ));
-            }
+            return bad(format!(
+                "random steps need amplitude ≥ 0 and 1 ≤ min_hold ≤ max_hold, got {amplitude}, {min_hold}, {max_hold}"
+            ));
         }
         let p = if self.measure_pump_flow { 6 } else { 4 };
         for f in &self.faults {
@@ -484,7 +484,7 @@ impl TankRun {
                 TankFaultKind::ActuatorBias { input, .. } if input >= 2 => {
                     return bad(format!("actuator bias on u{input}, inputs are u0, u1"));
                 }
-                TankFaultKind::Leak { tank, area } if tank >= 4 || !(area >= 0.0) => {
+                TankFaultKind::Leak { tank, area } if tank >= 4 || area.is_nan() || area < 0.0 => {
                     return bad(format!(
                         "leak of {area} cm² from tank {tank}, tanks are 0–3"
                     ));
@@ -563,8 +563,8 @@ impl TankRun {
             }
             // Measurements y_k.
             let mut y = Vec::with_capacity(p);
-            for i in 0..4 {
-                y.push(plant.sensor_gain * h[i] + self.sensor_noise_std * meas.normal());
+            for level in h {
+                y.push(plant.sensor_gain * level + self.sensor_noise_std * meas.normal());
             }
             if self.measure_pump_flow {
                 for j in 0..2 {
