@@ -15,6 +15,7 @@
 pub mod channel;
 pub mod rng;
 pub mod scenarios;
+pub mod tank;
 
 use glrmon_core::{
     Dims, FaultDictionary, LpvMatrix, Onset, SignalScaling, Signals, StateSpace, SystemMatrices,
