@@ -270,7 +270,7 @@ pub fn recorded(
             return Err(CalibrateError::Captured(path.to_owned()));
         }
     }
-    let mut samples = Samples::open(path, &channel.name, channel.dims)?;
+    let mut samples = Samples::for_channel(path, channel)?;
     let (mut skipped, mut first_skip) = (0u64, None);
     let stats = statistics(
         channel,

@@ -6,6 +6,7 @@ use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
 
 use glrmon_core::Dims;
+use glrmon_spec::Columns;
 use glrmon_wire::{ErrorCode, Sample};
 
 use crate::{InputError, InputErrorKind};
@@ -18,19 +19,8 @@ enum Slot {
     U(usize),
     Y(usize),
     P(usize),
-}
-
-impl std::fmt::Display for Slot {
-    /// The column's header name.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Slot::K => write!(f, "k"),
-            Slot::T => write!(f, "t"),
-            Slot::U(i) => write!(f, "u{i}"),
-            Slot::Y(i) => write!(f, "y{i}"),
-            Slot::P(i) => write!(f, "p{i}"),
-        }
-    }
+    /// A column the configuration's `[channels.columns]` does not name: not read.
+    Skip,
 }
 
 /// A streaming reader of sample rows; memory stays flat in the file size.
@@ -66,6 +56,8 @@ impl std::fmt::Display for Slot {
 pub struct CsvReader<R> {
     input: R,
     slots: Vec<Slot>,
+    /// The header's column names, for messages.
+    names: Vec<String>,
     line: String,
     row: u64,
     dims: Dims,
@@ -123,10 +115,24 @@ impl CsvReader<BufReader<File>> {
     /// [`InputErrorKind::OpenCsv`] when the file cannot be opened,
     /// [`InputErrorKind::Header`] when its header does not fit `dims`.
     pub fn open(path: &Path, dims: Dims) -> Result<Self, InputError> {
+        Self::open_with_columns(path, dims, &Columns::numbered(dims))
+    }
+
+    /// Opens a file and reads its header with the channel's column names (see
+    /// [`CsvReader::with_columns`]).
+    ///
+    /// # Errors
+    /// As [`CsvReader::open`].
+    pub fn open_with_columns(
+        path: &Path,
+        dims: Dims,
+        columns: &Columns,
+    ) -> Result<Self, InputError> {
         let file =
             File::open(path).map_err(|e| InputError::new(path, InputErrorKind::OpenCsv(e)))?;
         let reader = BufReader::with_capacity(1 << 16, file);
-        Self::new(reader, dims).map_err(|e| InputError::new(path, InputErrorKind::Header(e)))
+        Self::with_columns(reader, dims, columns)
+            .map_err(|e| InputError::new(path, InputErrorKind::Header(e)))
     }
 }
 
@@ -149,7 +155,43 @@ impl<R: BufRead> CsvReader<R> {
     /// assert!(matches!(err, HeaderError::Missing(ref c) if c == "y1"));
     /// assert_eq!(err.to_string(), r#"column "y1" is missing from the header"#);
     /// ```
-    pub fn new(mut input: R, dims: Dims) -> Result<Self, HeaderError> {
+    pub fn new(input: R, dims: Dims) -> Result<Self, HeaderError> {
+        Self::with_columns(input, dims, &Columns::numbered(dims))
+    }
+
+    /// A reader whose columns are named by `columns` (a channel's `[channels.columns]`):
+    /// the named columns are read into u, y, p in the given order, `k` and `t` as
+    /// usual, and when the names were given explicitly (`columns.named`) every other
+    /// column is skipped, so that a plant's export with more signals than the model
+    /// reads as it is. With numbered columns ([`Columns::numbered`]) an unknown column
+    /// is an error, as in [`CsvReader::new`].
+    ///
+    /// # Examples
+    ///
+    /// ```
+    /// use glrmon_core::Dims;
+    /// use glrmon_input::CsvReader;
+    /// use glrmon_spec::Columns;
+    /// use glrmon_wire::Sample;
+    ///
+    /// let dims = Dims { states: 1, inputs: 1, outputs: 1, signals: 0 };
+    /// let columns = Columns {
+    ///     u: vec!["FIC101".into()],
+    ///     y: vec!["TI205".into()],
+    ///     p: vec![],
+    ///     named: true,
+    /// };
+    /// let file = "t,TI205,spare,FIC101\n0.5,71.2,9,3.1\n";
+    /// let mut rows = CsvReader::with_columns(file.as_bytes(), dims, &columns)?;
+    /// let mut sample = Sample::default();
+    /// rows.next_into(&mut sample).unwrap().unwrap();
+    /// assert_eq!((sample.u[0], sample.y[0]), (3.1, 71.2));
+    /// # Ok::<(), glrmon_input::HeaderError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// As [`CsvReader::new`]; a missing column is named as the configuration names it.
+    pub fn with_columns(mut input: R, dims: Dims, columns: &Columns) -> Result<Self, HeaderError> {
         let mut header = String::new();
         input.read_line(&mut header).map_err(HeaderError::Read)?;
         let header = header.trim_end_matches(['\n', '\r']);
@@ -157,10 +199,26 @@ impl<R: BufRead> CsvReader<R> {
             return Err(HeaderError::Empty);
         }
         let mut slots = Vec::new();
+        let mut names = Vec::new();
         let mut seen = std::collections::HashSet::new();
         for name in header.split(',').map(str::trim) {
             if !seen.insert(name.to_owned()) {
                 return Err(HeaderError::Duplicate(name.to_owned()));
+            }
+            names.push(name.to_owned());
+            if columns.named {
+                let find = |list: &[String]| list.iter().position(|c| c == name);
+                let slot = match name {
+                    "k" => Slot::K,
+                    "t" => Slot::T,
+                    _ => find(&columns.u)
+                        .map(Slot::U)
+                        .or_else(|| find(&columns.y).map(Slot::Y))
+                        .or_else(|| find(&columns.p).map(Slot::P))
+                        .unwrap_or(Slot::Skip),
+                };
+                slots.push(slot);
+                continue;
             }
             let index = |prefix: &str, count: usize, what: &'static str| {
                 let i: usize = name[prefix.len()..]
@@ -185,16 +243,15 @@ impl<R: BufRead> CsvReader<R> {
             };
             slots.push(slot);
         }
-        for (prefix, count) in [("u", dims.inputs), ("y", dims.outputs), ("p", dims.signals)] {
-            for i in 0..count {
-                if !seen.contains(&format!("{prefix}{i}")) {
-                    return Err(HeaderError::Missing(format!("{prefix}{i}")));
-                }
+        for list in [&columns.u, &columns.y, &columns.p] {
+            if let Some(missing) = list.iter().find(|c| !seen.contains(c.as_str())) {
+                return Err(HeaderError::Missing(missing.clone()));
             }
         }
         Ok(Self {
             input,
             slots,
+            names,
             line: String::new(),
             row: 1,
             dims,
@@ -272,9 +329,9 @@ impl<R: BufRead> CsvReader<R> {
             }
         }
         sample.k = k;
-        for (text, slot) in line.split(',').zip(&self.slots) {
+        for ((text, slot), name) in line.split(',').zip(&self.slots).zip(&self.names) {
             let target: &mut f64 = match *slot {
-                Slot::K => continue,
+                Slot::K | Slot::Skip => continue,
                 Slot::T => sample.t.insert(0.0),
                 Slot::U(i) => &mut sample.u[i],
                 Slot::Y(i) => &mut sample.y[i],
@@ -284,11 +341,11 @@ impl<R: BufRead> CsvReader<R> {
             match text.trim().parse::<f64>() {
                 Ok(v) if v.is_finite() => *target = v,
                 Ok(_) => {
-                    let msg = format!("column {slot}: \"{}\" is not finite", text.trim());
+                    let msg = format!("column {name}: \"{}\" is not finite", text.trim());
                     return Some(Err(self.err(k, ErrorCode::NonFinite, msg)));
                 }
                 Err(_) => {
-                    let msg = format!("column {slot}: \"{}\" is not a number", text.trim());
+                    let msg = format!("column {name}: \"{}\" is not a number", text.trim());
                     return Some(Err(self.err(k, ErrorCode::WrongType, msg)));
                 }
             }

@@ -6,6 +6,7 @@ use std::io::BufReader;
 use std::path::Path;
 
 use glrmon_core::Dims;
+use glrmon_spec::{Channel, Columns};
 use glrmon_runtime::InputItem;
 use glrmon_wire::{IntakeEvent, Sample};
 
@@ -55,10 +56,28 @@ impl Samples {
     /// An [`InputError`] when the file cannot be opened, is not a recording, or its
     /// CSV header does not fit `dims`.
     pub fn open(path: &Path, channel: &str, dims: Dims) -> Result<Self, InputError> {
+        Self::open_columns(path, channel, dims, &Columns::numbered(dims))
+    }
+
+    /// [`Samples::open`] for a configured channel: a CSV file's columns are the
+    /// channel's `[channels.columns]` names.
+    ///
+    /// # Errors
+    /// As [`Samples::open`].
+    pub fn for_channel(path: &Path, channel: &Channel) -> Result<Self, InputError> {
+        Self::open_columns(path, &channel.name, channel.dims, &channel.columns)
+    }
+
+    fn open_columns(
+        path: &Path,
+        channel: &str,
+        dims: Dims,
+        columns: &Columns,
+    ) -> Result<Self, InputError> {
         let source = if is_mcap(path) {
             Source::Mcap(Box::new(McapInput::open(path)?), channel.to_owned())
         } else {
-            Source::Csv(CsvReader::open(path, dims)?)
+            Source::Csv(CsvReader::open_with_columns(path, dims, columns)?)
         };
         Ok(Self { source })
     }

@@ -429,6 +429,35 @@ pub struct DiagnosisSettings {
 /// Default level of the sparse diagnosis's no-fault test: as `glr.isolation_alpha`.
 pub const DEFAULT_DIAGNOSIS_ALPHA: f64 = 0.01;
 
+/// The CSV column names of a channel's inputs, outputs and signals.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Columns {
+    /// The column read into u_i, for each input.
+    pub u: Vec<String>,
+    /// The column read into y_i, for each output.
+    pub y: Vec<String>,
+    /// The column read into p_i, for each scheduling signal.
+    pub p: Vec<String>,
+    /// The names were given (`[channels.columns]`): a file's other columns are skipped.
+    /// Otherwise they are the numbered names and an unknown column is an error.
+    pub named: bool,
+}
+
+impl Columns {
+    /// `u0…u{l−1}`, `y0…`, `p0…`: the default names.
+    #[must_use]
+    pub fn numbered(dims: Dims) -> Self {
+        let names =
+            |prefix: char, count: usize| (0..count).map(|i| format!("{prefix}{i}")).collect();
+        Self {
+            u: names('u', dims.inputs),
+            y: names('y', dims.outputs),
+            p: names('p', dims.signals),
+            named: false,
+        }
+    }
+}
+
 /// A validated channel.
 #[derive(Debug, Clone)]
 pub struct Channel {
@@ -448,6 +477,8 @@ pub struct Channel {
     pub cross_covariance: Option<DMatrix<f64>>,
     /// Raw plant units → model units (`[channels.scaling]`), applied on intake.
     pub scaling: Option<SignalScaling>,
+    /// The CSV column names of the signals (`[channels.columns]`).
+    pub columns: Columns,
     /// X̂_0.
     pub x0: DVector<f64>,
     /// P_0.
@@ -1156,6 +1187,7 @@ impl Validator {
             .scaling
             .as_ref()
             .and_then(|sc| self.scaling(prefix, sc, dims));
+        let columns = self.columns(prefix, spec.columns.as_ref(), dims);
         let faults = self.faults(prefix, spec, dims, (&g, &j), scaling.as_ref());
         if self.errors.len() > before {
             return None;
@@ -1392,6 +1424,7 @@ impl Validator {
             unknown_input: e,
             cross_covariance: cross,
             scaling,
+            columns,
             x0,
             p0: p0
                 .map(|m| m.base().clone())
@@ -1596,6 +1629,52 @@ impl Validator {
                 ),
             );
         }
+    }
+
+    /// `[channels.columns]` into [`Columns`]: one unique, non-empty name per signal,
+    /// none of them `k` or `t` and none with a comma.
+    fn columns(&mut self, prefix: &str, spec: Option<&schema::ColumnsSpec>, dims: Dims) -> Columns {
+        let mut columns = Columns::numbered(dims);
+        let Some(spec) = spec else {
+            return columns;
+        };
+        columns.named = true;
+        let mut all: Vec<(String, String)> = Vec::new();
+        for (field, given, target, count, what) in [
+            ("u", &spec.u, &mut columns.u, dims.inputs, "inputs"),
+            ("y", &spec.y, &mut columns.y, dims.outputs, "outputs"),
+            ("p", &spec.p, &mut columns.p, dims.signals, "signals"),
+        ] {
+            let path = join(prefix, &format!("columns.{field}"));
+            if let Some(names) = given {
+                if names.len() != count {
+                    self.error(
+                        path.clone(),
+                        format!(
+                            "has {} names but the channel has {count} {what}",
+                            names.len()
+                        ),
+                    );
+                }
+                target.clone_from(names);
+            }
+            for (i, name) in target.iter().enumerate() {
+                let at = format!("{path}[{i}]");
+                if name.trim().is_empty() || name.trim() != name || name.contains(',') {
+                    self.error(
+                        at,
+                        format!("\"{name}\" is not a column name (empty, padded or with a comma)"),
+                    );
+                } else if name == "k" || name == "t" {
+                    self.error(at, format!("\"{name}\" is the sample index or time column"));
+                } else if let Some((other, _)) = all.iter().find(|(_, n)| n == name) {
+                    self.error(at, format!("\"{name}\" is also {other}"));
+                } else {
+                    all.push((format!("{field}{i}"), name.clone()));
+                }
+            }
+        }
+        columns
     }
 
     /// `[channels.scaling]` into a [`SignalScaling`]: absent lists are offset 0 and

@@ -228,6 +228,8 @@ pub struct ChannelSpec {
     /// Natural units: the operating point and scale that turn the plant's raw U, Y
     /// into the model's (`[channels.scaling]`).
     pub scaling: Option<ScalingSpec>,
+    /// The CSV column names of the inputs, outputs and signals (`[channels.columns]`).
+    pub columns: Option<ColumnsSpec>,
     /// The fault dictionary.
     #[serde(default)]
     pub faults: Vec<FaultSpec>,
@@ -302,6 +304,20 @@ pub struct ScalingSpec {
     pub y_offset: Option<Vec<f64>>,
     /// Scale of each output (finite, positive).
     pub y_scale: Option<Vec<f64>>,
+}
+
+/// `[channels.columns]`: the CSV header names read into u0…, y0…, p0… (in that
+/// order); other columns of such a file are skipped. An absent list keeps the numbered
+/// names (`u0`, `u1`, …).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ColumnsSpec {
+    /// Names of the inputs' columns.
+    pub u: Option<Vec<String>>,
+    /// Names of the outputs' columns.
+    pub y: Option<Vec<String>>,
+    /// Names of the scheduling signals' columns.
+    pub p: Option<Vec<String>>,
 }
 
 /// A matrix: scalar × identity, dense rows, or LPV table.

@@ -68,11 +68,10 @@ struct Extent {
 /// position). Bad rows and gaps are errors: the regression needs consecutive samples.
 fn for_each_sample(
     path: &Path,
-    channel: &str,
-    dims: glrmon_core::Dims,
+    channel: &glrmon_spec::Channel,
     mut visit: impl FnMut(u64, &Sample) -> anyhow::Result<bool>,
 ) -> anyhow::Result<Option<Extent>> {
-    let mut samples = Samples::open(path, channel, dims).map_err(input_error)?;
+    let mut samples = Samples::for_channel(path, channel).map_err(input_error)?;
     let mut sample = Sample::default();
     let mut extent: Option<Extent> = None;
     let mut position = 0u64;
@@ -136,7 +135,7 @@ pub(crate) fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
             .map_err(|e| InvalidInput(format!("channel \"{}\": {e}", channel.name)))?;
     }
     // First pass: the file's extent, so that the span and the history are known.
-    let extent = for_each_sample(&args.input, &channel.name, channel.dims, |_, _| Ok(true))?
+    let extent = for_each_sample(&args.input, &channel, |_, _| Ok(true))?
         .ok_or_else(|| InvalidInput(format!("{}: no samples", args.input.display())))?;
     let from = args.from.unwrap_or(extent.first);
     let to = args.to.unwrap_or(extent.last);
@@ -152,7 +151,7 @@ pub(crate) fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     let history = usize::try_from(to - from + 2).unwrap_or(usize::MAX);
     let mut engine = DiagnosisEngine::new(&channel, history)
         .map_err(|e| InvalidInput(format!("channel \"{}\": {e}", channel.name)))?;
-    for_each_sample(&args.input, &channel.name, channel.dims, |k, s| {
+    for_each_sample(&args.input, &channel, |k, s| {
         let sample = glrmon_core::Sample {
             k,
             u: &s.u,

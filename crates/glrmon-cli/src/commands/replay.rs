@@ -135,7 +135,8 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
     };
     let cfg = load_config(config)?;
     let channel = pick(&cfg, args.channel.as_deref())?;
-    let csv = CsvReader::open(&args.input, channel.dims).map_err(input_error)?;
+    let csv = CsvReader::open_with_columns(&args.input, channel.dims, &channel.columns)
+        .map_err(input_error)?;
     let monitor = Monitor::from_channel(channel)?;
     let header = FileHeader {
         config: cfg.source.clone(),
