@@ -188,8 +188,8 @@ pub enum IdentError {
     /// determine.
     #[error(
         "noise covariances not identifiable from the output autocovariances: the design \
-         matrix has rank {rank} for {parameters} free parameters; not determined: \
-         {undetermined:?}; {hint}"
+         matrix has rank {rank} for {parameters} free parameters; parameters in the undetermined \
+         combinations: {undetermined:?}; {hint}"
     )]
     NotIdentifiable {
         /// Numerical rank of the (column-normalised) design matrix.
