@@ -5,8 +5,10 @@
 //! with E[w wᵀ] = Q, E[v vᵀ] = R, E[w vᵀ] = S (same time index, as in
 //! [`solve_riccati`]). Only Q, R, S are estimated; F, G, H, J are kept.
 //!
-//! Outline (Odelson, Rajamani & Rawlings 2006, §3 "the ALS technique"; Åkesson,
-//! Jørgensen, Poulsen & Jørgensen 2008, §3, for the cross covariance S):
+//! Outline (Odelson, Rajamani & Rawlings 2006, the ALS formulation; Åkesson, Jørgensen,
+//! Poulsen & Jørgensen 2008, its generalisation to a correlated S and a noise input
+//! matrix G_w; section and equation numbers are not quoted here because they were not
+//! checked against the papers):
 //!
 //! 1. run a stable, generally suboptimal, one-step predictor with gain L over every
 //!    experiment separately, skip its transient, and pool the sample autocovariances
@@ -18,14 +20,18 @@
 //!
 //!    which is linear in (Q, R, S). The design matrix of that linear map is built one
 //!    column at a time, by evaluating the map on each basis element of the free
-//!    parameters (equivalent to the Kronecker/vec form of Odelson et al. 2006, §3, but
+//!    parameters (equivalent to the Kronecker/vec form of Odelson et al. 2006, but
 //!    without forming (I − Ā ⊗ Ā)⁻¹);
-//! 3. the stacked sample C_j are fitted by (unweighted) least squares, after a rank check
-//!    of the design matrix (identifiability: Odelson et al. 2006, §3, Lemma 4 for S = 0;
-//!    Rajamani & Rawlings 2009 for the general case);
-//! 4. the estimate is projected onto the positive semi-definite cone (Q and R
-//!    separately, or the joint [[Q_w, S_w], [S_wᵀ, R]] when S is estimated) — a simple
-//!    stand-in for the semidefinite-constrained ALS of Rajamani & Rawlings (2009);
+//! 3. the stacked sample C_j are fitted by (unweighted, identity-weighted) least
+//!    squares, after a rank check of the design matrix: its full column rank is the
+//!    uniqueness condition of the ALS solution (Odelson et al. 2006 state the necessary
+//!    and sufficient condition for S = 0; Rajamani & Rawlings 2009 discuss the structure
+//!    G_w and what it makes identifiable);
+//! 4. the unconstrained estimate is projected onto the positive semi-definite cone (Q and
+//!    R separately, or the joint [[Q_w, S_w], [S_wᵀ, R]] when S is estimated). This is a
+//!    simpler stand-in for, not the same as, the semidefinite-constrained ALS of Odelson
+//!    et al. 2006 and Rajamani & Rawlings 2009: with enough data the unconstrained
+//!    estimate is already semi-definite and the two agree;
 //! 5. the Kalman gain of the estimate (Riccati) becomes the next iteration's L.
 //!
 //! Odelson et al. write the predictor as x̂⁺ = A x̂ + A L (y − C x̂); their A L is the L
@@ -165,10 +171,11 @@ pub enum CrossCovariance {
 /// S = G_w S_w; without a noise input matrix G_w = I (Q_w = Q).
 ///
 /// Not every structure is identifiable from output data: the output spectrum only
-/// determines the n·p + p(p + 1)/2 parameters of the innovation form (K, Re), so e.g. a
-/// full Q with a free S is never identifiable, and a full Q with S = 0 needs
-/// roughly n + 1 ≤ 2p. [`estimate_noise`] checks the rank and names the parameters that
-/// are not determined ([`IdentError::NotIdentifiable`]).
+/// determines the n·p + p(p + 1)/2 parameters of the innovation form (K, Re), so a full
+/// Q with a free S is never identifiable, and a full Q with S = 0 fails already for
+/// n = 3, p = 2 (rank 8 for 9 parameters) although it works for n = 2, p = 2.
+/// [`estimate_noise`] checks the rank and names the parameters in the undetermined
+/// combinations ([`IdentError::NotIdentifiable`]).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct NoiseStructure {
     /// G_w (n × g), how the g process noise sources enter the states; `None` = I_n.
