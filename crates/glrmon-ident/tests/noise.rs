@@ -357,6 +357,16 @@ fn non_identifiable_structures_are_an_error_naming_the_parameters() {
         other => panic!("expected NotIdentifiable, got {other}"),
     }
     assert!(err.to_string().contains("rank 8 for 9 free parameters"));
+    // Structural, not a matter of the tolerance: the same at 10⁻¹².
+    let strict = NoiseSettings {
+        rank_tolerance: 1e-12,
+        ..NoiseSettings::default()
+    };
+    let err = estimate_noise(&plant.model, std::slice::from_ref(&exp), &strict).unwrap_err();
+    assert!(
+        matches!(err, IdentError::NotIdentifiable { rank: 8, .. }),
+        "{err}"
+    );
     // A diagonal Q (3 + 3 unknowns) is identifiable for the same system.
     let diagonal = NoiseSettings {
         structure: NoiseStructure {
