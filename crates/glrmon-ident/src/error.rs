@@ -183,6 +183,25 @@ pub enum IdentError {
         /// Which matrix.
         what: &'static str,
     },
+    /// The noise covariances' least-squares design matrix is rank deficient: the chosen
+    /// noise structure has more free parameters than the innovation autocovariances
+    /// determine.
+    #[error(
+        "noise covariances not identifiable from the output autocovariances: the design \
+         matrix has rank {rank} for {parameters} free parameters; parameters in the undetermined \
+         combinations: {undetermined:?}; {hint}"
+    )]
+    NotIdentifiable {
+        /// Numerical rank of the (column-normalised) design matrix.
+        rank: usize,
+        /// Number of free parameters.
+        parameters: usize,
+        /// Names of the parameters with a share in the null space (`Q[i,j]`, `R[i,j]`,
+        /// `S[i,j]`, or `Q_w`, `S_w` with a noise input matrix).
+        undetermined: Vec<String>,
+        /// What would make the problem identifiable.
+        hint: String,
+    },
     /// No candidate order gave a usable model.
     #[error("no order in 1..={max_order} gave a usable model: {why}")]
     NoUsableOrder {

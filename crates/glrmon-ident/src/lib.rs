@@ -5,6 +5,7 @@ pub mod data;
 pub mod error;
 pub mod identify;
 pub mod model;
+pub mod noise;
 pub mod subspace;
 pub mod validation;
 
@@ -20,6 +21,10 @@ pub use identify::{
 pub use model::{
     InnovationModel, Prediction, RiccatiSolution, solve_riccati, sorted_eigenvalues,
     spectral_radius,
+};
+pub use noise::{
+    AlsIteration, CrossCovariance, InitialGuess, NoiseEstimate, NoiseSettings, NoiseStructure,
+    PhysicalModel, Structure, estimate_noise,
 };
 pub use subspace::Subspace;
 pub use validation::{LjungBox, chi2_survival, ljung_box, nis_mean, nrmse};
