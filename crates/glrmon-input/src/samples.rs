@@ -6,8 +6,8 @@ use std::io::BufReader;
 use std::path::Path;
 
 use glrmon_core::Dims;
-use glrmon_spec::{Channel, Columns};
 use glrmon_runtime::InputItem;
+use glrmon_spec::{Channel, Columns};
 use glrmon_wire::{IntakeEvent, Sample};
 
 use crate::{CsvReader, InputError, InputErrorKind, McapInput, is_mcap};

@@ -192,3 +192,41 @@ fn scaling_errors_name_the_entry() {
         "{e}"
     );
 }
+
+#[test]
+fn column_names_are_checked() {
+    let named = SCALED.replace(
+        "[channels.simulation]",
+        "[channels.columns]\nu = [\"FIC101\"]\ny = [\"TI1\", \"TI2\"]\n[channels.simulation]",
+    );
+    let c = channel(&named);
+    assert!(c.columns.named);
+    assert_eq!(c.columns.y, ["TI1", "TI2"]);
+    for (bad, expected) in [
+        (
+            "y = [\"TI1\", \"TI2\"]",
+            "y = [\"TI1\"]",
+            "columns.y has 1 names but the channel has 2 outputs",
+        ),
+        (
+            "y = [\"TI1\", \"TI2\"]",
+            "y = [\"TI1\", \"FIC101\"]",
+            "columns.y[1]: \"FIC101\" is also u0",
+        ),
+        (
+            "u = [\"FIC101\"]",
+            "u = [\"t\"]",
+            "columns.u[0]: \"t\" is the sample index or time column",
+        ),
+        (
+            "u = [\"FIC101\"]",
+            "u = [\"a,b\"]",
+            "columns.u[0]: \"a,b\" is not a column name",
+        ),
+    ]
+    .map(|(from, to, e)| (named.replace(from, to), e))
+    {
+        let e = glrmon_spec::parse(&bad).unwrap_err().to_string();
+        assert!(e.contains(expected), "{e}");
+    }
+}
