@@ -47,6 +47,10 @@ pub enum InputErrorKind {
     /// ([`crate::Samples`]). Invalid input.
     #[error("{}", .0.join("; "))]
     Damaged(Vec<String>),
+    /// A file read as named columns ([`crate::read_table`]) that cannot be used: the
+    /// row and column, and why. Invalid input.
+    #[error("{0}")]
+    Table(String),
 }
 
 impl InputError {
@@ -89,7 +93,8 @@ impl InputError {
             | InputErrorKind::Header(_)
             | InputErrorKind::NoRecordedConfig
             | InputErrorKind::RecordedConfig(_)
-            | InputErrorKind::Damaged(_) => true,
+            | InputErrorKind::Damaged(_)
+            | InputErrorKind::Table(_) => true,
             InputErrorKind::OpenCsv(_) | InputErrorKind::Read(_) => false,
         }
     }

@@ -6,6 +6,7 @@ mod mcap;
 mod readahead;
 mod replay;
 mod samples;
+mod table;
 
 pub use csv::{CsvReader, HeaderError, RowError, write_header, write_row};
 pub use error::{InputError, InputErrorKind};
@@ -13,3 +14,4 @@ pub use mcap::{McapInput, RecordedInput, is_mcap};
 pub use readahead::{ReadAhead, ReadAheadError};
 pub use replay::{CsvReplayed, McapReplayed, ReplayError, replay_csv, replay_mcap};
 pub use samples::{Samples, recorded_config};
+pub use table::{Table, read_table};

@@ -23,6 +23,7 @@ pub mod covariance;
 pub mod edit;
 pub mod expr;
 pub mod schema;
+pub mod write;
 
 use std::fmt;
 use std::path::Path;
@@ -1188,7 +1189,7 @@ impl Validator {
             .as_ref()
             .and_then(|sc| self.scaling(prefix, sc, dims));
         let columns = self.columns(prefix, spec.columns.as_ref(), dims);
-        let faults = self.faults(prefix, spec, dims, (&g, &j), scaling.as_ref());
+        let faults = self.faults(prefix, spec, dims, (&g, &j), scaling.as_ref(), &columns);
         if self.errors.len() > before {
             return None;
         }
@@ -1747,6 +1748,7 @@ impl Validator {
         dims: Dims,
         (g, j): (&LpvMatrix, &LpvMatrix),
         scaling: Option<&SignalScaling>,
+        columns: &Columns,
     ) -> Vec<FaultPlan> {
         if spec.faults.is_empty() {
             self.error(
@@ -1754,7 +1756,7 @@ impl Validator {
                 "the fault dictionary is empty".into(),
             );
         }
-        let expanded = self.expand_shortcuts(prefix, &spec.faults, dims);
+        let expanded = self.expand_shortcuts(prefix, &spec.faults, dims, columns);
         let mut out = Vec::new();
         for (i, (path, f)) in expanded.iter().enumerate() {
             if expanded[..i].iter().any(|(_, g)| g.name == f.name) {
@@ -1786,12 +1788,15 @@ impl Validator {
 
     /// The dictionary with the `all_sensors` / `all_actuators` shortcuts expanded into
     /// one `sensor_bias` per output / `actuator_bias` per input, each with its path
-    /// (`faults[i]`, or `faults[i] (y2)` for an expanded entry).
+    /// (`faults[i]`, or `faults[i] (y2)` for an expanded entry). A fault without a name
+    /// is named after its signal: `y2_bias`, or `<column>_bias` when
+    /// `[channels.columns]` names the columns.
     fn expand_shortcuts(
         &mut self,
         prefix: &str,
         faults: &[FaultSpec],
         dims: Dims,
+        columns: &Columns,
     ) -> Vec<(String, FaultSpec)> {
         let mut out = Vec::with_capacity(faults.len());
         for (i, f) in faults.iter().enumerate() {
@@ -1823,7 +1828,15 @@ impl Validator {
             }
             for s in 0..count {
                 let name = if f.name.is_empty() {
-                    format!("{letter}{s}_bias")
+                    let list = if letter == 'u' {
+                        &columns.u
+                    } else {
+                        &columns.y
+                    };
+                    match list.get(s) {
+                        Some(column) if columns.named => format!("{column}_bias"),
+                        _ => format!("{letter}{s}_bias"),
+                    }
                 } else {
                     format!("{}{s}", f.name)
                 };
