@@ -4,7 +4,8 @@
 use clap::{Parser, Subcommand};
 
 use crate::commands::{
-    calibrate, demo, diagnose, evaluate, recover, replay, run, simulate, status, validate, watch,
+    calibrate, demo, diagnose, evaluate, identify, recover, replay, run, simulate, status,
+    validate, watch,
 };
 
 /// Model-based fault detection and isolation (GLR, Zhang & Basseville 2014) on plant data.
@@ -32,6 +33,10 @@ pub(crate) enum Command {
     /// Run the monitors over recorded samples (CSV, or an MCAP recording with its
     /// configuration) to the same numbers as live; JSON lines, MCAP, HTML report.
     Replay(replay::ReplayArgs),
+    /// Identify a channel's model from fault-free recordings (subspace identification
+    /// of an innovation model, order selection, validation) and write it as a
+    /// configuration with signal scaling and one bias fault per signal.
+    Identify(identify::IdentifyArgs),
     /// Find a channel's detection threshold for a target mean time between false
     /// alarms or a per-sample false-alarm fraction, on fault-free data (recordings,
     /// each an independent run, or simulated).

@@ -16,7 +16,8 @@ use clap::Parser as _;
 
 use crate::cli::{Cli, Command};
 use crate::commands::{
-    calibrate, demo, diagnose, evaluate, recover, replay, run, simulate, status, validate, watch,
+    calibrate, demo, diagnose, evaluate, identify, recover, replay, run, simulate, status,
+    validate, watch,
 };
 use crate::common::InvalidInput;
 
@@ -40,6 +41,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => simulate::run(args),
         Command::Replay(args) => replay::run(args),
         Command::Recover(args) => recover::run(args),
+        Command::Identify(args) => identify::run(args),
         Command::Calibrate(args) => calibrate::run(args),
         Command::Evaluate(args) => evaluate::run(args),
         Command::Diagnose(args) => diagnose::run(args),

@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 
 pub mod calibrate;
+pub mod identify;
 
 use glrmon_monitor::Monitor;
 use glrmon_report::FaultEvaluation;

@@ -5,6 +5,7 @@ pub(crate) mod calibrate;
 pub(crate) mod demo;
 pub(crate) mod diagnose;
 pub(crate) mod evaluate;
+pub(crate) mod identify;
 pub(crate) mod recover;
 pub(crate) mod replay;
 pub(crate) mod run;

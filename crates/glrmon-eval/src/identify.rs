@@ -1,0 +1,394 @@
+//! `glrmon identify`: fault-free recordings → an identified, validated channel
+//! configuration (see [`glrmon_ident`] for the numerics).
+//!
+//! Each file is read as named columns ([`glrmon_input::read_table`]); every run of
+//! consecutive samples is a separate experiment (never joined to the next); the chosen
+//! inputs and outputs go to [`glrmon_ident::identify`]; the identified innovation model,
+//! its operating point and scales, and the columns become a commented configuration
+//! ([`glrmon_spec::write::identified_channel`]) that is parsed back and whose detector is
+//! checked against the identification before anything is returned.
+
+use std::path::{Path, PathBuf};
+
+use glrmon_ident::{
+    Experiment, IdentError, IdentSettings, Identification, InnovationModel, Signal, WarningKind,
+};
+use glrmon_input::{InputError, Table, read_table};
+use glrmon_spec::write::{IdentifiedChannel, identified_channel};
+use nalgebra::DMatrix;
+
+/// Runs shorter than this are left out (with a note): they cannot fill the block
+/// Hankel matrices of any useful horizon.
+pub const MIN_RUN_SAMPLES: usize = 50;
+
+/// What to identify.
+#[derive(Debug, Clone)]
+pub struct IdentifyRequest {
+    /// Name of the channel to write.
+    pub channel: String,
+    /// Fault-free recordings (CSV or MCAP), each a separate experiment.
+    pub files: Vec<PathBuf>,
+    /// Input columns; `None`: every `u<i>` column, in index order.
+    pub inputs: Option<Vec<String>>,
+    /// Output columns; `None`: every `y<i>` column, in index order.
+    pub outputs: Option<Vec<String>>,
+    /// Identification settings (order, horizon, hold-out, criterion, detrending).
+    pub settings: IdentSettings,
+    /// GLR window of the written channel.
+    pub window: usize,
+    /// Lines for the head of the written file (e.g. the command line).
+    pub notes: Vec<String>,
+}
+
+/// A run that was used or left out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunInfo {
+    /// The file.
+    pub file: PathBuf,
+    /// Where the run starts in it.
+    pub start: String,
+    /// Its samples.
+    pub samples: usize,
+    /// Whether it was used (long enough).
+    pub used: bool,
+}
+
+/// The result: the identification, the configuration text and what was checked.
+#[derive(Debug, Clone)]
+pub struct Identified {
+    /// The identification (model, order selection, validation).
+    pub identification: Identification,
+    /// The chosen input columns (before constant ones were dropped).
+    pub inputs: Vec<String>,
+    /// The chosen output columns (before constant ones were dropped).
+    pub outputs: Vec<String>,
+    /// The channel as written.
+    pub channel: IdentifiedChannel,
+    /// The configuration text.
+    pub config: String,
+    /// The runs found in the files.
+    pub runs: Vec<RunInfo>,
+    /// Columns left out of the model, in words, named.
+    pub dropped: Vec<String>,
+    /// Largest relative difference between the written channel's detector's innovation
+    /// covariance Σ_k after one pass over the first experiment and the identified Re
+    /// (the configuration's Kalman filter is the identified predictor: ≈ 0).
+    pub sigma_mismatch: f64,
+}
+
+/// Why identification failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum IdentifyError {
+    /// A file could not be read.
+    #[error(transparent)]
+    Input(#[from] InputError),
+    /// A requested or expected column is missing, or none was found.
+    #[error("{file}: {why}")]
+    Columns {
+        /// The file.
+        file: PathBuf,
+        /// What is missing.
+        why: String,
+    },
+    /// No run is long enough.
+    #[error(
+        "no run of consecutive samples has at least {MIN_RUN_SAMPLES} samples (runs: {0}): \
+         identification needs longer recordings"
+    )]
+    TooShort(String),
+    /// The numerics refused (the message names the columns).
+    #[error("identification failed: {0}")]
+    Ident(String),
+    /// The written configuration does not validate (a bug: please report it).
+    #[error("the written configuration does not validate:\n{0}")]
+    Written(String),
+}
+
+/// Identifies `request.channel` from the files (see the [module](self) docs).
+///
+/// # Errors
+/// [`IdentifyError`]: unreadable files, missing columns, too little data, numerical
+/// refusals (naming the columns), or a written configuration that does not validate.
+pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, IdentifyError> {
+    let mut tables: Vec<(PathBuf, Table)> = Vec::new();
+    for file in &request.files {
+        for table in read_runs(file, &request.channel)? {
+            tables.push((file.clone(), table));
+        }
+    }
+    let first = tables
+        .first()
+        .ok_or_else(|| IdentifyError::TooShort("none".into()))?;
+    let inputs = match &request.inputs {
+        Some(list) => list.clone(),
+        None => numbered(&first.1.names, 'u'),
+    };
+    let outputs = match &request.outputs {
+        Some(list) => list.clone(),
+        None => numbered(&first.1.names, 'y'),
+    };
+    if outputs.is_empty() {
+        return Err(IdentifyError::Columns {
+            file: first.0.clone(),
+            why: format!(
+                "no output column: name them with --outputs (columns: {})",
+                first.1.names.join(", ")
+            ),
+        });
+    }
+    if let Some(name) = inputs.iter().find(|n| outputs.contains(n)) {
+        return Err(IdentifyError::Columns {
+            file: first.0.clone(),
+            why: format!("column \"{name}\" is both an input and an output"),
+        });
+    }
+    let mut runs = Vec::new();
+    let mut experiments = Vec::new();
+    let mut periods = Vec::new();
+    for (file, table) in &tables {
+        let used = table.samples() >= MIN_RUN_SAMPLES;
+        runs.push(RunInfo {
+            file: file.clone(),
+            start: table.start.clone(),
+            samples: table.samples(),
+            used,
+        });
+        if !used {
+            continue;
+        }
+        let column = |name: &String| {
+            table.column(name).ok_or_else(|| IdentifyError::Columns {
+                file: file.clone(),
+                why: format!("no column \"{name}\" (columns: {})", table.names.join(", ")),
+            })
+        };
+        let n = table.samples();
+        let mut u = DMatrix::zeros(n, inputs.len());
+        for (j, name) in inputs.iter().enumerate() {
+            u.column_mut(j).copy_from_slice(column(name)?);
+        }
+        let mut y = DMatrix::zeros(n, outputs.len());
+        for (j, name) in outputs.iter().enumerate() {
+            y.column_mut(j).copy_from_slice(column(name)?);
+        }
+        experiments.push(Experiment::new(u, y));
+        periods.extend(table.period);
+    }
+    if experiments.is_empty() {
+        let sizes: Vec<String> = runs.iter().map(|r| r.samples.to_string()).collect();
+        return Err(IdentifyError::TooShort(sizes.join(", ")));
+    }
+    let identification = glrmon_ident::identify(&experiments, &request.settings)
+        .map_err(|e| IdentifyError::Ident(describe(&e, &inputs, &outputs)))?;
+    let scaling = &identification.scaling;
+    let kept_inputs: Vec<String> = scaling
+        .input_columns
+        .iter()
+        .map(|&i| inputs[i].clone())
+        .collect();
+    let kept_outputs: Vec<String> = scaling
+        .output_columns
+        .iter()
+        .map(|&i| outputs[i].clone())
+        .collect();
+    let dropped = identification
+        .warnings
+        .iter()
+        .map(|w| {
+            let name = match w.signal {
+                Signal::Input => &inputs[w.column],
+                Signal::Output => &outputs[w.column],
+            };
+            match w.kind {
+                WarningKind::Constant { value } => {
+                    format!("{name} is constant ({value}): left out of the model")
+                }
+                WarningKind::NearlyConstant { std, level } => format!(
+                    "{name} is nearly constant (std {std:.3e} at level {level:.3e}): left out \
+                     of the model"
+                ),
+                _ => format!("{name}: left out of the model"),
+            }
+        })
+        .collect::<Vec<_>>();
+    // The operating point written is the samples-weighted mean of the experiments'.
+    let total: f64 = experiments.iter().map(|e| e.samples() as f64).sum();
+    let pooled = |pick: &dyn Fn(&glrmon_ident::OperatingPoint) -> &nalgebra::DVector<f64>,
+                  len: usize| {
+        let mut mean = vec![0.0; len];
+        for (op, e) in scaling.operating_points.iter().zip(&experiments) {
+            for (m, v) in mean.iter_mut().zip(pick(op).iter()) {
+                *m += v * e.samples() as f64 / total;
+            }
+        }
+        mean
+    };
+    let u_offset = pooled(&|op| &op.input_mean, kept_inputs.len());
+    let y_offset = pooled(&|op| &op.output_mean, kept_outputs.len());
+    let model = &identification.scaled_model;
+    periods.sort_by(f64::total_cmp);
+    let mut notes = request.notes.clone();
+    notes.extend(summary(&identification, &kept_outputs, &runs, &dropped));
+    let channel = IdentifiedChannel {
+        name: request.channel.clone(),
+        period: periods.get(periods.len() / 2).copied(),
+        a: model.a.clone(),
+        b: model.b.clone(),
+        c: model.c.clone(),
+        d: model.d.clone(),
+        k: model.k.clone(),
+        re: model.re.clone(),
+        p0: initial_covariance(model),
+        inputs: kept_inputs,
+        outputs: kept_outputs,
+        u_offset,
+        u_scale: scaling.input_scale.iter().copied().collect(),
+        y_offset,
+        y_scale: scaling.output_scale.iter().copied().collect(),
+        window: request.window,
+        notes,
+    };
+    let config = identified_channel(&channel);
+    let parsed = glrmon_spec::parse(&config).map_err(|e| IdentifyError::Written(e.to_string()))?;
+    let sigma_mismatch = sigma_mismatch(&parsed.channels[0], experiments[0].samples(), model)
+        .map_err(IdentifyError::Written)?;
+    Ok(Identified {
+        identification,
+        inputs,
+        outputs,
+        channel,
+        config,
+        runs,
+        dropped,
+        sigma_mismatch,
+    })
+}
+
+/// The runs of `file`; for a recording, channel `channel`'s if it has one, else its
+/// only channel's.
+fn read_runs(file: &Path, channel: &str) -> Result<Vec<Table>, InputError> {
+    if glrmon_input::is_mcap(file) {
+        match read_table(file, Some(channel)) {
+            Ok(runs) => return Ok(runs),
+            Err(e) if matches!(e.kind(), glrmon_input::InputErrorKind::Table(_)) => {}
+            Err(e) => return Err(e),
+        }
+    }
+    read_table(file, None)
+}
+
+/// `u0, u1, …` (or `y…`) among `names`, in index order.
+fn numbered(names: &[String], letter: char) -> Vec<String> {
+    let mut found: Vec<(usize, String)> = names
+        .iter()
+        .filter_map(|n| {
+            let rest = n.strip_prefix(letter)?;
+            let i: usize = rest.parse().ok()?;
+            (rest == i.to_string()).then(|| (i, n.clone()))
+        })
+        .collect();
+    found.sort();
+    found.into_iter().map(|(_, n)| n).collect()
+}
+
+/// An identification error with the caller's column names in place of indices.
+fn describe(e: &IdentError, inputs: &[String], outputs: &[String]) -> String {
+    let inputs = inputs.join(", ");
+    let outputs = outputs.join(", ");
+    format!(
+        "{e} (inputs, in order: [{inputs}]; outputs: [{outputs}]; experiments count from 0 in file order)"
+    )
+}
+
+/// The comment lines that say how the model was found.
+fn summary(
+    id: &Identification,
+    outputs: &[String],
+    runs: &[RunInfo],
+    dropped: &[String],
+) -> Vec<String> {
+    let used: Vec<&RunInfo> = runs.iter().filter(|r| r.used).collect();
+    let samples: usize = used.iter().map(|r| r.samples).sum();
+    let mut lines = vec![
+        format!(
+            "{} experiment(s), {samples} samples; order n = {} ({}); horizon i = {}.",
+            used.len(),
+            id.model.order(),
+            id.order.reason,
+            id.horizon
+        ),
+        format!(
+            "One-step prediction NRMSE ({}): {}.",
+            if id.validation.in_sample {
+                "in-sample"
+            } else {
+                "held-out"
+            },
+            outputs
+                .iter()
+                .zip(id.validation.nrmse.iter())
+                .map(|(n, v)| format!("{n} {v:.3}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    ];
+    if let Some(nis) = id.validation.nis_mean {
+        lines.push(format!(
+            "Mean normalised innovation square {nis:.3} (expected {} for a right model).",
+            id.validation.outputs
+        ));
+    }
+    lines.extend(dropped.iter().cloned());
+    lines
+}
+
+/// P0: the stationary state covariance of x⁺ = A x + K e (the spread of an unknown
+/// start), by doubling; the identity when A is not stable enough for it to exist.
+fn initial_covariance(model: &InnovationModel) -> DMatrix<f64> {
+    let n = model.order();
+    if glrmon_ident::spectral_radius(&model.a) >= 0.999 {
+        return DMatrix::identity(n, n);
+    }
+    let mut p = &model.k * &model.re * model.k.transpose();
+    let mut a = model.a.clone();
+    for _ in 0..64 {
+        let next = &p + &a * &p * a.transpose();
+        let change = (&next - &p).amax();
+        p = next;
+        a = &a * &a;
+        if change <= 1e-14 * p.amax() {
+            break;
+        }
+    }
+    // Never singular: a state that noise does not excite still starts unknown.
+    let floor = 1e-6 * p.diagonal().max().max(1e-12);
+    p + DMatrix::identity(n, n) * floor
+}
+
+/// max |Σ_N − Re| / max |Re| after the written channel's detector has taken `steps`
+/// steps. Σ_k depends on the model and the number of steps only, not on the data, so
+/// the steps are fed zeros (model units).
+fn sigma_mismatch(
+    channel: &glrmon_spec::Channel,
+    steps: usize,
+    model: &InnovationModel,
+) -> Result<f64, String> {
+    let mut detector = channel.detector().map_err(|e| e.to_string())?;
+    let dims = channel.dims;
+    let mut out = glrmon_core::StepOutput::new(dims.outputs, detector.fault_count());
+    let (u, y) = (vec![0.0; dims.inputs], vec![0.0; dims.outputs]);
+    for k in 0..steps {
+        let sample = glrmon_core::Sample {
+            k: k as u64,
+            u: &u,
+            y: &y,
+            p: &[],
+        };
+        detector
+            .step(&sample, &mut out)
+            .map_err(|e| e.to_string())?;
+    }
+    let sigma = detector.filter().innovation_covariance();
+    Ok((sigma - &model.re).amax() / model.re.amax())
+}
