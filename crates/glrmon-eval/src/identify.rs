@@ -228,6 +228,11 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
     let y_offset = pooled(&|op| &op.output_mean, kept_outputs.len());
     let model = &identification.scaled_model;
     periods.sort_by(f64::total_cmp);
+    let other_columns = tables.iter().any(|(_, t)| {
+        t.names
+            .iter()
+            .any(|n| !kept_inputs.contains(n) && !kept_outputs.contains(n))
+    });
     let mut notes = request.notes.clone();
     notes.extend(summary(&identification, &kept_outputs, &runs, &dropped));
     let channel = IdentifiedChannel {
@@ -242,6 +247,7 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
         p0: initial_covariance(model),
         inputs: kept_inputs,
         outputs: kept_outputs,
+        other_columns,
         u_offset,
         u_scale: scaling.input_scale.iter().copied().collect(),
         y_offset,

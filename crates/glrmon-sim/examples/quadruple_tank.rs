@@ -21,19 +21,6 @@ fn usage() -> ! {
     std::process::exit(2)
 }
 
-fn csv(rec: &TankRecording) -> String {
-    let mut s = rec.columns().join(",");
-    s.push('\n');
-    for i in 0..rec.k.len() {
-        let _ = write!(s, "{},{}", rec.k[i], rec.t[i]);
-        for x in rec.u[i].iter().chain(&rec.y[i]) {
-            let _ = write!(s, ",{x:.6}");
-        }
-        s.push('\n');
-    }
-    s
-}
-
 fn write(dir: &Path, name: &str, text: &str) {
     let path = dir.join(name);
     if let Err(e) = std::fs::write(&path, text) {
@@ -85,7 +72,11 @@ fn main() {
             seed: seed + i,
             ..base.clone()
         });
-        write(&dir, &format!("fault_free_{i}.csv"), &csv(&rec));
+        write(
+            &dir,
+            &format!("fault_free_{i}.csv"),
+            &TankRecording::csv(&rec),
+        );
     }
     let onset = (samples / 2) as u64;
     let mut faults: Vec<(String, TankFault)> = Vec::new();
@@ -118,7 +109,7 @@ fn main() {
             faults: vec![fault],
             ..base.clone()
         });
-        write(&dir, &name, &csv(&rec));
+        write(&dir, &name, &TankRecording::csv(&rec));
         let (kind, target, magnitude, unit) = match fault.kind {
             TankFaultKind::SensorBias { output, magnitude } => {
                 ("sensor_bias", format!("y{output}"), magnitude, "V")

@@ -433,6 +433,24 @@ impl TankRecording {
         c.extend((0..p).map(|i| format!("y{i}")));
         c
     }
+
+    /// The recording as glrmon's CSV sample format: the [`TankRecording::columns`]
+    /// header, then one row per sample, values to 6 decimals (1 µV: well below the
+    /// sensor noise).
+    #[must_use]
+    pub fn csv(&self) -> String {
+        use std::fmt::Write as _;
+        let mut s = self.columns().join(",");
+        s.push('\n');
+        for i in 0..self.k.len() {
+            let _ = write!(s, "{},{}", self.k[i], self.t[i]);
+            for x in self.u[i].iter().chain(&self.y[i]) {
+                let _ = write!(s, ",{x:.6}");
+            }
+            s.push('\n');
+        }
+        s
+    }
 }
 
 struct StepInput {

@@ -32,6 +32,10 @@ pub struct IdentifiedChannel {
     pub inputs: Vec<String>,
     /// CSV column of each output.
     pub outputs: Vec<String>,
+    /// Write `[channels.columns]` even when the columns are the numbered `u0…`/`y0…`:
+    /// the recordings hold other columns too (left out, or not chosen), which a reader
+    /// must then skip.
+    pub other_columns: bool,
     /// Operating point of each input.
     pub u_offset: Vec<f64>,
     /// Scale of each input.
@@ -50,7 +54,7 @@ pub struct IdentifiedChannel {
 /// `glrmon validate` accepts, with the model in innovation form
 /// (F = A, G = B, H = C, J = D, Q = K·Re·Kᵀ, S = K·Re, R = Re: its Kalman filter is the
 /// identified steady predictor), `[channels.scaling]`, `[channels.columns]` when the
-/// columns are not the numbered `u0…`/`y0…`, one sensor bias per output and one
+/// columns are not the numbered `u0…`/`y0…` or the files have others, one sensor bias per output and one
 /// actuator bias per input, and a GLR that waits one window before alarming.
 ///
 /// # Examples
@@ -65,7 +69,7 @@ pub struct IdentifiedChannel {
 ///     period: Some(5.0),
 ///     a: one(0.9), b: one(0.5), c: one(1.0), d: one(0.0), k: one(0.4), re: one(0.2),
 ///     p0: one(1.0),
-///     inputs: vec!["FIC101".into()], outputs: vec!["LI101".into()],
+///     inputs: vec!["FIC101".into()], outputs: vec!["LI101".into()], other_columns: false,
 ///     u_offset: vec![3.0], u_scale: vec![0.5], y_offset: vec![12.0], y_scale: vec![0.8],
 ///     window: 30,
 ///     notes: vec!["identified from run1.csv".into()],
@@ -82,11 +86,12 @@ pub fn identified_channel(channel: &IdentifiedChannel) -> String {
     for line in &channel.notes {
         let _ = writeln!(out, "# {line}");
     }
-    let numbered = channel
-        .inputs
-        .iter()
-        .enumerate()
-        .all(|(i, n)| *n == format!("u{i}"))
+    let numbered = !channel.other_columns
+        && channel
+            .inputs
+            .iter()
+            .enumerate()
+            .all(|(i, n)| *n == format!("u{i}"))
         && channel
             .outputs
             .iter()
@@ -220,6 +225,7 @@ mod tests {
             p0: DMatrix::identity(2, 2),
             inputs: vec![],
             outputs: vec!["y0".into()],
+            other_columns: false,
             u_offset: vec![],
             u_scale: vec![],
             y_offset: vec![1e3],
