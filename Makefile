@@ -4,7 +4,7 @@ CARGO ?= cargo
 
 .DEFAULT_GOAL := help
 
-.PHONY: help deps deps-zenohd build test fmt fmt-check lint unit doc check-deps check-config fuzz-build fuzz msrv demo bench bench-e2e bench-replay
+.PHONY: help deps deps-zenohd build test fmt fmt-check lint unit doc check-deps check-config fuzz-build fuzz msrv demo bench bench-e2e bench-replay tank-table
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z0-9_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-11s %s\n", $$1, $$2}'
@@ -69,6 +69,9 @@ msrv: ## check the workspace on the declared rust-version (installs that toolcha
 
 demo: ## the main job on built-in simulated channels with an injected fault
 	$(CARGO) run --release -q -p glrmon-cli -- demo
+
+tank-table: ## the quadruple-tank identify → calibrate → monitor table of docs/IDENTIFY.md (50 runs per fault)
+	cargo run --release -q -p glrmon-eval --example quadruple_tank_table
 
 bench: ## every criterion benchmark: the per-sample step and the sparse diagnosis (figures in docs/PERFORMANCE.md)
 	$(CARGO) bench --workspace
