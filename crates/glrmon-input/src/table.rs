@@ -327,4 +327,31 @@ mod tests {
         assert_eq!(runs[0].columns, [vec![1.0, 3.0, 5.0], vec![2.0, 4.0, 6.0]]);
         assert_eq!(runs[0].period, None);
     }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+        /// Any bytes, and any mix of CSV-like tokens, give runs or an error: never a
+        /// panic, and every run's columns have one length.
+        #[test]
+        fn arbitrary_files_never_panic(
+            bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..200),
+            tokens in proptest::collection::vec(
+                proptest::sample::select(vec!["k", "t", "a", ",", "\n", "1", "-2.5", "1e308", "nan", "9", " ", "\r", "x"]),
+                0..80,
+            ),
+        ) {
+            let dir = std::env::temp_dir();
+            for (i, content) in [bytes, tokens.concat().into_bytes()].into_iter().enumerate() {
+                let path = dir.join(format!("glrmon-table-prop-{}-{i}.csv", std::process::id()));
+                std::fs::write(&path, &content).unwrap();
+                if let Ok(runs) = read_table(&path, None) {
+                    for run in runs {
+                        let n = run.samples();
+                        proptest::prop_assert!(run.columns.iter().all(|c| c.len() == n));
+                        proptest::prop_assert!(run.columns.iter().flatten().all(|v| v.is_finite()));
+                    }
+                }
+            }
+        }
+    }
 }
