@@ -770,6 +770,9 @@ impl Detector {
     }
 
     fn check(&self, s: &Sample<'_>) -> Result<(), StepError> {
+        if s.k == u64::MAX {
+            return Err(StepError::IndexTooLarge { k: s.k });
+        }
         if let Some(next) = self.next_k
             && s.k != next
         {

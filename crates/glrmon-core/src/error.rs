@@ -59,6 +59,12 @@ pub enum StepError {
         /// The index received.
         got: u64,
     },
+    /// The sample index is 2⁶⁴ − 1, which leaves no next index.
+    #[error("sample index {k} is the largest 64-bit index: no sample could follow it")]
+    IndexTooLarge {
+        /// The index received.
+        k: u64,
+    },
     /// The filter cannot proceed (e.g. an innovation covariance that is not positive
     /// definite after evaluating the model at this sample's signals).
     #[error("numerical failure: {what}")]

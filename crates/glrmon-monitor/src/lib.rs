@@ -100,6 +100,11 @@ pub struct MonitorSettings {
     /// the filter restarts from its initial state at the sample that follows it
     /// (reported as `gap`), so that an outage never leaves a channel dead.
     pub max_gap: u64,
+    /// A sample repeating the last processed index, or up to this many indices before
+    /// it, is refused alone (`duplicate`, `out_of_order`); one further back means the
+    /// publisher started numbering again (it restarted): the filter restarts at that
+    /// sample (reported as `sequence_reset`) instead of refusing every later sample.
+    pub max_reorder: u64,
 }
 
 /// The settings a configuration reload changes in a running monitor (the part of
@@ -308,6 +313,7 @@ impl Monitor {
                 })
                 .collect(),
             max_gap: channel.max_gap,
+            max_reorder: channel.max_reorder,
         };
         let mut monitor = Self::new(&channel.name, channel.detector()?, settings);
         if let Some(scaling) = &channel.scaling {
@@ -442,7 +448,33 @@ impl Monitor {
     /// [`Monitor::on_sample`] with U_k, Y_k already in model units.
     fn process(&mut self, sample: &Sample, u: &[f64], y: &[f64], records: &mut Vec<Record>) {
         let k = sample.k.unwrap_or(self.arrivals);
+        if k == u64::MAX {
+            self.reject(
+                records,
+                Some(k),
+                ErrorCode::TooLarge,
+                format!(
+                    "sample index k = {k} is the largest 64-bit index: no sample could follow it"
+                ),
+            );
+            return;
+        }
         self.arrivals = self.arrivals.max(k + 1);
+        if let Some(next) = self.detector.next_index()
+            && k < next
+            && next - k > self.settings.max_reorder.saturating_add(1)
+        {
+            let why = format!(
+                "sample k = {k} is {} before the last processed k = {}, more than \
+                 max_reorder = {}: the publisher numbers anew (a restart?); the filter \
+                 restarts from its initial state at k = {k}",
+                next - 1 - k,
+                next - 1,
+                self.settings.max_reorder
+            );
+            self.restart(k, sample.t, ErrorCode::SequenceReset, why, records);
+            self.arrivals = k + 1;
+        }
         if let Some(next) = self.detector.next_index() {
             if k < next {
                 let (code, why) = if k + 1 == next {
@@ -785,7 +817,8 @@ impl Monitor {
                 k,
                 t,
                 onset: self.reported_onset,
-                duration: k - started,
+                // A sequence reset restarts at a k before the episode began.
+                duration: k.saturating_sub(started),
                 peak_glr: peak,
             }));
         }
@@ -832,6 +865,7 @@ mod tests {
                 isolation_thresholds: vec![],
                 chi2_detector: false,
                 max_gap: 10,
+                max_reorder: 16,
             },
         )
     }

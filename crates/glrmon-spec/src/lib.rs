@@ -503,6 +503,9 @@ pub struct Channel {
     pub chi2_detector: bool,
     /// Largest gap filled by predict-only steps.
     pub max_gap: u64,
+    /// How many indices before the last processed one a sample is refused as late;
+    /// further back is a sequence reset.
+    pub max_reorder: u64,
     /// Fault names in dictionary order.
     pub fault_names: Vec<String>,
     /// Simulation settings.
@@ -1453,6 +1456,7 @@ impl Validator {
                 .unwrap_or_default(),
             groups,
             max_gap: glr.max_gap,
+            max_reorder: glr.max_reorder,
             fault_names: faults.iter().map(|f| f.name.clone()).collect(),
             simulation,
             diagnosis,

@@ -415,6 +415,11 @@ pub struct GlrSpec {
     /// a longer one the filter restarts from its initial state.
     #[serde(default = "default_max_gap")]
     pub max_gap: u64,
+    /// A sample repeating the last processed index, or up to this many indices before
+    /// it, is refused alone as duplicate or late (default 16); one further back means
+    /// the publisher started numbering again, and the filter restarts at it.
+    #[serde(default = "default_max_reorder")]
+    pub max_reorder: u64,
     /// Samples after the start (and after each restart) during which the GLR is held
     /// off: `"window"` (w, until the window is full, as Zhang & Basseville 2014 §6.2
     /// do), a sample count, or none (default).
@@ -448,6 +453,7 @@ impl Default for GlrSpec {
             groups: Vec::new(),
             rank_tolerance: None,
             max_gap: default_max_gap(),
+            max_reorder: default_max_reorder(),
             warm_up: None,
         }
     }
@@ -470,6 +476,9 @@ fn default_isolation_alpha() -> f64 {
 }
 fn default_max_gap() -> u64 {
     100
+}
+fn default_max_reorder() -> u64 {
+    16
 }
 
 /// A named group of faults tested together against the others.

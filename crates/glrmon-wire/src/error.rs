@@ -60,11 +60,16 @@ pub enum ErrorCode {
     /// A numerical failure inside the monitor, such as a covariance that lost positive
     /// definiteness.
     Numerical,
+    /// A sample's index is further behind the expected one than the channel's
+    /// `max_reorder`: the publisher started numbering again (a restart), and the monitor
+    /// restarts its filter at that sample instead of refusing every later one (raised by
+    /// the monitor).
+    SequenceReset,
 }
 
 impl ErrorCode {
     /// Every code, in declaration order: for pre-registering counters and for docs.
-    pub const ALL: [ErrorCode; 12] = [
+    pub const ALL: [ErrorCode; 13] = [
         ErrorCode::InvalidJson,
         ErrorCode::WrongType,
         ErrorCode::MissingField,
@@ -77,6 +82,7 @@ impl ErrorCode {
         ErrorCode::Gap,
         ErrorCode::UnknownChannel,
         ErrorCode::Numerical,
+        ErrorCode::SequenceReset,
     ];
 
     /// The snake_case label, identical to the serialized form.
@@ -95,6 +101,7 @@ impl ErrorCode {
             ErrorCode::Gap => "gap",
             ErrorCode::UnknownChannel => "unknown_channel",
             ErrorCode::Numerical => "numerical",
+            ErrorCode::SequenceReset => "sequence_reset",
         }
     }
 }
