@@ -1769,10 +1769,10 @@ impl Validator {
                 );
                 continue;
             }
-            if let Some(plan) = self.fault(path, f, dims, j) {
-                if let Some(plan) = self.in_raw_units(path, f, plan, g, scaling) {
-                    out.push(plan);
-                }
+            if let Some(plan) = self.fault(path, f, dims, j)
+                && let Some(plan) = self.in_raw_units(path, f, plan, g, scaling)
+            {
+                out.push(plan);
             }
         }
         let known = out.iter().filter(|f| f.onset == Onset::Known).count();
