@@ -35,7 +35,9 @@ pub(crate) enum Command {
     Replay(replay::ReplayArgs),
     /// Identify a channel's model from fault-free recordings (subspace identification
     /// of an innovation model, order selection, validation) and write it as a
-    /// configuration with signal scaling and one bias fault per signal.
+    /// configuration with signal scaling and one bias fault per signal; or, with
+    /// --model CONFIG, keep your model's F, G, H, J and estimate its noise covariances
+    /// Q, R (and S).
     Identify(identify::IdentifyArgs),
     /// Find a channel's detection threshold for a target mean time between false
     /// alarms or a per-sample false-alarm fraction, on fault-free data (recordings,

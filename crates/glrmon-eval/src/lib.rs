@@ -2,6 +2,7 @@
 
 pub mod calibrate;
 pub mod identify;
+pub mod noise;
 
 use glrmon_monitor::Monitor;
 use glrmon_report::FaultEvaluation;

@@ -34,6 +34,7 @@
 //! ```
 
 use glrmon_core::calibration::{Calibration, Target};
+use nalgebra::DMatrix;
 
 use crate::SpecErrors;
 
@@ -54,6 +55,12 @@ pub enum EditError {
     /// The channel's `glr` is something other than a table.
     #[error("channels.glr is not a table")]
     GlrNotTable,
+    /// The channel's `model` is something other than a table (inline or not).
+    #[error("channels.model is not a table")]
+    ModelNotTable,
+    /// A matrix to write has a value that is not finite (named).
+    #[error("{0} has a value that is not finite")]
+    NotFinite(&'static str),
     /// The edited text would not be a valid configuration.
     #[error("the updated configuration would be invalid:\n{0}")]
     Invalid(SpecErrors),
@@ -131,6 +138,209 @@ pub fn set_calibrated(
     let updated = doc.to_string();
     crate::parse(&updated).map_err(EditError::Invalid)?;
     Ok(updated)
+}
+
+/// The start of the comment line [`set_noise`] leaves before the noise covariances
+/// (a later [`set_noise`] replaces it).
+pub const NOISE_NOTE: &str = "# Noise covariances Q, R";
+
+/// Sets `model.Q` and `model.R` of `channel` in the configuration `text` to `q` and
+/// `r` (made exactly symmetric: each pair of off-diagonal entries is replaced by its
+/// mean), and `model.S` to `s`, or removes `model.S` when `s` is `None`. Matrices are
+/// written as arrays of row arrays with Rust's shortest round-trip (`{:?}`) float
+/// formatting. A comment line starting with [`NOISE_NOTE`] and naming `source` (where
+/// the values came from) is left before `Q` in a `[channels.model]` table, or before
+/// `model` when it is an inline table; an earlier such line is replaced. Everything
+/// else of `text` (comments, order, layout, the other matrices) is kept.
+///
+/// ```
+/// use nalgebra::DMatrix;
+///
+/// let one = |v: f64| DMatrix::from_element(1, 1, v);
+/// let text = "[[channels]]\nname = \"tank\"\n\
+///             model = { F = [[0.9]], H = [[1.0]], Q = 1.0, R = 1.0 } # by hand\n\
+///             faults = [{ name = \"bias\", kind = \"sensor_bias\", output = 0 }]\n";
+/// let edited = glrmon_spec::edit::set_noise(
+///     text, "tank", &one(0.01), &one(0.04), None, "a.csv",
+/// )
+/// .unwrap();
+/// assert!(edited.contains("Q = [[0.01]], R = [[0.04]] } # by hand"), "{edited}");
+/// let cfg = glrmon_spec::parse(&edited).unwrap();
+/// assert_eq!(cfg.channels[0].model.matrices()[4].base()[(0, 0)], 0.01);
+/// ```
+///
+/// # Errors
+/// [`EditError::Toml`] when `text` is not TOML, [`EditError::NoChannels`] or
+/// [`EditError::NoChannel`] when it has no channel named `channel`,
+/// [`EditError::ModelNotTable`] when that channel's `model` is missing or not a table,
+/// [`EditError::NotFinite`] when a matrix has a value that is not finite, and
+/// [`EditError::Invalid`] when the edited text does not [`parse`](crate::parse) (e.g.
+/// a matrix of the wrong size, or an R that is not positive definite).
+pub fn set_noise(
+    text: &str,
+    channel: &str,
+    q: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+    s: Option<&DMatrix<f64>>,
+    source: &str,
+) -> Result<String, EditError> {
+    for (name, m) in [("Q", Some(q)), ("R", Some(r)), ("S", s)] {
+        if m.is_some_and(|m| m.iter().any(|v| !v.is_finite())) {
+            return Err(EditError::NotFinite(name));
+        }
+    }
+    let mut doc: toml_edit::DocumentMut = text
+        .parse()
+        .map_err(|e: toml_edit::TomlError| EditError::Toml(e.to_string()))?;
+    let channels = doc
+        .get_mut("channels")
+        .and_then(toml_edit::Item::as_array_of_tables_mut)
+        .ok_or(EditError::NoChannels)?;
+    let table = channels
+        .iter_mut()
+        .find(|t| t.get("name").and_then(|v| v.as_str()) == Some(channel))
+        .ok_or_else(|| EditError::NoChannel(channel.to_owned()))?;
+    let note = format!(
+        "{NOISE_NOTE}{} from {}",
+        if s.is_some() { ", S" } else { "" },
+        source.replace(['\n', '\r'], " ")
+    );
+    // In an inline table, the space before `}` is the last value's suffix: it stays
+    // last when S is added or removed.
+    let (inline, tail) = match table.get("model") {
+        Some(toml_edit::Item::Table(_)) => (false, String::new()),
+        Some(toml_edit::Item::Value(toml_edit::Value::InlineTable(t))) => (
+            true,
+            t.iter()
+                .last()
+                .and_then(|(_, v)| v.decor().suffix()?.as_str().map(str::to_owned))
+                .filter(|s| s.trim().is_empty())
+                .unwrap_or_default(),
+        ),
+        _ => return Err(EditError::ModelNotTable),
+    };
+    {
+        let model = table
+            .get_mut("model")
+            .and_then(toml_edit::Item::as_table_like_mut)
+            .ok_or(EditError::ModelNotTable)?;
+        put(model, "Q", &symmetric(q));
+        put(model, "R", &symmetric(r));
+        match s {
+            Some(s) => put(model, "S", s),
+            None => {
+                model.remove("S");
+            }
+        }
+        if !inline && let Some(mut key) = model.key_mut("Q") {
+            add_note(key.leaf_decor_mut(), &note);
+        }
+    }
+    if inline && let Some(mut key) = table.key_mut("model") {
+        add_note(key.leaf_decor_mut(), &note);
+    }
+    if let Some(model) = table
+        .get_mut("model")
+        .and_then(toml_edit::Item::as_value_mut)
+        .and_then(toml_edit::Value::as_inline_table_mut)
+    {
+        respace(model, &tail);
+    }
+    let updated = doc.to_string();
+    crate::parse(&updated).map_err(EditError::Invalid)?;
+    Ok(updated)
+}
+
+/// Gives the last value of an inline table the suffix `tail` and the others none
+/// (when theirs is only whitespace).
+fn respace(table: &mut toml_edit::InlineTable, tail: &str) {
+    let count = table.len();
+    for (i, (_, value)) in table.iter_mut().enumerate() {
+        let blank = value
+            .decor()
+            .suffix()
+            .and_then(toml_edit::RawString::as_str)
+            .is_none_or(|s| s.trim().is_empty());
+        if i + 1 == count {
+            value.decor_mut().set_suffix(tail.to_owned());
+        } else if blank {
+            value.decor_mut().set_suffix("");
+        }
+    }
+}
+
+/// `m` with m[j,i] = m[i,j] = (m[i,j] + m[j,i]) / 2 exactly.
+fn symmetric(m: &DMatrix<f64>) -> DMatrix<f64> {
+    let mut out = m.clone();
+    for i in 0..m.nrows().min(m.ncols()) {
+        for j in i + 1..m.ncols().min(m.nrows()) {
+            let v = 0.5 * (m[(i, j)] + m[(j, i)]);
+            out[(i, j)] = v;
+            out[(j, i)] = v;
+        }
+    }
+    out
+}
+
+/// Sets `key` of `table` to the rows of `m`, keeping the old value's surrounding
+/// whitespace (but not a comment after it: it was about the old value).
+fn put(table: &mut dyn toml_edit::TableLike, key: &str, m: &DMatrix<f64>) {
+    let mut value = rows(m);
+    if let Some(old) = table.get(key).and_then(toml_edit::Item::as_value) {
+        let raw = |r: Option<&toml_edit::RawString>| {
+            r.and_then(toml_edit::RawString::as_str)
+                .filter(|s| s.trim().is_empty())
+                .map(str::to_owned)
+        };
+        if let Some(prefix) = raw(old.decor().prefix()) {
+            value.decor_mut().set_prefix(prefix);
+        }
+        value
+            .decor_mut()
+            .set_suffix(raw(old.decor().suffix()).unwrap_or_default());
+    }
+    table.insert(key, toml_edit::Item::Value(value));
+}
+
+/// `[[a, b], [c, d]]` with `{:?}` floats.
+fn rows(m: &DMatrix<f64>) -> toml_edit::Value {
+    let text = format!(
+        "[{}]",
+        m.row_iter()
+            .map(|row| format!(
+                "[{}]",
+                row.iter()
+                    .map(|v| format!("{v:?}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let mut value: toml_edit::Value = text
+        .parse()
+        .unwrap_or_else(|e| unreachable!("{text} is a TOML array: {e}"));
+    value.decor_mut().set_prefix(" ");
+    value
+}
+
+/// Puts the comment line `note` last in `decor`'s prefix (before the key, at its
+/// indentation), dropping an earlier note.
+fn add_note(decor: &mut toml_edit::Decor, note: &str) {
+    let prefix = decor
+        .prefix()
+        .and_then(toml_edit::RawString::as_str)
+        .unwrap_or("")
+        .to_owned();
+    let (body, indent) = match prefix.rfind('\n') {
+        Some(i) => prefix.split_at(i + 1),
+        None => ("", prefix.as_str()),
+    };
+    let kept: String = body
+        .split_inclusive('\n')
+        .filter(|line| !line.trim_start().starts_with(NOISE_NOTE))
+        .collect();
+    decor.set_prefix(format!("{kept}{indent}{note}\n{indent}"));
 }
 
 #[cfg(test)]
@@ -262,5 +472,139 @@ isolation = { level_bias = 7.5 }
         };
         let e = set_calibrated(TEXT, "tank", &c, &[], "a.csv").unwrap_err();
         assert!(matches!(e, EditError::Invalid(_)), "{e:?}");
+    }
+
+    const TWO: &str = r#"# Two states, two outputs.
+[[channels]]
+name = "plant"
+# the model, by hand
+[channels.model]
+F = [[0.9, 0.1], [0.0, 0.8]]
+H = [[1.0, 0.0], [0.0, 1.0]]
+Q = 0.1 # a guess
+R = [[1.0, 0.0], [0.0, 1.0]]
+S = [[0.0, 0.0], [0.0, 0.0]]
+
+[[channels.faults]]
+name = "b0"
+kind = "sensor_bias"
+output = 0
+"#;
+
+    fn m(n: usize, v: &[f64]) -> DMatrix<f64> {
+        DMatrix::from_row_slice(n, n, v)
+    }
+
+    fn noise() -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
+        (
+            m(2, &[0.01, 0.002, 0.0020000000000000004, 0.03]),
+            m(2, &[0.04, 0.0, 0.0, 0.09]),
+            m(2, &[0.001, 0.0, 0.0, 0.002]),
+        )
+    }
+
+    #[test]
+    fn noise_in_a_model_table_is_replaced_keeping_comments_and_other_keys() {
+        let (q, r, _) = noise();
+        let edited = set_noise(TWO, "plant", &q, &r, None, "data.csv (ALS)").unwrap();
+        assert_eq!(
+            edited,
+            r#"# Two states, two outputs.
+[[channels]]
+name = "plant"
+# the model, by hand
+[channels.model]
+F = [[0.9, 0.1], [0.0, 0.8]]
+H = [[1.0, 0.0], [0.0, 1.0]]
+# Noise covariances Q, R from data.csv (ALS)
+Q = [[0.01, 0.002], [0.002, 0.03]]
+R = [[0.04, 0.0], [0.0, 0.09]]
+
+[[channels.faults]]
+name = "b0"
+kind = "sensor_bias"
+output = 0
+"#
+        );
+        let cfg = crate::parse(&edited).unwrap();
+        let c = &cfg.channels[0];
+        let [_, _, _, _, q_read, r_read] = c.model.matrices();
+        assert_eq!(q_read.base(), &symmetric(&q));
+        assert_eq!(q_read.base()[(0, 1)], q_read.base()[(1, 0)]);
+        assert_eq!(r_read.base(), &r);
+        assert!(c.cross_covariance.is_none());
+        // A second edit replaces the note and adds S.
+        let (q2, r2, s2) = noise();
+        let again = set_noise(&edited, "plant", &(q2 * 2.0), &r2, Some(&s2), "b.csv").unwrap();
+        assert_eq!(again.matches(NOISE_NOTE).count(), 1, "{again}");
+        assert!(again.contains("# Noise covariances Q, R, S from b.csv\nQ = [[0.02, "));
+        assert!(
+            again.contains("S = [[0.001, 0.0], [0.0, 0.002]]\n"),
+            "{again}"
+        );
+        assert!(again.contains("# the model, by hand\n[channels.model]\nF = "));
+        let cfg = crate::parse(&again).unwrap();
+        assert_eq!(cfg.channels[0].cross_covariance.as_ref(), Some(&s2));
+    }
+
+    #[test]
+    fn noise_in_an_inline_model_is_replaced_and_s_added_and_removed() {
+        let text = TEXT.replace(
+            "model = { F = [[0.9]], H = [[1.0]], Q = 0.01, R = 0.04 }",
+            "model = { F = [[0.9]], H = [[1.0]], Q = 0.01, R = 0.04 } # scalar",
+        );
+        let (q, r, s) = (m(1, &[0.002]), m(1, &[0.5]), m(1, &[0.01]));
+        let edited = set_noise(&text, "tank", &q, &r, Some(&s), "x.mcap").unwrap();
+        assert!(
+            edited.contains(
+                "name = \"tank\"   # the only one\n# Noise covariances Q, R, S from x.mcap\n\
+                 model = { F = [[0.9]], H = [[1.0]], Q = [[0.002]], R = [[0.5]], S = [[0.01]] } \
+                 # scalar\n"
+            ),
+            "{edited}"
+        );
+        assert!(edited.starts_with("# A tank, by hand.\n"));
+        assert!(edited.contains("# set by hand until calibrated\nthreshold = 9.0\n"));
+        let cfg = crate::parse(&edited).unwrap();
+        assert_eq!(cfg.channels[0].cross_covariance.as_ref(), Some(&s));
+        let removed = set_noise(&edited, "tank", &q, &r, None, "y.csv").unwrap();
+        assert!(
+            removed.contains(
+                "# the only one\n# Noise covariances Q, R from y.csv\n\
+                 model = { F = [[0.9]], H = [[1.0]], Q = [[0.002]], R = [[0.5]] } # scalar\n"
+            ),
+            "{removed}"
+        );
+        assert!(
+            crate::parse(&removed).unwrap().channels[0]
+                .cross_covariance
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn noise_edits_that_cannot_be_made_are_refused() {
+        let (q, r, _) = noise();
+        let one = m(1, &[1.0]);
+        let e = set_noise(TEXT, "pump", &one, &one, None, "a").unwrap_err();
+        assert!(matches!(e, EditError::NoChannel(_)), "{e:?}");
+        // Q of the wrong size: the result would not validate.
+        let e = set_noise(TEXT, "tank", &q, &one, None, "a").unwrap_err();
+        assert!(matches!(e, EditError::Invalid(_)), "{e:?}");
+        // R not positive definite.
+        let e = set_noise(TWO, "plant", &q, &(r * -1.0), None, "a").unwrap_err();
+        assert!(matches!(e, EditError::Invalid(_)), "{e:?}");
+        let e = set_noise(TEXT, "tank", &m(1, &[f64::NAN]), &one, None, "a").unwrap_err();
+        assert!(matches!(e, EditError::NotFinite("Q")), "{e:?}");
+        let e = set_noise(
+            "[[channels]]\nname = \"tank\"\nmodel = 1\n",
+            "tank",
+            &one,
+            &one,
+            None,
+            "a",
+        )
+        .unwrap_err();
+        assert!(matches!(e, EditError::ModelNotTable), "{e:?}");
     }
 }

@@ -1,6 +1,10 @@
 //! `glrmon identify`: a channel's model from fault-free recordings (subspace
 //! identification of an innovation model, order selection, validation), written as a
 //! commented configuration. See [`glrmon_eval::identify`].
+//!
+//! With `--model CONFIG`: the noise covariances Q, R (and S) of the user's own model
+//! (F, G, H, J kept) from fault-free recordings, written into a copy of the
+//! configuration. See [`glrmon_eval::noise`].
 
 use std::path::PathBuf;
 
@@ -13,9 +17,29 @@ use crate::common::InvalidInput;
 
 #[derive(Debug, Args)]
 pub(crate) struct IdentifyArgs {
-    /// Name of the channel to write.
-    #[arg(long)]
-    channel: String,
+    /// Name of the channel to write (with --model: the channel whose noise is estimated,
+    /// optional when the configuration has one channel).
+    #[arg(long, required_unless_present = "model")]
+    channel: Option<String>,
+    /// Keep this configuration's model (F, G, H, J) and estimate only its noise
+    /// covariances Q, R (and S) from the recordings (autocovariance least squares); the
+    /// configuration is written to --output with the estimate in place of its Q, R, S.
+    #[arg(long, value_name = "CONFIG", conflicts_with_all = [
+        "order", "max_order", "inputs", "outputs", "criterion", "horizon", "detrend",
+        "window", "holdout", "holdout_last",
+    ])]
+    model: Option<PathBuf>,
+    /// With --model: the structure of Q (full: every entry; diagonal: uncorrelated
+    /// process noises, fewer parameters when a full Q is not identifiable).
+    #[arg(long, value_enum, default_value_t = QStructureArg::Full, requires = "model")]
+    q_structure: QStructureArg,
+    /// With --model: also estimate the cross covariance S = E[w vᵀ] (otherwise S = 0
+    /// and any S of the configuration is removed).
+    #[arg(long, requires = "model")]
+    cross_covariance: bool,
+    /// With --model: autocovariance lags fitted.
+    #[arg(long, default_value_t = 15, requires = "model")]
+    lags: usize,
     /// Fault-free recordings, CSV (named columns) or MCAP; each file, and each run of
     /// consecutive samples in it, is a separate experiment (never joined).
     #[arg(required = true)]
@@ -61,6 +85,12 @@ pub(crate) struct IdentifyArgs {
     json: bool,
 }
 
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum QStructureArg {
+    Full,
+    Diagonal,
+}
+
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum CriterionArg {
     Bic,
@@ -76,8 +106,19 @@ pub(crate) fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
         .into());
     }
     let files: Vec<String> = args.input.iter().map(|p| p.display().to_string()).collect();
+    if let Some(config) = &args.model {
+        return noise::run(args, config, &files);
+    }
+    let Some(channel) = args.channel.clone() else {
+        // clap refuses this already (required_unless_present): a usage error, exit 2.
+        clap::Error::raw(
+            clap::error::ErrorKind::MissingRequiredArgument,
+            "--channel NAME is required (unless --model CONFIG is given)\n",
+        )
+        .exit();
+    };
     let request = IdentifyRequest {
-        channel: args.channel.clone(),
+        channel: channel.clone(),
         files: args.input.clone(),
         inputs: args.inputs.clone(),
         outputs: args.outputs.clone(),
@@ -108,13 +149,13 @@ pub(crate) fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
         notes: vec![
             format!(
                 "Identified by `glrmon identify --channel {}` from {}.",
-                args.channel,
+                channel,
                 files.join(", ")
             ),
             format!(
                 "Next: glrmon calibrate --config {} --channel {} {} --sample-far 0.01 --write",
                 args.output.display(),
-                args.channel,
+                channel,
                 files.join(" ")
             ),
         ],
@@ -139,7 +180,7 @@ pub(crate) fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
              then monitor: glrmon replay --config {} NEW.csv   or   glrmon run --config {}",
             args.output.display(),
             args.output.display(),
-            args.channel,
+            channel,
             files.join(" "),
             args.output.display(),
             args.output.display(),
@@ -346,6 +387,338 @@ impl Report {
             },
             sigma_mismatch: id.sigma_mismatch,
             period: id.channel.period,
+        }
+    }
+}
+
+/// `glrmon identify --model CONFIG`: the noise covariances of the user's own model.
+mod noise {
+    use std::path::Path;
+
+    use glrmon_eval::noise::{NoiseError, NoiseReport, NoiseRequest, estimate_channel_noise};
+    use glrmon_ident::{CrossCovariance, IdentError, NoiseSettings, NoiseStructure, Structure};
+    use nalgebra::DMatrix;
+    use serde::Serialize;
+
+    use super::{IdentifyArgs, QStructureArg};
+    use crate::common::InvalidInput;
+
+    pub(super) fn run(args: &IdentifyArgs, config: &Path, files: &[String]) -> anyhow::Result<()> {
+        let text = std::fs::read_to_string(config)
+            .map_err(|e| InvalidInput(format!("reading {}: {e}", config.display())))?;
+        let request = NoiseRequest {
+            config: text,
+            channel: args.channel.clone(),
+            files: args.input.clone(),
+            settings: NoiseSettings {
+                structure: NoiseStructure {
+                    q: match args.q_structure {
+                        QStructureArg::Full => Structure::Full,
+                        QStructureArg::Diagonal => Structure::Diagonal,
+                    },
+                    s: if args.cross_covariance {
+                        CrossCovariance::Free
+                    } else {
+                        CrossCovariance::Zero
+                    },
+                    ..NoiseStructure::default()
+                },
+                lags: args.lags,
+                ..NoiseSettings::default()
+            },
+            source: format!(
+                "`glrmon identify --model {}` (autocovariance least squares) on {}",
+                config.display(),
+                files.join(", ")
+            ),
+        };
+        let report = estimate_channel_noise(&request).map_err(|e| error(e, args))?;
+        std::fs::write(&args.output, &report.config)
+            .map_err(|e| anyhow::anyhow!("writing {}: {e}", args.output.display()))?;
+        let next = format!(
+            "glrmon calibrate --config {} --channel {} {} --sample-far 0.01 --write",
+            args.output.display(),
+            report.channel,
+            files.join(" ")
+        );
+        if args.json {
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&Report::of(&report, args, &next))?
+            );
+        } else {
+            print_report(&report, args);
+            println!(
+                "\nwrote {} (it validates): {}'s model with the estimated noise. Next, \
+                 thresholds from fault-free data:\n  {next}",
+                args.output.display(),
+                config.display()
+            );
+        }
+        Ok(())
+    }
+
+    /// The exit code of a refusal: a runtime failure reading a file is 3, everything
+    /// else (the configuration, the data, an unidentifiable structure) is the user's
+    /// input (1).
+    fn error(e: NoiseError, args: &IdentifyArgs) -> anyhow::Error {
+        match e {
+            NoiseError::Input(e) => crate::common::input_error(e),
+            NoiseError::Ident(IdentError::NotIdentifiable { .. }) => {
+                let hint = if args.cross_covariance {
+                    "leave out --cross-covariance (S with a full Q is never identifiable)"
+                } else if args.q_structure == QStructureArg::Full {
+                    "try --q-structure diagonal"
+                } else {
+                    "the data cannot separate these parameters for this model"
+                };
+                InvalidInput(format!("{e}\nhint: {hint}")).into()
+            }
+            other => InvalidInput(other.to_string()).into(),
+        }
+    }
+
+    /// A number for a person: 4 decimals, or 4 significant digits when far from 1.
+    fn num(v: f64) -> String {
+        if v == 0.0 || (1e-2..1e5).contains(&v.abs()) {
+            format!("{v:.4}")
+        } else {
+            format!("{v:.3e}")
+        }
+    }
+
+    fn print_matrix(name: &str, m: &DMatrix<f64>) {
+        println!("{name} =");
+        for row in m.row_iter() {
+            let cells: Vec<String> = row.iter().map(|&v| format!("{:>11}", num(v))).collect();
+            println!("  [{} ]", cells.join(""));
+        }
+    }
+
+    /// ‖a − b‖ / ‖b‖ (Frobenius).
+    fn change(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
+        (a - b).norm() / b.norm().max(f64::MIN_POSITIVE)
+    }
+
+    /// σ of the mean of N χ²_p values, sqrt(2p / N).
+    fn nis_sigma(p: usize, samples: usize) -> f64 {
+        (2.0 * p as f64 / samples.max(1) as f64).sqrt()
+    }
+
+    fn print_report(report: &NoiseReport, args: &IdentifyArgs) {
+        let est = &report.estimate;
+        let used: Vec<_> = report.runs.iter().filter(|r| r.used).collect();
+        println!(
+            "channel \"{}\": F, G, H, J kept (n = {}, {} input(s), {} output(s)); estimating \
+             Q ({}), R (full), S ({})",
+            report.channel,
+            est.q.nrows(),
+            report.inputs.len(),
+            report.outputs.len(),
+            match args.q_structure {
+                QStructureArg::Full => "full",
+                QStructureArg::Diagonal => "diagonal",
+            },
+            if args.cross_covariance {
+                "free"
+            } else {
+                "zero"
+            },
+        );
+        println!(
+            "{} experiment(s), {} samples; u [{}], y [{}]; {}",
+            used.len(),
+            used.iter().map(|r| r.samples).sum::<usize>(),
+            report.inputs.join(", "),
+            report.outputs.join(", "),
+            if report.scaled {
+                "the channel's scaling applied (model units)"
+            } else {
+                "no scaling"
+            }
+        );
+        for r in report.runs.iter().filter(|r| !r.used) {
+            println!(
+                "  left out: {} from {} ({} samples, fewer than {})",
+                r.file.display(),
+                r.start,
+                r.samples,
+                glrmon_eval::noise::MIN_RUN_SAMPLES
+            );
+        }
+        println!(
+            "design matrix: rank {} for {} parameters ({}); {} lags",
+            est.design_rank,
+            est.parameters.len(),
+            est.parameters.join(" "),
+            est.lags
+        );
+        println!("iteration  ρ(F−LH)  samples  residual  cond      ΔQ       ΔR");
+        let mut previous: Option<(&DMatrix<f64>, &DMatrix<f64>)> = None;
+        for (i, it) in est.iterations.iter().enumerate() {
+            let (dq, dr) = match previous {
+                Some((q, r)) => (
+                    format!("{:>8.4}", change(&it.q, q)),
+                    format!("{:>8.4}", change(&it.r, r)),
+                ),
+                None => (format!("{:>8}", "—"), format!("{:>8}", "—")),
+            };
+            println!(
+                "{:>9} {:>8.4} {:>8} {:>9.4} {:>9.2e} {dq} {dr}{}",
+                i + 1,
+                it.predictor_spectral_radius,
+                it.samples,
+                it.residual,
+                it.design_condition,
+                if it.projected {
+                    "  (projected onto PSD)"
+                } else {
+                    ""
+                }
+            );
+            previous = Some((&it.q, &it.r));
+        }
+        print_matrix("Q", &est.q);
+        print_matrix("R", &est.r);
+        if let Some(s) = &est.s {
+            print_matrix("S", s);
+        }
+        print_matrix("steady Kalman gain K (predictor form)", &est.k);
+        print_matrix("innovation covariance Re", &est.re);
+        let p = report.outputs.len();
+        let samples = est.iterations.last().map_or(0, |it| it.samples);
+        if let Some(nis) = est.nis_mean {
+            let sigma = nis_sigma(p, samples);
+            let z = (nis - p as f64) / sigma;
+            println!(
+                "mean NIS on the data {nis:.4} (expected p = {p}; σ ≈ {sigma:.4}, z = {z:.2}{})",
+                if z.abs() <= 4.0 {
+                    ": consistent"
+                } else {
+                    ": NOT consistent"
+                }
+            );
+        }
+        if let Some(first) = est.ljung_box.first() {
+            let lb: Vec<String> = report
+                .outputs
+                .iter()
+                .zip(&est.ljung_box)
+                .map(|(n, t)| format!("{n} p = {:.3}", t.p_value))
+                .collect();
+            println!(
+                "innovation whiteness (Ljung–Box, {} lags): {}",
+                first.lags,
+                lb.join(", ")
+            );
+        }
+    }
+
+    fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+        m.row_iter().map(|r| r.iter().copied().collect()).collect()
+    }
+
+    /// `--json`: the printed report.
+    #[derive(Debug, Serialize)]
+    struct Report {
+        channel: String,
+        inputs: Vec<String>,
+        outputs: Vec<String>,
+        scaled: bool,
+        runs: Vec<super::RunReport>,
+        q_structure: &'static str,
+        cross_covariance: bool,
+        lags: usize,
+        parameters: Vec<String>,
+        design_rank: usize,
+        iterations: Vec<Iteration>,
+        q: Vec<Vec<f64>>,
+        r: Vec<Vec<f64>>,
+        s: Option<Vec<Vec<f64>>>,
+        k: Vec<Vec<f64>>,
+        re: Vec<Vec<f64>>,
+        p: Vec<Vec<f64>>,
+        nis_mean: Option<f64>,
+        expected_nis: usize,
+        nis_sigma: f64,
+        ljung_box_p: Vec<f64>,
+        ljung_box_lags: usize,
+        output: String,
+        next: String,
+    }
+
+    #[derive(Debug, Serialize)]
+    struct Iteration {
+        predictor_spectral_radius: f64,
+        transient: usize,
+        samples: usize,
+        residual: f64,
+        design_condition: f64,
+        projected: bool,
+        q_change: Option<f64>,
+        r_change: Option<f64>,
+    }
+
+    impl Report {
+        fn of(report: &NoiseReport, args: &IdentifyArgs, next: &str) -> Self {
+            let est = &report.estimate;
+            let p = report.outputs.len();
+            let samples = est.iterations.last().map_or(0, |it| it.samples);
+            Self {
+                channel: report.channel.clone(),
+                inputs: report.inputs.clone(),
+                outputs: report.outputs.clone(),
+                scaled: report.scaled,
+                runs: report
+                    .runs
+                    .iter()
+                    .map(|r| super::RunReport {
+                        file: r.file.display().to_string(),
+                        start: r.start.clone(),
+                        samples: r.samples,
+                        used: r.used,
+                    })
+                    .collect(),
+                q_structure: match args.q_structure {
+                    QStructureArg::Full => "full",
+                    QStructureArg::Diagonal => "diagonal",
+                },
+                cross_covariance: args.cross_covariance,
+                lags: est.lags,
+                parameters: est.parameters.clone(),
+                design_rank: est.design_rank,
+                iterations: est
+                    .iterations
+                    .iter()
+                    .enumerate()
+                    .map(|(i, it)| {
+                        let before = i.checked_sub(1).map(|j| &est.iterations[j]);
+                        Iteration {
+                            predictor_spectral_radius: it.predictor_spectral_radius,
+                            transient: it.transient,
+                            samples: it.samples,
+                            residual: it.residual,
+                            design_condition: it.design_condition,
+                            projected: it.projected,
+                            q_change: before.map(|b| change(&it.q, &b.q)),
+                            r_change: before.map(|b| change(&it.r, &b.r)),
+                        }
+                    })
+                    .collect(),
+                q: rows(&est.q),
+                r: rows(&est.r),
+                s: est.s.as_ref().map(rows),
+                k: rows(&est.k),
+                re: rows(&est.re),
+                p: rows(&est.p),
+                nis_mean: est.nis_mean,
+                expected_nis: p,
+                nis_sigma: nis_sigma(p, samples),
+                ljung_box_p: est.ljung_box.iter().map(|t| t.p_value).collect(),
+                ljung_box_lags: est.ljung_box.first().map_or(0, |t| t.lags),
+                output: args.output.display().to_string(),
+                next: next.to_owned(),
+            }
         }
     }
 }
