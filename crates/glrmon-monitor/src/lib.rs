@@ -539,6 +539,10 @@ impl Monitor {
                 }
             }
         }
+        if let Some(why) = too_large(u, y, &sample.p) {
+            self.reject(records, Some(k), ErrorCode::TooLarge, why);
+            return;
+        }
         let core_sample = glrmon_core::Sample {
             k,
             u,
@@ -578,6 +582,21 @@ impl Monitor {
             } else {
                 self.reject(records, Some(k), code, e.to_string());
             }
+            return;
+        }
+        if !self.out.normalized_innovation.is_finite()
+            || self.out.glr.is_some_and(|l| !l.is_finite())
+            || self.out.magnitude.iter().any(|v| !v.is_finite())
+        {
+            // Detected where it arises: a statistic that overflowed would make records
+            // no one can encode, and the filter state behind it is no better.
+            let why = format!(
+                "the statistics at k = {k} are not finite (εᵀΣ⁻¹ε = {:e}, l_k = {:?}): \
+                 sample dropped; the filter restarts from its initial state at the next \
+                 sample",
+                self.out.normalized_innovation, self.out.glr
+            );
+            self.restart(k, sample.t, ErrorCode::Numerical, why, records);
             return;
         }
         self.counters.samples += 1;
@@ -844,6 +863,27 @@ impl Monitor {
             stage: Stage::Processing,
         }));
     }
+}
+
+/// The largest magnitude of an input, output or signal value (in model units, after
+/// `[channels.scaling]`) that the monitor accepts. The filter squares innovations and
+/// sums them over the window; values beyond 10¹⁰⁰ could overflow those quadratic forms
+/// (10³⁰⁸), so they are refused at intake (`too_large`) instead of poisoning the
+/// channel's statistics.
+pub const MAX_MAGNITUDE: f64 = 1e100;
+
+/// Why a sample's values are refused as too large, if they are.
+fn too_large(u: &[f64], y: &[f64], p: &[f64]) -> Option<String> {
+    for (field, values) in [("u", u), ("y", y), ("p", p)] {
+        if let Some(i) = values.iter().position(|v| v.abs() > MAX_MAGNITUDE) {
+            return Some(format!(
+                "field {field}[{i}] = {:e} is beyond the accepted magnitude {MAX_MAGNITUDE:e} \
+                 (in model units): it would overflow the filter's statistics",
+                values[i]
+            ));
+        }
+    }
+    None
 }
 
 #[cfg(test)]

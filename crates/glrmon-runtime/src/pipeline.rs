@@ -369,14 +369,45 @@ impl ChannelPipeline {
                 None
             };
             let mut json = emit.buffer();
-            if let Err(source) = encode_json(&record, &mut json) {
-                first.get_or_insert(PipelineError::Encode {
-                    channel: self.name.to_string(),
-                    what: "record",
-                    source,
-                });
-                continue;
-            }
+            let record = match encode_json(&record, &mut json) {
+                Ok(()) => record,
+                Err(source) => {
+                    // Never a silent loss: the record that cannot be encoded (a number
+                    // JSON cannot hold) is replaced by an error record saying so, which
+                    // is counted and goes wherever the record would have gone.
+                    let error = ErrorRecord {
+                        channel: self.name.to_string(),
+                        k: record.k(),
+                        code: ErrorCode::Numerical,
+                        message: format!(
+                            "channel \"{}\": the {} record at k = {} could not be encoded \
+                             and is replaced by this error: {source}",
+                            self.name,
+                            record.kind_str(),
+                            record.k().map_or_else(|| "?".to_owned(), |k| k.to_string())
+                        ),
+                        stage: Stage::Sending,
+                    };
+                    *self
+                        .stats
+                        .errors
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)
+                        .entry(ErrorCode::Numerical.as_str())
+                        .or_insert(0) += 1;
+                    let error = Record::Error(error);
+                    json.clear();
+                    if let Err(source) = encode_json(&error, &mut json) {
+                        first.get_or_insert(PipelineError::Encode {
+                            channel: self.name.to_string(),
+                            what: "record",
+                            source,
+                        });
+                        continue;
+                    }
+                    error
+                }
+            };
             let handed = emit.record(Output {
                 record,
                 json,
@@ -397,5 +428,57 @@ impl ChannelPipeline {
 fn keep_first(first: &mut Option<PipelineError>, result: Result<(), PipelineError>) {
     if let Err(e) = result {
         first.get_or_insert(e);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{MemorySink, Sink};
+
+    /// Issue 21, item 1: a record that cannot be encoded (a non-finite number) used to be
+    /// skipped without a trace; it is now replaced by a counted `numerical` error record
+    /// that reaches every sink the record would have reached.
+    #[test]
+    fn a_record_that_cannot_be_encoded_becomes_a_counted_error_record() {
+        let cfg = glrmon_spec::parse(include_str!("../../../config/demo.toml")).unwrap();
+        let monitor = Monitor::from_channel(&cfg.channels[0]).unwrap();
+        let memory = MemorySink::default();
+        let records = memory.records();
+        let mut fanout = Fanout::new(vec![Box::new(memory) as Box<dyn Sink>], 1);
+        let mut pipeline = ChannelPipeline::new(0, monitor, fanout.plan());
+        pipeline.records.push(Record::Stat(glrmon_wire::Stat {
+            channel: pipeline.name.to_string(),
+            k: 7,
+            t: None,
+            glr: Some(f64::INFINITY),
+            onset: Some(3),
+            magnitude: vec![f64::NAN],
+            rank: 1,
+            innovation: vec![0.0],
+            threshold: None,
+        }));
+        pipeline.hand_on_records(0, &mut fanout).unwrap();
+        fanout.close(&mut |e| panic!("{e}"));
+        let got = records.lock().unwrap();
+        assert_eq!(got.len(), 1);
+        let Record::Error(e) = &got[0].record else {
+            panic!("{:?}", got[0].record);
+        };
+        assert_eq!(
+            (e.k, e.code, e.stage),
+            (Some(7), ErrorCode::Numerical, Stage::Sending)
+        );
+        assert!(
+            e.message
+                .contains("the stat record at k = 7 could not be encoded"),
+            "{}",
+            e.message
+        );
+        assert!(String::from_utf8_lossy(&got[0].json).contains("\"code\":\"numerical\""));
+        assert_eq!(
+            pipeline.stats().errors.lock().unwrap().get("numerical"),
+            Some(&1)
+        );
     }
 }
