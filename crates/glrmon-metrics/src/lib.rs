@@ -137,6 +137,12 @@ impl MetricsSource {
             r.queued_payloads.load(Ordering::Relaxed).max(0).to_string(),
         );
         gauge(
+            "glrmon_queued_bytes",
+            "Bytes of the payloads waiting for a worker (bounded by daemon.intake_mb).",
+            "gauge",
+            r.queued_bytes.load(Ordering::Relaxed).max(0).to_string(),
+        );
+        gauge(
             "glrmon_workers_alive",
             "Worker threads running.",
             "gauge",

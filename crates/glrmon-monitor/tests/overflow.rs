@@ -78,7 +78,13 @@ fn a_huge_finite_value_is_refused_at_intake_and_the_alarm_still_comes() {
         })
         .collect();
     // The refused sample is then a missing one, bridged by a predict-only step.
-    assert_eq!(errors, [(Some(300), ErrorCode::TooLarge), (Some(301), ErrorCode::Gap)]);
+    assert_eq!(
+        errors,
+        [
+            (Some(300), ErrorCode::TooLarge),
+            (Some(301), ErrorCode::Gap)
+        ]
+    );
     let stats = records
         .iter()
         .filter(|r| matches!(r, Record::Stat(_)))

@@ -40,7 +40,7 @@ pub use sinks::{FnSink, JsonLinesSink, MemorySink};
 pub use status::channel_statuses;
 
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Receiver, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -94,6 +94,11 @@ pub struct RuntimeSettings {
     pub workers: usize,
     /// Capacity of each worker's queue, in payloads.
     pub worker_queue: usize,
+    /// Capacity of each worker's queue, in payload bytes: a payload that would take a
+    /// worker's queued bytes beyond it is dropped (counted, a gap for its channel).
+    pub worker_queue_bytes: usize,
+    /// Capacity of all worker queues together, in payload bytes.
+    pub intake_bytes: usize,
     /// Capacity of the output queue, in records.
     pub output_queue: usize,
     /// Forward one `stat` record in this many (0: none) to the sinks.
@@ -112,6 +117,8 @@ impl RuntimeSettings {
                 std::thread::available_parallelism().map_or(2, std::num::NonZero::get)
             }),
             worker_queue: d.worker_queue,
+            worker_queue_bytes: mib(d.worker_queue_mb),
+            intake_bytes: mib(d.intake_mb),
             output_queue: d.output_queue,
             stat_every: d.stat_every,
             limits: DecodeLimits {
@@ -122,11 +129,25 @@ impl RuntimeSettings {
     }
 }
 
+/// `mb` MiB in bytes (saturating; a negative or NaN size is 0).
+fn mib(mb: f64) -> usize {
+    let bytes = mb * 1024.0 * 1024.0;
+    if bytes.is_nan() || bytes <= 0.0 {
+        0
+    } else if bytes >= usize::MAX as f64 {
+        usize::MAX
+    } else {
+        bytes as usize
+    }
+}
+
 impl Default for RuntimeSettings {
     fn default() -> Self {
         Self {
             workers: 2,
             worker_queue: 4096,
+            worker_queue_bytes: 64 << 20,
+            intake_bytes: 256 << 20,
             output_queue: 16384,
             stat_every: 10,
             limits: DecodeLimits::default(),
@@ -184,6 +205,10 @@ impl Clock {
 #[derive(Clone)]
 pub struct Intake {
     queues: Arc<Vec<SyncSender<Job>>>,
+    /// Payload bytes queued for each worker.
+    queued_bytes: Arc<Vec<Arc<AtomicUsize>>>,
+    worker_queue_bytes: usize,
+    intake_bytes: usize,
     stats: Arc<Vec<Arc<ChannelStats>>>,
     open: Arc<AtomicBool>,
     limits: DecodeLimits,
@@ -225,6 +250,8 @@ impl LatencyHistogram {
 pub struct RuntimeMetrics {
     /// Payloads accepted by intake and not yet taken by a worker.
     pub queued_payloads: AtomicI64,
+    /// Their bytes.
+    pub queued_bytes: AtomicI64,
     /// Worker threads running (a worker that ends or panics leaves this count).
     pub workers_alive: AtomicU64,
     /// From a payload's receipt to its records handed to the output stage.
@@ -297,21 +324,46 @@ impl Intake {
             }
             return Offer::TooLarge;
         }
-        let Some(queue) = self.queues.get(channel % self.queues.len().max(1)) else {
+        let worker = channel % self.queues.len().max(1);
+        let (Some(queue), Some(queued)) = (self.queues.get(worker), self.queued_bytes.get(worker))
+        else {
             return Offer::Closed;
         };
+        // Memory is bounded in bytes as well as in payloads: reserve this payload's
+        // bytes, and give them back if it cannot be queued.
+        let len = payload.bytes.len();
+        let in_worker = queued.fetch_add(len, Ordering::AcqRel).saturating_add(len);
+        let total = self
+            .metrics
+            .queued_bytes
+            .fetch_add(len as i64, Ordering::AcqRel)
+            .saturating_add(len as i64);
+        let release = || {
+            queued.fetch_sub(len, Ordering::AcqRel);
+            self.metrics
+                .queued_bytes
+                .fetch_sub(len as i64, Ordering::AcqRel);
+        };
         let before = stats.pending_drops.swap(0, Ordering::AcqRel);
+        if in_worker > self.worker_queue_bytes || total > self.intake_bytes as i64 {
+            release();
+            stats.pending_drops.fetch_add(before + 1, Ordering::AcqRel);
+            stats.dropped.fetch_add(1, Ordering::Relaxed);
+            return Offer::Dropped;
+        }
         match queue.try_send(Job::Payload(channel, payload, before)) {
             Ok(()) => {
                 self.metrics.queued_payloads.fetch_add(1, Ordering::Relaxed);
                 Offer::Accepted
             }
             Err(TrySendError::Full(_)) => {
+                release();
                 stats.pending_drops.fetch_add(before + 1, Ordering::AcqRel);
                 stats.dropped.fetch_add(1, Ordering::Relaxed);
                 Offer::Dropped
             }
             Err(TrySendError::Disconnected(_)) => {
+                release();
                 stats.pending_drops.fetch_add(before, Ordering::AcqRel);
                 Offer::Closed
             }
@@ -374,10 +426,13 @@ impl Runtime {
                 .push(ChannelPipeline::new(i, m, plan.clone()).with_stats(stats[i].clone()));
         }
         let mut queues = Vec::new();
+        let mut queued_bytes = Vec::new();
         let mut workers = Vec::new();
         for (w, shard) in shards.into_iter().enumerate() {
             let (tx, rx) = mpsc::sync_channel::<Job>(settings.worker_queue.max(1));
             queues.push(tx);
+            let bytes = Arc::new(AtomicUsize::new(0));
+            queued_bytes.push(bytes.clone());
             let out = out_tx.clone();
             let m = metrics.clone();
             m.workers_alive.fetch_add(1, Ordering::Relaxed);
@@ -394,7 +449,7 @@ impl Runtime {
                 .name(format!("glrmon-worker-{w}"))
                 .spawn(move || {
                     let _alive = AliveGuard(m.clone());
-                    worker(rx, shard, context, &m);
+                    worker(rx, shard, context, &m, &bytes);
                 });
             match spawned {
                 Ok(h) => workers.push(h),
@@ -406,6 +461,9 @@ impl Runtime {
         Self {
             intake: Intake {
                 queues: Arc::new(queues),
+                queued_bytes: Arc::new(queued_bytes),
+                worker_queue_bytes: settings.worker_queue_bytes,
+                intake_bytes: settings.intake_bytes,
                 stats: stats.clone(),
                 open: Arc::new(AtomicBool::new(true)),
                 limits: settings.limits,
@@ -572,6 +630,7 @@ fn worker(
     mut shard: Vec<ChannelPipeline>,
     mut cx: WorkerContext,
     metrics: &RuntimeMetrics,
+    queued_bytes: &AtomicUsize,
 ) {
     let mut samples: Vec<Sample> = Vec::new();
     loop {
@@ -583,6 +642,10 @@ fn worker(
         let (channel, received) = match &job {
             Job::Payload(c, p, _) => {
                 metrics.queued_payloads.fetch_sub(1, Ordering::Relaxed);
+                queued_bytes.fetch_sub(p.bytes.len(), Ordering::AcqRel);
+                metrics
+                    .queued_bytes
+                    .fetch_sub(p.bytes.len() as i64, Ordering::AcqRel);
                 (*c, p.received)
             }
             Job::Reject(c, _, _, at) => (*c, *at),
@@ -598,8 +661,8 @@ fn worker(
             continue;
         };
         let log_time_ns = cx.clock.unix_ns(received);
-        // The queue emitter never fails; an input or record that cannot be encoded is
-        // not handed on (the pipeline goes on with the next one).
+        // The queue emitter never fails; a record that cannot be encoded is replaced by
+        // an error record saying so (the pipeline goes on with the next one).
         match job {
             Job::Payload(_, payload, dropped_before) => {
                 // Payloads dropped at intake just before this one: advance the arrival

@@ -715,6 +715,19 @@ pub fn parse(text: &str) -> Result<Config, SpecErrors> {
             "workers, worker_queue, output_queue and max_payload_bytes must be positive".into(),
         );
     }
+    for (field, mb) in [
+        ("worker_queue_mb", d.worker_queue_mb),
+        ("intake_mb", d.intake_mb),
+    ] {
+        // At least one payload of the largest accepted size must fit.
+        let least = d.max_payload_bytes as f64 / (1024.0 * 1024.0);
+        if !(mb.is_finite() && mb >= least && mb <= 1024.0 * 1024.0) {
+            v.error(
+                format!("daemon.{field}"),
+                format!("{mb} must be between max_payload_bytes ({least} MiB) and 1048576 MiB"),
+            );
+        }
+    }
     if !(d.shutdown_timeout.is_finite() && d.shutdown_timeout > 0.0) {
         v.error(
             "daemon.shutdown_timeout".into(),

@@ -54,6 +54,13 @@ pub struct DaemonSpec {
     /// Capacity of each worker's queue in payloads (default 4096); a full queue drops.
     #[serde(default = "default_worker_queue")]
     pub worker_queue: usize,
+    /// Capacity of each worker's queue in MiB of payloads (default 64): memory is
+    /// bounded in bytes as well as in payloads; a payload beyond it is dropped.
+    #[serde(default = "default_worker_queue_mb")]
+    pub worker_queue_mb: f64,
+    /// Capacity of all worker queues together in MiB (default 256).
+    #[serde(default = "default_intake_mb")]
+    pub intake_mb: f64,
     /// Capacity of the output queue in records (default 16384).
     #[serde(default = "default_output_queue")]
     pub output_queue: usize,
@@ -82,6 +89,8 @@ impl Default for DaemonSpec {
         Self {
             workers: None,
             worker_queue: default_worker_queue(),
+            worker_queue_mb: default_worker_queue_mb(),
+            intake_mb: default_intake_mb(),
             output_queue: default_output_queue(),
             stat_every: default_stat_every(),
             max_payload_bytes: default_max_payload(),
@@ -95,6 +104,12 @@ impl Default for DaemonSpec {
 
 fn default_worker_queue() -> usize {
     4096
+}
+fn default_worker_queue_mb() -> f64 {
+    64.0
+}
+fn default_intake_mb() -> f64 {
+    256.0
 }
 fn default_output_queue() -> usize {
     16384
