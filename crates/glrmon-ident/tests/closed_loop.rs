@@ -7,10 +7,14 @@ use glrmon_ident::{Experiment, IdentSettings, Identification, Method, identify, 
 use nalgebra::{DMatrix, DVector};
 use support::{Rng, Truth, markov_error, noise_markov_error, pole_error, re_error};
 
-/// Controller gains, dither and samples of the closed-loop record.
+/// Controller gains, dither and samples of the closed-loop record. The dither is needed:
+/// without it the PI law makes u0_k an exact linear function of the past window and
+/// the VARX regression is collinear (asserted in the sweep); σ = 0.3 is small next to
+/// the feedback part of u0 (a unit dither makes the loop nearly open and PO-MOESP's
+/// Markov error falls to 0.035–0.046, inside the tolerance).
 const KP: f64 = 0.2;
 const KI: f64 = 0.02;
-const DITHER: f64 = 0.1;
+const DITHER: f64 = 0.3;
 const SAMPLES: usize = 30_000;
 
 fn settings(method: Method) -> IdentSettings {
@@ -146,7 +150,73 @@ fn closed_loop_pbsid_recovers_the_system_and_moesp_does_not() {
         moesp.order.chosen
     );
     assert!(moesp_poles > 0.03, "MOESP pole error {moesp_poles}");
+    assert!(moesp_markov > 0.05, "MOESP Markov error {moesp_markov}");
     println!("closed loop, MOESP: Markov {moesp_markov:.4}, Re {moesp_re:.4}");
+    // At the true order PO-MOESP's bias is in B, D and the noise path: the Markov
+    // parameters are 4× outside the tolerance on every seed of the sweep below; its poles
+    // are off by more than 0.03 on 8 of those 12 seeds only, so they are printed.
+    let fixed = identify(
+        &data,
+        &IdentSettings {
+            order: Some(4),
+            ..settings(Method::Moesp)
+        },
+    )
+    .unwrap();
+    let (_, fixed_markov, fixed_noise, _) = report("closed loop, MOESP order 4", &fixed, &truth);
+    assert!(
+        fixed_markov > 0.1,
+        "MOESP order 4 Markov error {fixed_markov}"
+    );
+    assert!(
+        fixed_noise > 0.15,
+        "MOESP order 4 noise Markov error {fixed_noise}"
+    );
+}
+
+#[test]
+fn closed_loop_pbsid_on_two_experiments_never_uses_the_join() {
+    // Two closed-loop records of half the length at different operating points (inputs
+    // +5, outputs +50): each experiment's regressions stay inside it.
+    let truth = Truth::four_state();
+    let mut experiments = Vec::new();
+    for (seed, offset) in [(41, 0.0), (42, 50.0)] {
+        let mut rng = Rng::new(seed);
+        let (u, y) = closed_loop(&truth, SAMPLES / 2, DITHER, &mut rng);
+        experiments.push(Experiment::new(
+            u.add_scalar(offset / 10.0),
+            y.add_scalar(offset),
+        ));
+    }
+    let id = identify(&experiments, &settings(Method::Pbsid)).unwrap();
+    let (poles, markov, noise, re) = report("closed loop, two experiments, PBSID", &id, &truth);
+    assert_eq!(id.order.chosen, 4, "{}", id.order.reason);
+    assert!(poles < 0.03, "pole error {poles}");
+    assert!(markov < 0.05, "Markov error {markov}");
+    assert!(noise < 0.15, "noise Markov error {noise}");
+    assert!(re < 0.1, "Re error {re}");
+    let again = identify(&experiments, &settings(Method::Pbsid)).unwrap();
+    assert_eq!(id, again, "identification is not deterministic");
+
+    // Falsification: the same records joined into one experiment carry the step.
+    let joined = Experiment::new(
+        vstack(&experiments[0].inputs, &experiments[1].inputs),
+        vstack(&experiments[0].outputs, &experiments[1].outputs),
+    );
+    let bad = identify(&[joined], &settings(Method::Pbsid)).unwrap();
+    let markov_bad = markov_error(&bad.model, &truth, 6);
+    println!(
+        "closed loop, joined with a step: chosen order {}, Markov error {markov_bad:.4}",
+        bad.order.chosen
+    );
+    assert!(markov_bad > 2.0 * markov, "{markov_bad} vs {markov}");
+}
+
+fn vstack(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    let mut out = DMatrix::zeros(a.nrows() + b.nrows(), a.ncols());
+    out.rows_mut(0, a.nrows()).copy_from(a);
+    out.rows_mut(a.nrows(), b.nrows()).copy_from(b);
+    out
 }
 
 #[test]
@@ -162,4 +232,67 @@ fn open_loop_pbsid_recovers_the_system() {
     assert!(markov < 0.05, "Markov error {markov}");
     assert!(noise < 0.15, "noise Markov error {noise}");
     assert!(re < 0.1, "Re error {re}");
+}
+
+#[test]
+fn closed_loop_seed_sweep() {
+    // Twelve seeds at the test's dither, and the same seeds without dither and with a
+    // unit dither: what holds for every seed is asserted, the rest printed.
+    let truth = Truth::four_state();
+    let mut worst = [0.0_f64; 2];
+    let mut beyond = 0;
+    for seed in 100..112 {
+        let mut rng = Rng::new(seed);
+        let (u, y) = closed_loop(&truth, SAMPLES, DITHER, &mut rng);
+        let data = [Experiment::new(u, y)];
+        let id = identify(&data, &settings(Method::Pbsid)).unwrap();
+        let fixed = identify(
+            &data,
+            &IdentSettings {
+                order: Some(4),
+                ..settings(Method::Moesp)
+            },
+        )
+        .unwrap();
+        let poles = pole_error(&id.model.poles(), &truth.a);
+        let markov = markov_error(&id.model, &truth, 6);
+        let noise = noise_markov_error(&id.model, &truth, 6);
+        let re = re_error(&id.model.re, &truth.re);
+        let moesp_poles = pole_error(&fixed.model.poles(), &truth.a);
+        let moesp_markov = markov_error(&fixed.model, &truth, 6);
+        println!(
+            "seed {seed}: PBSID order {}, poles {poles:.4}, Markov {markov:.4}, noise {noise:.4}, \
+             Re {re:.4} | MOESP order 4: poles {moesp_poles:.4}, Markov {moesp_markov:.4}",
+            id.order.chosen
+        );
+        assert_eq!(id.order.chosen, 4, "seed {seed}: {}", id.order.reason);
+        assert!(markov < 0.05, "seed {seed}: Markov error {markov}");
+        assert!(noise < 0.15, "seed {seed}: noise Markov error {noise}");
+        assert!(re < 0.1, "seed {seed}: Re error {re}");
+        assert!(
+            moesp_markov > 0.1,
+            "seed {seed}: MOESP Markov error {moesp_markov}"
+        );
+        worst[0] = worst[0].max(poles);
+        worst[1] = worst[1].max(markov);
+        beyond += usize::from(poles >= 0.03);
+    }
+    println!(
+        "sweep: worst PBSID pole error {:.4}, worst Markov error {:.4}, {beyond} of 12 seeds \
+         with a pole error ≥ 0.03",
+        worst[0], worst[1]
+    );
+    assert!(worst[0] < 0.05, "worst pole error {}", worst[0]);
+
+    // Without dither, u0_k is an exact linear function of u0_{k−1}, y0_{k−1}, y0_{k−2}:
+    // the VARX regressors [z̄_k; u_k] are collinear, D's u0 column is not identifiable
+    // and no order gives a stable predictor. An error, not a wrong model.
+    let mut rng = Rng::new(100);
+    let (u, y) = closed_loop(&truth, SAMPLES, 0.0, &mut rng);
+    let err = identify(&[Experiment::new(u, y)], &settings(Method::Pbsid)).unwrap_err();
+    println!("no dither: {err}");
+    assert!(
+        matches!(err, glrmon_ident::IdentError::NoUsableOrder { .. }),
+        "{err}"
+    );
 }
