@@ -49,12 +49,13 @@ pub enum Method {
     Moesp,
     /// Predictor-based subspace identification, PBSID-opt ([`Pbsid`]; Chiuso 2007, §5;
     /// van der Veen et al. 2013, §4.3): the choice for data recorded under feedback
-    /// control. The controller must not use y_k to compute u_k when the model has a
-    /// direct feedthrough D from that input (a one-sample delay in the loop, as in any
-    /// sampled controller that acts on the last measurement), and the driven input needs
-    /// some excitation besides the feedback (a dither or setpoint changes): a noise-free
-    /// linear controller of low order makes u_k a linear function of the past window,
-    /// the VARX regression collinear and the model unusable (an error, not a wrong model).
+    /// control. D is estimated for every input, so u_k must not depend on the current
+    /// innovation: the controller must compute u_k from y_{k−1} and older (a one-sample
+    /// delay in the loop; a controller acting on y_k biases D and the whole model, as it
+    /// would the VARX of Chiuso 2007, who assumes a delay or a known D = 0). The driven
+    /// input also needs excitation besides the feedback (a dither or setpoint changes): a
+    /// noise-free linear controller of low order makes it a linear function of the past
+    /// window, and [`Pbsid::new`] refuses the collinear data (an error, not a wrong model).
     ///
     /// Not the default: on the open-loop tests it is as accurate as PO-MOESP, but its
     /// default past window (20) needs more samples per experiment (2p = 40 instead of

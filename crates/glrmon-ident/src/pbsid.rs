@@ -15,8 +15,8 @@
 //! 1. **VARX.** Ξ_1..Ξ_p and D by least squares of y_k on [z_{k−p}; …; z_{k−1}; u_k]. e_k
 //!    is white and uncorrelated with the past z (whatever feedback produced the inputs),
 //!    so the estimate is consistent in closed loop as long as u_k itself does not depend
-//!    on e_k (a controller acting on y_{k−1}, or D = 0 for the driven input) and Ã^p is
-//!    negligible (Chiuso 2007, *The role of vector autoregressive modeling in
+//!    on e_k (a controller acting on y_{k−1}: D is estimated for every input here) and
+//!    Ã^p is negligible (Chiuso 2007, *The role of vector autoregressive modeling in
 //!    predictor-based subspace identification*, Automatica 43, 1034–1048, §3–4; Chiuso &
 //!    Picci 2005, *Consistency analysis of some closed-loop subspace identification
 //!    methods*, Automatica 41, 377–391).
@@ -93,7 +93,11 @@ impl Pbsid {
     /// [`IdentError::ColumnMismatch`], [`IdentError::RowMismatch`],
     /// [`IdentError::ExperimentTooShort`] when an experiment has fewer than 2p samples,
     /// [`IdentError::TooFewSamples`] when the experiments give fewer regression rows than
-    /// the data matrix has columns, [`IdentError::SvdNotConverged`].
+    /// the data matrix has columns (one per experiment, p(l + p), l, p),
+    /// [`IdentError::NotPositiveDefinite`] when the past window is collinear (an input
+    /// that is a linear function of past data, e.g. a controller's output without dither
+    /// or setpoint changes: the data do not determine that input's path),
+    /// [`IdentError::SvdNotConverged`].
     pub fn new(experiments: &[Experiment], past: usize, future: usize) -> Result<Self, IdentError> {
         if past < 1 {
             return Err(IdentError::InvalidSetting {
@@ -147,7 +151,8 @@ impl Pbsid {
             rows += n - past;
         }
         let q = past * (l + p);
-        let width = q + l + p;
+        // The collinearity check regresses on a constant per experiment too.
+        let width = experiments.len() + q + l + p;
         if rows < width {
             return Err(IdentError::TooFewSamples {
                 columns: rows,
@@ -158,17 +163,18 @@ impl Pbsid {
             });
         }
 
-        // 1. VARX by least squares, from R of the data [Z_p; u; y] (rows scaled 1/√N).
-        let r = data_r(experiments, past, l, p, rows);
-        let reg = q + l;
-        let r_reg = r.view((0, 0), (reg, reg)).into_owned();
-        let theta_t = pinv(&r_reg) * r.view((0, reg), (reg, p));
+        // The past window must not be collinear (after a constant per experiment).
+        check_past_window(
+            &data_r(experiments, past, l, p, rows, true),
+            experiments.len(),
+            q,
+        )?;
+        // 1. VARX by least squares, from R of the data [Z_p; u; y] (rows scaled 1/√N):
+        // the least squares of columns of Q R on others are those of the columns of R.
+        let r = data_r(experiments, past, l, p, rows, false);
+        let theta = least_squares(&r, q + l);
         // Ξ_j multiplies z_{k−j}, stored at column block p − j of the past window.
-        let xi = |j: usize| {
-            theta_t
-                .view(((past - j) * (l + p), 0), (l + p, p))
-                .transpose()
-        };
+        let xi = |j: usize| theta.columns((past - j) * (l + p), l + p).into_owned();
 
         // 2. Γ_f 𝒦_p: block (i, lag j) = Ξ_{i+j} for i + j ≤ p, column block p − j.
         let mut gamma_k = DMatrix::zeros(future * p, q);
@@ -381,32 +387,68 @@ fn square(r: DMatrix<f64>, cols: usize) -> DMatrix<f64> {
     out
 }
 
-/// R of the data matrix whose rows are [z̄_kᵀ, u_kᵀ, y_kᵀ]/√N, k = p..N−1 of every
-/// experiment.
+/// Smallest singular value of the past window's R (after the per-experiment constants),
+/// relative to the largest, below which the past data are collinear.
+const COLLINEAR_TOLERANCE: f64 = 1e-7;
+
+/// Refuses a collinear past window: some combination of z̄_k is (to rounding) a
+/// constant per experiment, typically an input computed by a linear controller from
+/// past data with no external excitation (no dither, no setpoint change). The VARX is
+/// then not unique, the data are not informative about that input's path (Ljung 1999,
+/// *System Identification*, §13.4), and any model would be arbitrary.
+fn check_past_window(r: &DMatrix<f64>, e: usize, q: usize) -> Result<(), IdentError> {
+    let block = r.view((e, e), (q, q)).into_owned();
+    let s = nalgebra::SVD::try_new(block, false, false, f64::EPSILON, SVD_MAX_ITERATIONS)
+        .ok_or(IdentError::SvdNotConverged {
+            what: "the PBSID past window",
+        })?
+        .singular_values;
+    let max = s.iter().copied().fold(0.0, f64::max);
+    let min = s.iter().copied().fold(f64::INFINITY, f64::min);
+    // NaN (non-finite data) counts as collinear.
+    let separated = min > COLLINEAR_TOLERANCE * max;
+    if !separated {
+        return Err(IdentError::NotPositiveDefinite {
+            what: "the covariance of the PBSID past window z̄_k (its data are collinear: an \
+                   input is a linear function of past data, e.g. a controller's output with no \
+                   dither or setpoint change, and the data say nothing about its path)",
+        });
+    }
+    Ok(())
+}
+
+/// R of the data matrix whose rows are [1_eᵀ, z̄_kᵀ, u_kᵀ, y_kᵀ]/√N, k = p..N−1 of every
+/// experiment, 1_e the indicator of the experiment when `intercepts` (else absent).
 fn data_r(
     experiments: &[Experiment],
     past: usize,
     l: usize,
     p: usize,
     rows: usize,
+    intercepts: bool,
 ) -> DMatrix<f64> {
     let q = past * (l + p);
-    let width = q + l + p;
+    let c0 = if intercepts { experiments.len() } else { 0 };
+    let width = c0 + q + l + p;
     let scale = 1.0 / (rows as f64).sqrt();
     let mut r = DMatrix::<f64>::zeros(0, width);
-    for exp in experiments {
+    for (ei, exp) in experiments.iter().enumerate() {
         let n = exp.samples() - past;
         let mut start = 0;
         while start < n {
             let len = BLOCK_ROWS.min(n - start);
             let mut block = DMatrix::zeros(len, width);
-            block
+            if intercepts {
+                block.column_mut(ei).fill(1.0);
+            }
+            let mut block_data = block.columns_mut(c0, q + l + p);
+            block_data
                 .columns_mut(0, q)
                 .copy_from(&past_rows(exp, past, l, p, start, len));
-            block
+            block_data
                 .columns_mut(q, l)
                 .copy_from(&exp.inputs.rows(past + start, len));
-            block
+            block_data
                 .columns_mut(q + l, p)
                 .copy_from(&exp.outputs.rows(past + start, len));
             block *= scale;
