@@ -6,6 +6,7 @@ pub mod error;
 pub mod identify;
 pub mod model;
 pub mod noise;
+pub mod pbsid;
 pub mod subspace;
 pub mod validation;
 
@@ -15,8 +16,8 @@ pub use data::{
 };
 pub use error::{IdentError, Signal};
 pub use identify::{
-    Candidate, Criterion, Holdout, IdentSettings, Identification, OrderSelection, ValidationReport,
-    identify, to_physical, validate,
+    Candidate, Criterion, Holdout, IdentSettings, Identification, Method, OrderSelection,
+    ValidationReport, identify, to_physical, validate,
 };
 pub use model::{
     InnovationModel, Prediction, RiccatiSolution, solve_riccati, sorted_eigenvalues,
@@ -26,5 +27,6 @@ pub use noise::{
     AlsIteration, CrossCovariance, InitialGuess, NoiseEstimate, NoiseSettings, NoiseStructure,
     PhysicalModel, Structure, estimate_noise,
 };
+pub use pbsid::Pbsid;
 pub use subspace::Subspace;
 pub use validation::{LjungBox, chi2_survival, ljung_box, nis_mean, nrmse};
