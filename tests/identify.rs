@@ -230,3 +230,30 @@ fn named_columns_constant_columns_and_missing_ones() {
     let e = String::from_utf8_lossy(&missing.stderr);
     assert!(e.contains("no column \"P9\""), "{e}");
 }
+
+#[test]
+fn the_predictor_based_method_identifies_the_tank_too() {
+    let d = dir("pbsid");
+    let runs: Vec<String> = (1..=3)
+        .map(|s| record(&d, &format!("fault_free_{s}.csv"), s, vec![]))
+        .collect();
+    let config = d.join("tank.toml");
+    let mut args = vec![
+        "identify",
+        "--channel",
+        "tank",
+        "--method",
+        "pbsid",
+        "--json",
+        "--output",
+        config.to_str().unwrap(),
+    ];
+    args.extend(runs.iter().map(String::as_str));
+    let report: serde_json::Value = serde_json::from_str(&ok(&args)).unwrap();
+    assert_eq!(report["order"], 4, "{report:#}");
+    let nis = report["validation"]["nis_mean"].as_f64().unwrap();
+    assert!(
+        (nis - 4.0).abs() < 4.0 * (8.0f64 / 1200.0).sqrt(),
+        "NIS {nis}"
+    );
+}

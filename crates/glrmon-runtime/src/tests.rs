@@ -237,7 +237,12 @@ fn intake_memory_is_bounded_in_bytes() {
         },
         ..RuntimeSettings::default()
     };
-    let rt = Runtime::start(monitors, vec![Box::new(sink)], &settings, Arc::new(NoEvents));
+    let rt = Runtime::start(
+        monitors,
+        vec![Box::new(sink)],
+        &settings,
+        Arc::new(NoEvents),
+    );
     let intake = rt.intake();
     let metrics = rt.metrics();
     let (mut accepted, mut dropped, mut most) = (0u64, 0u64, 0i64);

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 use glrmon_eval::identify::{Identified, IdentifyError, IdentifyRequest, identify_channel};
-use glrmon_ident::{Criterion, Detrend, Holdout, IdentSettings, PreprocessSettings};
+use glrmon_ident::{Criterion, Detrend, Holdout, IdentSettings, Method, PreprocessSettings};
 use serde::Serialize;
 
 use crate::common::InvalidInput;
@@ -62,6 +62,10 @@ pub(crate) struct IdentifyArgs {
     /// Largest candidate order.
     #[arg(long, default_value_t = 10)]
     max_order: usize,
+    /// Subspace method: moesp (PO-MOESP, open-loop data) or pbsid (predictor-based,
+    /// consistent on data recorded under feedback control).
+    #[arg(long, value_enum, default_value_t = MethodArg::Moesp, conflicts_with = "model")]
+    method: MethodArg,
     /// Criterion that picks the order.
     #[arg(long, value_enum, default_value_t = CriterionArg::Bic)]
     criterion: CriterionArg,
@@ -89,6 +93,12 @@ pub(crate) struct IdentifyArgs {
 enum QStructureArg {
     Full,
     Diagonal,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum MethodArg {
+    Moesp,
+    Pbsid,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -138,6 +148,10 @@ pub(crate) fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
                 Holdout::LastExperiment
             } else {
                 Holdout::LastFraction(args.holdout)
+            },
+            method: match args.method {
+                MethodArg::Moesp => Method::Moesp,
+                MethodArg::Pbsid => Method::Pbsid,
             },
             criterion: match args.criterion {
                 CriterionArg::Bic => Criterion::Bic,
