@@ -142,6 +142,21 @@ pub fn identified_channel(channel: &IdentifiedChannel) -> String {
     let _ = writeln!(out, "R = {}", matrix(&symmetric(&channel.re)));
     let _ = writeln!(out, "S = {}", matrix(&s));
     let _ = writeln!(out, "P0 = {}", matrix(&symmetric(&channel.p0)));
+    if !channel.inputs.is_empty() {
+        let inputs: Vec<String> = channel
+            .u_offset
+            .iter()
+            .zip(&channel.u_scale)
+            .map(|(o, s)| quoted(&format!("{o:?} + {s:?} * normal(0, 1)")))
+            .collect();
+        let _ = writeln!(
+            out,
+            "\n# `glrmon simulate`, `evaluate` and `calibrate --simulate` drive the model with\n\
+             # raw inputs of the recordings' mean and spread (white: edit to taste).\n\
+             [channels.simulation]\ninputs = [{}]",
+            inputs.join(", ")
+        );
+    }
     out.push_str(
         "\n# One bias per output and per input, named after its column.\n\
          [[channels.faults]]\nkind = \"all_sensors\"\n",
