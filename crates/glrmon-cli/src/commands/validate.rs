@@ -222,6 +222,36 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
             "  correlated noises: S = E[w vᵀ] given, the predictor gain is (F P Hᵀ + S) Σ⁻¹ (an innovation model runs at its own order; sparse diagnosis's residual filters ignore S)"
         );
     }
+    if let Some(scaling) = &channel.scaling {
+        let list = |names: &[String], offset: &[f64], scale: &[f64]| {
+            names
+                .iter()
+                .zip(offset.iter().zip(scale))
+                .map(|(n, (o, s))| format!("{n} {o:.4} ± {s:.4}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let _ = writeln!(
+            s,
+            "  natural units: model = (raw − offset)/scale on intake; inputs [{}], outputs [{}]; \
+             sensor/actuator bias magnitudes in raw units",
+            list(&channel.columns.u, scaling.u_offset(), scaling.u_scale()),
+            list(&channel.columns.y, scaling.y_offset(), scaling.y_scale())
+        );
+    }
+    if channel.columns.named {
+        let _ = writeln!(
+            s,
+            "  CSV columns: u = [{}], y = [{}]{} (other columns are skipped)",
+            channel.columns.u.join(", "),
+            channel.columns.y.join(", "),
+            if channel.columns.p.is_empty() {
+                String::new()
+            } else {
+                format!(", p = [{}]", channel.columns.p.join(", "))
+            }
+        );
+    }
     let (info, steady, samples) = channel_information(channel)?;
     match steady {
         Some(sigma) => {
