@@ -126,3 +126,50 @@ fn usage_error_exits_2() {
     let out = glrmon().arg("no-such-command").output().unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
+
+/// `glrmon replay … | head -1`: when the reader of standard output goes away, an
+/// offline command ends by SIGPIPE, quietly, as `cat` does; it used to panic in
+/// `println!` (exit 101, "failed printing to stdout: Broken pipe").
+#[test]
+fn a_closed_pipe_ends_an_offline_command_quietly() {
+    use std::io::Read as _;
+    use std::os::unix::process::ExitStatusExt as _;
+    let dir = std::env::temp_dir().join(format!("glrmon-pipe-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("data.csv");
+    let config = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/examples/paper2014-unstable.toml"
+    );
+    let simulated = glrmon()
+        .args([
+            "simulate",
+            "--config",
+            config,
+            "--samples",
+            "20000",
+            "--output",
+        ])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(
+        simulated.status.success(),
+        "{}",
+        String::from_utf8_lossy(&simulated.stderr)
+    );
+    let mut child = glrmon()
+        .args(["replay", "--config", config])
+        .arg(&csv)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = [0u8; 16];
+    child.stdout.take().unwrap().read_exact(&mut first).unwrap();
+    // The pipe's read end is dropped here: the next write gets EPIPE.
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(out.status.signal(), Some(13), "{:?}: {stderr}", out.status);
+}

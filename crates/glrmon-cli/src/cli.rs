@@ -60,3 +60,22 @@ pub(crate) enum Command {
     /// channels, samples/s, alarms, errors, drops, reconnections, uptime).
     Status(status::StatusArgs),
 }
+
+impl Command {
+    /// Commands that talk to nobody but files and the terminal: a closed stdout may end
+    /// them (see `quiet_broken_pipe` in main.rs). The daemon and the Zenoh commands
+    /// are not among them.
+    pub(crate) fn writes_to_a_pipe_only(&self) -> bool {
+        match self {
+            Command::Validate(_)
+            | Command::Replay(_)
+            | Command::Identify(_)
+            | Command::Calibrate(_)
+            | Command::Evaluate(_)
+            | Command::Recover(_)
+            | Command::Diagnose(_) => true,
+            Command::Simulate(args) => !args.publishes(),
+            Command::Demo(_) | Command::Run(_) | Command::Watch(_) | Command::Status(_) => false,
+        }
+    }
+}

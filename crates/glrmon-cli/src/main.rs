@@ -29,6 +29,9 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if cli.command.writes_to_a_pipe_only() {
+        quiet_broken_pipe();
+    }
     let filter = tracing_subscriber::EnvFilter::try_from_env("GLRMON_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,zenoh=warn"));
     tracing_subscriber::fmt()
@@ -59,5 +62,18 @@ fn main() -> ExitCode {
             eprintln!("glrmon: {err:#}");
             ExitCode::from(3)
         }
+    }
+}
+
+/// `glrmon validate … | head -1`: an offline command whose reader went away ends
+/// quietly, as `cat` does (the default SIGPIPE action), instead of panicking in
+/// `println!`. Not for the daemon and the Zenoh commands, whose sockets must see EPIPE
+/// as an error to handle.
+fn quiet_broken_pipe() {
+    #[cfg(unix)]
+    // SAFETY: called first thing in `main`, before any thread exists; SIG_DFL is a valid
+    // disposition for SIGPIPE.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }

@@ -52,6 +52,13 @@ pub(crate) struct SimulateArgs {
     zenoh: crate::flags::ZenohArgs,
 }
 
+impl SimulateArgs {
+    /// Whether the samples go to Zenoh (`--publish`) rather than to a file.
+    pub(crate) fn publishes(&self) -> bool {
+        self.publish
+    }
+}
+
 pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let cfg = load_config(&args.config)?;
     let channel = pick(&cfg, args.channel.as_deref())?;
