@@ -53,7 +53,7 @@ check-config: ## glrmon validate every file in config/
 	@$(CARGO) build -q -p glrmon-cli
 	@g=$${CARGO_TARGET_DIR:-target}/debug/glrmon; for f in config/*.toml config/examples/*.toml; do $$g validate $$f >/dev/null || { $$g validate $$f; exit 1; }; echo "valid: $$f"; done
 
-fuzz-build: ## build the fuzz targets (fuzz/: sample, record, status, config and MCAP decoders) so they keep compiling
+fuzz-build: ## build the fuzz targets (fuzz/: sample, record, status, config, expression, CSV and MCAP decoders) so they keep compiling
 	$(CARGO) build --manifest-path fuzz/Cargo.toml --target-dir target
 
 FUZZ_TARGET ?= samples
