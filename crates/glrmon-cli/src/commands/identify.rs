@@ -50,10 +50,10 @@ pub(crate) struct IdentifyArgs {
     /// Overwrite --output if it exists.
     #[arg(long)]
     force: bool,
-    /// Input columns, in order (default: every u<i> column).
+    /// Input columns, in order (default: the u0, u1, … columns).
     #[arg(long, value_delimiter = ',')]
     inputs: Option<Vec<String>>,
-    /// Output columns, in order (default: every y<i> column).
+    /// Output columns, in order (default: the y0, y1, … columns).
     #[arg(long, value_delimiter = ',')]
     outputs: Option<Vec<String>>,
     /// Model order n (default: chosen by --criterion up to --max-order).
