@@ -3,7 +3,7 @@
 //!
 //! Each file is read as named columns ([`glrmon_input::read_table`]); every run of
 //! consecutive samples is a separate experiment (never joined to the next); the chosen
-//! inputs and outputs go to [`glrmon_ident::identify`]; the identified innovation model,
+//! inputs and outputs go to [`glrmon_ident::identify()`]; the identified innovation model,
 //! its operating point and scales, and the columns become a commented configuration
 //! ([`glrmon_spec::write::identified_channel`]) that is parsed back and whose detector is
 //! checked against the identification before anything is returned.
