@@ -3,7 +3,7 @@
 
 use std::collections::VecDeque;
 use std::fs::File;
-use std::io::{BufReader, Read};
+use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -26,6 +26,16 @@ impl<R: Read> Read for Counting<R> {
         let n = self.inner.read(buf)?;
         self.read.fetch_add(n as u64, Ordering::Relaxed);
         Ok(n)
+    }
+}
+
+impl<R: Seek> Seek for Counting<R> {
+    fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
+        // The counter shows the position (the reader reads the summary first, and
+        // skips damaged parts).
+        let at = self.inner.seek(pos)?;
+        self.read.store(at, Ordering::Relaxed);
+        Ok(at)
     }
 }
 
@@ -338,7 +348,8 @@ impl McapInput {
             .iter()
             .map(|d| format!("damaged: {d}"))
             .collect();
-        let mut damaged = !lines.is_empty() || !self.bad_inputs.is_empty();
+        let salvage = self.reader.salvage();
+        let mut damaged = !lines.is_empty() || !self.bad_inputs.is_empty() || salvage.lost_data();
         lines.extend(
             self.bad_inputs
                 .iter()
@@ -357,8 +368,13 @@ impl McapInput {
             )),
             ReadEnd::Unreadable { at, reason } => {
                 damaged = true;
-                lines.push(format!("unreadable from byte {at}: {reason}"));
+                lines.push(format!(
+                    "unreadable from byte {at}: {reason}; no valid chunk follows"
+                ));
             }
+        }
+        if salvage.lost_data() || salvage.summary_note.is_some() {
+            lines.push(format!("salvage: {salvage}"));
         }
         (lines, damaged)
     }

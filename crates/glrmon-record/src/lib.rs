@@ -27,7 +27,7 @@ use std::path::Path;
 
 pub use config::{file_header, leftovers};
 pub use file_sink::McapFileSink;
-pub use reader::{Damage, Event, McapReader, Message, ReadEnd, ReadError, Topic};
+pub use reader::{Damage, Event, Lost, McapReader, Message, ReadEnd, ReadError, Salvage, Topic};
 pub use recorder::{
     Capture, PARTIAL_SUFFIX, Recorder, RecorderSettings, RecorderStats, finished_name,
 };
@@ -47,6 +47,17 @@ pub struct Recovery {
     pub damage: Vec<Damage>,
     /// How the input ended.
     pub end: ReadEnd,
+    /// The salvage totals: damaged regions, bytes skipped, messages read and known.
+    pub salvage: Salvage,
+}
+
+impl Recovery {
+    /// Whether data was lost to damage ([`Salvage::lost_data`], or a read that ended
+    /// [`ReadEnd::Unreadable`]); an unfinished file alone is not.
+    #[must_use]
+    pub fn lost_data(&self) -> bool {
+        self.salvage.lost_data() || matches!(self.end, ReadEnd::Unreadable { .. })
+    }
 }
 
 /// Errors of [`recover`].
@@ -67,6 +78,8 @@ pub enum RecoverError {
 
 /// Reads every readable message of `input` (a file cut short or with damaged chunks)
 /// and writes them, with the `glrmon` metadata, as a finished MCAP file `output`.
+/// Damaged records are skipped by resynchronising on the next valid chunk (see
+/// [`McapReader`]); [`Recovery::salvage`] and [`Recovery::damage`] say what was lost.
 ///
 /// # Errors
 /// [`RecoverError`] when the input is not MCAP or the output cannot be written.
@@ -115,6 +128,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<Recovery, RecoverError> {
         chunks: reader.chunks(),
         damage: reader.damage().to_vec(),
         end: reader.end().clone(),
+        salvage: reader.salvage(),
     })
 }
 

@@ -1,6 +1,12 @@
 //! `glrmon recover FILE`: a recording left unfinished by a crash (`kill -9`, power
-//! loss) or with damaged chunks, rewritten as a finished MCAP file (summary, index,
-//! footer) holding every readable message.
+//! loss) or with damaged records, rewritten as a finished MCAP file (summary, index,
+//! footer) holding every readable message. Damaged records are skipped by
+//! resynchronising on the next valid chunk; the report says what was lost.
+//!
+//! Exit codes: 0 when nothing was lost (a finished file, or an unfinished one whose
+//! only loss is the incomplete record being written when the recorder died); 1 when
+//! data was lost to damage — the output is written all the same, with every readable
+//! message, and the damage (regions, bytes, lost time ranges) is reported on stderr.
 
 use std::path::PathBuf;
 
@@ -39,7 +45,9 @@ pub(crate) fn run(args: &RecoverArgs) -> anyhow::Result<()> {
             "the input was unfinished: readable up to byte {at}, {partial} bytes of an \
              incomplete record dropped"
         ),
-        ReadEnd::Unreadable { at, reason } => format!("unreadable from byte {at}: {reason}"),
+        ReadEnd::Unreadable { at, reason } => {
+            format!("unreadable from byte {at}: {reason}; no valid chunk follows")
+        }
     };
     println!(
         "glrmon recover: {} messages from {} chunks written to {}; {end}",
@@ -48,7 +56,19 @@ pub(crate) fn run(args: &RecoverArgs) -> anyhow::Result<()> {
         output.display()
     );
     for d in &r.damage {
-        println!("  damaged, skipped: {d}");
+        eprintln!("glrmon recover: damaged, skipped: {d}");
+    }
+    if r.lost_data() || r.salvage.summary_note.is_some() {
+        eprintln!("glrmon recover: salvage: {}", r.salvage);
+    }
+    if r.lost_data() {
+        return Err(InvalidInput(format!(
+            "{}: the file is damaged and data was lost; every readable message was \
+             written to {}",
+            args.input.display(),
+            output.display()
+        ))
+        .into());
     }
     Ok(())
 }
