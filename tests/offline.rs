@@ -497,7 +497,7 @@ fn bad_rows_become_error_records_and_the_replay_continues() {
     let parts: Vec<String> = lines[41].split(',').map(str::to_owned).collect();
     lines[41] = format!("{},{},{},inf", parts[0], parts[1], parts[2]); // non-finite
     lines.insert(61, lines[60].clone()); // k repeats
-    lines.insert(80, lines[50].clone()); // k goes backwards
+    lines.insert(80, lines[70].clone()); // k goes back by 10 (within max_reorder: refused alone)
     std::fs::write(&csv, lines.join("\n") + "\n").unwrap();
     let out = dir.file("out.jsonl");
     let replay = glrmon(&["replay", "--config", &cfg, &csv, "--output", &out]);
