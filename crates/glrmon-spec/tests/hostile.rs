@@ -301,3 +301,64 @@ fn instance_names_are_one_safe_key_chunk() {
         assert!(glrmon_spec::parse(&format!("[daemon]\ninstance = \"{good}\"\n{BASE}")).is_ok());
     }
 }
+
+mod shapes {
+    use proptest::prelude::*;
+
+    /// A matrix as written: up to 3 rows of up to 3 entries each (ragged, empty, or a
+    /// scalar when `None`).
+    fn matrix() -> impl Strategy<Value = Option<Vec<Vec<f64>>>> {
+        proptest::option::of(proptest::collection::vec(
+            proptest::collection::vec(-2.0_f64..2.0, 0..4),
+            0..4,
+        ))
+    }
+
+    fn toml(name: &str, m: &Option<Vec<Vec<f64>>>, scalar: &str) -> String {
+        match m {
+            None => format!("{name} = {scalar}\n"),
+            Some(rows) => {
+                let rows: Vec<String> = rows
+                    .iter()
+                    .map(|r| {
+                        let r: Vec<String> = r.iter().map(|x| format!("{x:?}")).collect();
+                        format!("[{}]", r.join(", "))
+                    })
+                    .collect();
+                format!("{name} = [{}]\n", rows.join(", "))
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(2000))]
+
+        /// Item 4, exhaustively over small shapes: whatever the shapes of F, G, H, J, Q,
+        /// R, P0, E and S, validation returns (a configuration or errors), never panics.
+        #[test]
+        fn any_matrix_shapes_are_validated_without_panicking(
+            f in matrix(), g in matrix(), h in matrix(), j in matrix(), q in matrix(),
+            r in matrix(), p0 in matrix(), e in matrix(), s in matrix(),
+            with in proptest::collection::vec(any::<bool>(), 5),
+        ) {
+            let mut text = String::from("[[channels]]\nname = \"c\"\n\n[channels.model]\n");
+            text.push_str(&toml("F", &f, "0.5"));
+            text.push_str(&toml("H", &h, "1.0"));
+            text.push_str(&toml("Q", &q, "0.01"));
+            text.push_str(&toml("R", &r, "0.04"));
+            for (present, name, m, scalar) in [
+                (with[0], "G", &g, "1.0"),
+                (with[1], "J", &j, "0.0"),
+                (with[2], "P0", &p0, "1.0"),
+                (with[3], "E", &e, "1.0"),
+                (with[4], "S", &s, "0.0"),
+            ] {
+                if present {
+                    text.push_str(&toml(name, m, scalar));
+                }
+            }
+            text.push_str("\n[[channels.faults]]\nkind = \"all_sensors\"\n");
+            let _ = glrmon_spec::parse(&text);
+        }
+    }
+}
