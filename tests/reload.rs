@@ -216,3 +216,138 @@ async fn sighup_applies_thresholds_and_refuses_what_needs_a_restart() {
     let _ = session.close().await;
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 21: a SIGHUP with each hostile configuration of the issue (an empty H, the
+/// oversized windows and history, a key in glrmon's own space, bad instance names) is
+/// refused by the same validation as `glrmon validate`, naming the field, and the daemon
+/// goes on: no panic (H = [] killed it with exit 101), samples still processed, a clean
+/// exit 0 at SIGTERM.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sighup_with_hostile_configs_is_refused_and_the_daemon_goes_on() {
+    let dir = std::env::temp_dir().join(format!("glrmon-reload21-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
+    let motor = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/examples/dc-motor.toml"),
+    )
+    .unwrap();
+    let head = |instance: &str| {
+        format!(
+            "[zenoh]\nmode = \"peer\"\nlisten = [\"{endpoint}\"]\n\n[daemon]\nstat_every = 0\ninstance = \"{instance}\"\n\n"
+        )
+    };
+    let cfg = dir.join("plant.toml");
+    std::fs::write(&cfg, format!("{}{motor}", head("reload21"))).unwrap();
+    let (mut child, stderr) = support::spawn_logged(
+        Command::new(env!("CARGO_BIN_EXE_glrmon"))
+            .args(["run", "--config"])
+            .arg(&cfg),
+    );
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    assert!(line.contains("monitoring 1 channel(s)"), "{line}");
+    let mut daemon = Daemon { child, stderr };
+    let h = "H = [[1.0, 0.0], [0.0, 1.0]]";
+    let window = "window = 100";
+    let name = "name = \"dc_motor\"";
+    assert!(motor.contains(h) && motor.contains(window) && motor.contains(name));
+    let hostile: Vec<(String, &str)> = vec![
+        (motor.replace(h, "H = []"), "model.H has no rows"),
+        (
+            motor.replace(h, "H = [[1.0, 0.0], [0.0]]"),
+            "model.H: row 1 has 1 entries",
+        ),
+        (
+            motor.replace("P0 = 0.01", "P0 = []"),
+            "model.P0 has no rows",
+        ),
+        (
+            motor.replace(window, "window = 9223372036854775807"),
+            "glr.window: w = 9223372036854775807 is more than 100000",
+        ),
+        (
+            motor.replace(window, "window = 1000000000"),
+            "glr.window: w = 1000000000 is more than 100000",
+        ),
+        (
+            format!("{motor}\n[channels.diagnosis]\nenabled = true\nhistory = 1000000000000\n"),
+            "diagnosis.history: 1000000000000 samples is more than 1000000",
+        ),
+        (
+            motor.replace(name, "name = \"dc_motor\"\nkey = \"glrmon/**\""),
+            "intersects glrmon's own key space glrmon/**",
+        ),
+    ];
+    let mut refusals = 0;
+    for (text, expected) in &hostile {
+        std::fs::write(&cfg, format!("{}{text}", head("reload21"))).unwrap();
+        daemon.signal("-HUP");
+        refusals += 1;
+        let log = daemon.wait_log("Reload refused", refusals);
+        assert!(log.contains(expected), "wanted «{expected}» in\n{log}");
+    }
+    for (instance, expected) in [
+        ("", "daemon.instance is empty"),
+        ("a/b/**", "daemon.instance"),
+    ] {
+        std::fs::write(&cfg, format!("{}{motor}", head(instance))).unwrap();
+        daemon.signal("-HUP");
+        refusals += 1;
+        let log = daemon.wait_log("Reload refused", refusals);
+        assert!(log.contains(expected), "wanted «{expected}» in\n{log}");
+    }
+    assert!(
+        daemon.child.try_wait().unwrap().is_none(),
+        "the daemon exited: {}",
+        daemon.stderr.lock().unwrap()
+    );
+    // Still monitoring: samples go through.
+    let session = glrmon_zenoh::open(&SessionSettings {
+        mode: Some("client".into()),
+        connect: vec![endpoint.clone()],
+        multicast_scouting: Some(false),
+        ..SessionSettings::default()
+    })
+    .await
+    .unwrap();
+    let publisher = session
+        .declare_publisher("plant/dc_motor")
+        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .await
+        .unwrap();
+    let t = Instant::now();
+    while !publisher.matching_status().await.unwrap().matching() {
+        assert!(t.elapsed() < Duration::from_secs(10));
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    for k in 0..50_u64 {
+        let s = Sample {
+            k: Some(k),
+            t: None,
+            u: vec![1.0],
+            y: vec![0.0, 0.0],
+            p: Vec::new(),
+        };
+        let mut b = Vec::new();
+        encode_sample("dc_motor", &s, &mut b).unwrap();
+        publisher.put(b).wait().unwrap();
+    }
+    assert_eq!(wait_samples(&session, 50).await.0, 50);
+    daemon.signal("-TERM");
+    let t = Instant::now();
+    let code = loop {
+        if let Some(s) = daemon.child.try_wait().unwrap() {
+            break s.code();
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(10),
+            "no exit after SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    assert_eq!(code, Some(0));
+    let _ = session.close().await;
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -33,8 +33,10 @@ pub enum ModelError {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum StepError {
-    /// A vector of the sample has the wrong length.
-    #[error("field {field} has {got} values, model expects {expected}")]
+    /// A vector of the sample has the wrong length. An empty one that the model needs
+    /// reads "field u is missing or empty (the model has 1 input)": a payload without
+    /// `u` decodes to an empty `u`.
+    #[error("field {field} {}", wrong_dimension(field, *expected, *got))]
     WrongDimension {
         /// `"u"`, `"y"` or `"p"`.
         field: &'static str,
@@ -82,6 +84,21 @@ pub enum StepError {
         /// The missing sample.
         k: u64,
     },
+}
+
+/// The predicate of [`StepError::WrongDimension`].
+fn wrong_dimension(field: &str, expected: usize, got: usize) -> String {
+    if got == 0 && expected > 0 {
+        let what = match field {
+            "u" => "input",
+            "y" => "output",
+            _ => "signal",
+        };
+        let plural = if expected == 1 { "" } else { "s" };
+        format!("is missing or empty (the model has {expected} {what}{plural})")
+    } else {
+        format!("has {got} values, model expects {expected}")
+    }
 }
 
 /// Threshold of the Assumption (iv) check of Zhang 2021
@@ -154,4 +171,30 @@ pub enum SparseError {
     /// Xᵀy = 0: every Lasso solution is θ̂ = 0, there is no fault to isolate.
     #[error("Xᵀy = 0: the residuals carry no component along any fault signature")]
     NoSignal,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::StepError;
+
+    /// Issue 21, item 10: `{"y":[1,2]}` on a channel with an input said "field u has 0
+    /// values"; the field is missing.
+    #[test]
+    fn an_empty_field_is_reported_missing() {
+        let missing = StepError::WrongDimension {
+            field: "u",
+            expected: 1,
+            got: 0,
+        };
+        assert_eq!(
+            missing.to_string(),
+            "field u is missing or empty (the model has 1 input)"
+        );
+        let short = StepError::WrongDimension {
+            field: "y",
+            expected: 2,
+            got: 1,
+        };
+        assert_eq!(short.to_string(), "field y has 1 values, model expects 2");
+    }
 }

@@ -250,6 +250,34 @@ pub struct MetricsError {
     pub source: std::io::Error,
 }
 
+/// The warning to log when the endpoint listens beyond this host: `None` for a loopback
+/// address (127.0.0.0/8, ::1), otherwise a sentence saying that the endpoint is
+/// reachable from the network, unauthenticated, and how to protect it.
+///
+/// # Examples
+///
+/// ```
+/// assert!(glrmon_metrics::exposure_warning("127.0.0.1:9464".parse().unwrap()).is_none());
+/// assert!(glrmon_metrics::exposure_warning("0.0.0.0:9464".parse().unwrap()).is_some());
+/// ```
+#[must_use]
+pub fn exposure_warning(bound: std::net::SocketAddr) -> Option<String> {
+    if bound.ip().is_loopback() {
+        return None;
+    }
+    let scope = if bound.ip().is_unspecified() {
+        "every network interface of this host"
+    } else {
+        "a non-loopback address"
+    };
+    Some(format!(
+        "The metrics endpoint {bound} listens on {scope}: /metrics, /healthz and /readyz are \
+         served without authentication or TLS to anyone who can reach it. Bind it to \
+         127.0.0.1 and scrape through a reverse proxy or an SSH tunnel, or restrict the port \
+         with a firewall (docs/OPERATIONS.md, \"Metrics\")."
+    ))
+}
+
 /// Binds `addr` and serves on the current tokio runtime until the returned task is
 /// aborted; returns the bound address (the port, if `addr` asked for port 0) and the
 /// task.

@@ -566,6 +566,7 @@ impl Monitor {
         }
         if let Err(e) = self.detector.step(&core_sample, &mut self.out) {
             let code = match e {
+                StepError::WrongDimension { got: 0, .. } => ErrorCode::MissingField,
                 StepError::WrongDimension { .. } => ErrorCode::WrongDimension,
                 StepError::NonFinite { .. } => ErrorCode::NonFinite,
                 StepError::OutOfOrder { .. } => ErrorCode::OutOfOrder,
@@ -1160,6 +1161,10 @@ mod tests {
                 let mut bad = s.clone();
                 bad.y = vec![1.0, 2.0];
                 dirty.on_sample(&bad, &mut rd);
+                // Issue 21: `{"y":[..]}` on a channel with an input.
+                let mut no_u = s.clone();
+                no_u.u = Vec::new();
+                dirty.on_sample(&no_u, &mut rd);
                 let mut nan = s.clone();
                 nan.u = vec![f64::NAN];
                 dirty.on_sample(&nan, &mut rd);
@@ -1191,8 +1196,17 @@ mod tests {
                 }
             })
             .collect();
-        assert_eq!(codes, ["wrong_dimension", "non_finite", "duplicate"]);
+        assert_eq!(
+            codes,
+            [
+                "wrong_dimension",
+                "missing_field",
+                "non_finite",
+                "duplicate"
+            ]
+        );
         assert!(rd.iter().any(|r| matches!(r, Record::Error(e) if e.message.contains("field y has 2 values, model expects 1"))));
+        assert!(rd.iter().any(|r| matches!(r, Record::Error(e) if e.message.contains("field u is missing or empty (the model has 1 input)"))));
     }
 
     #[test]

@@ -22,6 +22,8 @@
 pub mod covariance;
 pub mod edit;
 pub mod expr;
+pub mod keys;
+pub mod limits;
 pub mod schema;
 pub mod write;
 
@@ -515,6 +517,9 @@ pub struct Channel {
     /// The filter-consistency test, when enabled.
     pub consistency: Option<glrmon_core::consistency::ConsistencySettings>,
     faults: Vec<FaultPlan>,
+    /// The configuration path of each fault, in dictionary order (`channels[0] "x":
+    /// faults[1]`, or `… faults[0] (y2)` for an expanded shortcut).
+    fault_paths: Vec<String>,
 }
 
 impl Channel {
@@ -571,6 +576,13 @@ impl Channel {
     #[must_use]
     pub fn innovation_dof(&self) -> usize {
         self.dims.outputs - self.unknown_input.as_ref().map_or(0, |e| e.shape().1)
+    }
+
+    /// The configuration path of fault `index` (dictionary order), e.g.
+    /// `channels[0] "pump3": faults[1]`, for messages that name the field at fault.
+    #[must_use]
+    pub fn fault_path(&self, index: usize) -> Option<&str> {
+        self.fault_paths.get(index).map(String::as_str)
     }
 
     /// Whether the model's matrices (and E, if any) are constant (LTI).
@@ -643,6 +655,16 @@ fn validate_recording(v: &mut Validator, r: &schema::RecordingSpec) {
     if r.queue == 0 {
         v.error("recording.queue".into(), "must be positive".into());
     }
+    if r.queue > limits::MAX_QUEUE {
+        v.error(
+            "recording.queue".into(),
+            format!(
+                "{} is more than {} (limits::MAX_QUEUE)",
+                r.queue,
+                limits::MAX_QUEUE
+            ),
+        );
+    }
     if r.prefix.is_empty() || r.prefix.contains(['/', '\\']) {
         v.error(
             "recording.prefix".into(),
@@ -658,6 +680,14 @@ fn validate_recording(v: &mut Validator, r: &schema::RecordingSpec) {
                 v.error(
                     format!("recording.capture.{field}"),
                     format!("{value} must be finite and non-negative"),
+                );
+            } else if value > limits::MAX_CAPTURE_SECONDS {
+                v.error(
+                    format!("recording.capture.{field}"),
+                    format!(
+                        "{value} s is more than {} s (limits::MAX_CAPTURE_SECONDS)",
+                        limits::MAX_CAPTURE_SECONDS
+                    ),
                 );
             }
         }
@@ -728,6 +758,28 @@ pub fn parse(text: &str) -> Result<Config, SpecErrors> {
             );
         }
     }
+    for (field, value, max) in [
+        ("workers", d.workers.unwrap_or(1), limits::MAX_WORKERS),
+        ("worker_queue", d.worker_queue, limits::MAX_QUEUE),
+        ("output_queue", d.output_queue, limits::MAX_QUEUE),
+        (
+            "max_payload_bytes",
+            d.max_payload_bytes,
+            limits::MAX_PAYLOAD_BYTES,
+        ),
+    ] {
+        if value > max {
+            v.error(
+                format!("daemon.{field}"),
+                format!("{value} is more than {max} (glrmon_spec::limits)"),
+            );
+        }
+    }
+    if let Some(instance) = &d.instance
+        && let Err(e) = validate_instance(instance)
+    {
+        v.error("daemon.instance".into(), e);
+    }
     if !(d.shutdown_timeout.is_finite() && d.shutdown_timeout > 0.0) {
         v.error(
             "daemon.shutdown_timeout".into(),
@@ -756,6 +808,11 @@ pub fn parse(text: &str) -> Result<Config, SpecErrors> {
                 prefix.clone(),
                 format!("duplicate channel name \"{}\"", spec.name),
             );
+        }
+        if let Some(key) = &spec.key
+            && let Err(e) = keys::check_input_key(key)
+        {
+            v.error(join(&prefix, "key"), e);
         }
         if let Some(c) = v.channel(&prefix, spec) {
             channels.push(c);
@@ -838,6 +895,16 @@ impl Validator {
                         );
                         continue;
                     };
+                    if index >= limits::MAX_SIGNALS {
+                        self.error(
+                            format!("{path}.{key}"),
+                            format!(
+                                "names signal p{index}: at most {} signals (limits::MAX_SIGNALS)",
+                                limits::MAX_SIGNALS
+                            ),
+                        );
+                        continue;
+                    }
                     let m = self.dense(&format!("{path}.{key}"), rows)?;
                     if m.shape() != base.shape() {
                         self.error(
@@ -854,13 +921,47 @@ impl Validator {
                     }
                     terms.push((index, m));
                 }
-                LpvMatrix::new(base, terms).ok()
+                match LpvMatrix::new(base, terms) {
+                    Ok(m) => Some(m),
+                    Err(e) => {
+                        self.error(path, e.to_string());
+                        None
+                    }
+                }
             }
         }
     }
 
     fn dense(&mut self, path: &str, rows: &[Vec<f64>]) -> Option<DMatrix<f64>> {
+        // An empty matrix (`[]`, `[[]]`) is never meant: every matrix of the model has
+        // at least one row and one column (issue 21: `H = []` reached nalgebra).
+        if rows.is_empty() {
+            self.error(
+                path.to_owned(),
+                "has no rows: write it row by row, e.g. [[1.0, 0.0]]".into(),
+            );
+            return None;
+        }
         let cols = rows.first().map_or(0, Vec::len);
+        if cols == 0 {
+            self.error(
+                path.to_owned(),
+                "has an empty row 0: every row needs at least one entry".into(),
+            );
+            return None;
+        }
+        if rows.len() > limits::MAX_MATRIX_SIDE || cols > limits::MAX_MATRIX_SIDE {
+            self.error(
+                path.to_owned(),
+                format!(
+                    "is {}×{}: at most {} rows and columns (limits::MAX_MATRIX_SIDE)",
+                    rows.len(),
+                    cols,
+                    limits::MAX_MATRIX_SIDE
+                ),
+            );
+            return None;
+        }
         for (i, r) in rows.iter().enumerate() {
             if r.len() != cols {
                 self.error(
@@ -1087,12 +1188,17 @@ impl Validator {
                 join(prefix, "model.F"),
                 format!("is {n}×{n} but H has {} columns", h.shape().1),
             );
+            return None;
         }
         if p == 0 {
             self.error(
                 join(prefix, "model.H"),
                 "has no rows: the channel needs at least one output".into(),
             );
+            return None;
+        }
+        if !self.dimension_limits(prefix, n, p) {
+            return None;
         }
         let g = model
             .g
@@ -1107,22 +1213,41 @@ impl Validator {
             .map(|g| g.shape().1)
             .or(j.as_ref().map(|j| j.shape().1))
             .unwrap_or(0);
+        if (model.g.is_some() && g.is_none()) || (model.j.is_some() && j.is_none()) {
+            // The error is recorded; l is unknown, so nothing below can be checked.
+            return None;
+        }
         let g = g.unwrap_or_else(|| LpvMatrix::constant(DMatrix::zeros(n, l)));
         let j = j.unwrap_or_else(|| LpvMatrix::constant(DMatrix::zeros(p, l)));
-        self.shape(
+        // Every product below (faults, E, S, diagnosis) assumes these shapes: a
+        // mismatch ends the channel's checks here instead of panicking in nalgebra.
+        let g_ok = self.shape(
             prefix,
             "G",
             &g,
             (n, l),
             &format!("F is {n}×{n} and there are {l} inputs"),
         );
-        self.shape(
+        let j_ok = self.shape(
             prefix,
             "J",
             &j,
             (p, l),
             &format!("H has {p} rows and there are {l} inputs"),
         );
+        if !(g_ok && j_ok) {
+            return None;
+        }
+        if l > limits::MAX_INPUTS {
+            self.error(
+                join(prefix, "model.G"),
+                format!(
+                    "has {l} columns (inputs): at most {} (limits::MAX_INPUTS)",
+                    limits::MAX_INPUTS
+                ),
+            );
+            return None;
+        }
         let mut q = self.matrix(prefix, "Q", &model.q, Some(n))?;
         let mut r = self.matrix(prefix, "R", &model.r, Some(p))?;
         if self.shape(prefix, "Q", &q, (n, n), &format!("F is {n}×{n}"))
@@ -1185,6 +1310,16 @@ impl Validator {
             .max()
             .unwrap_or(0);
         let signals = spec.signals.unwrap_or(lpv_max);
+        if signals > limits::MAX_SIGNALS {
+            self.error(
+                join(prefix, "signals"),
+                format!(
+                    "is {signals}: at most {} (limits::MAX_SIGNALS)",
+                    limits::MAX_SIGNALS
+                ),
+            );
+            return None;
+        }
         if signals < lpv_max {
             self.error(
                 join(prefix, "signals"),
@@ -1205,8 +1340,46 @@ impl Validator {
             .as_ref()
             .and_then(|sc| self.scaling(prefix, sc, dims));
         let columns = self.columns(prefix, spec.columns.as_ref(), dims);
-        let faults = self.faults(prefix, spec, dims, (&g, &j), scaling.as_ref(), &columns);
+        let (faults, fault_paths) =
+            self.faults(prefix, spec, dims, (&g, &j), scaling.as_ref(), &columns);
+        if faults.len() > limits::MAX_FAULTS {
+            self.error(
+                join(prefix, "faults"),
+                format!(
+                    "holds {} faults (shortcuts expanded): at most {} (limits::MAX_FAULTS)",
+                    faults.len(),
+                    limits::MAX_FAULTS
+                ),
+            );
+        }
         if self.errors.len() > before {
+            return None;
+        }
+        let footprint = limits::ChannelFootprint {
+            states: n,
+            outputs: p,
+            inputs: l,
+            faults: faults.len(),
+            window: spec.glr.window,
+            history: diagnosis.history,
+        };
+        let bytes = footprint.bytes();
+        if bytes > limits::CHANNEL_MEMORY_BUDGET {
+            let (field, what) = if footprint.history_bytes() > footprint.window_bytes() {
+                ("diagnosis.history", "lower diagnosis.history")
+            } else {
+                ("glr.window", "lower glr.window (or use fewer faults)")
+            };
+            self.error(
+                join(prefix, field),
+                format!(
+                    "makes the channel need about {} ({}), more than the budget of {} per \
+                     channel: {what}",
+                    limits::human_bytes(bytes),
+                    footprint.breakdown(),
+                    limits::human_bytes(limits::CHANNEL_MEMORY_BUDGET),
+                ),
+            );
             return None;
         }
         let lpv = match Lpv::new(f, g, h, j, q, r, signals) {
@@ -1397,6 +1570,16 @@ impl Validator {
         }
         let simulation = self.simulation(prefix, spec, dims, e.as_ref().map(LpvMatrix::base));
         let c = spec.consistency;
+        if c.window > limits::MAX_CONSISTENCY_WINDOW {
+            self.error(
+                join(prefix, "consistency.window"),
+                format!(
+                    "{} samples is more than {} (limits::MAX_CONSISTENCY_WINDOW)",
+                    c.window,
+                    limits::MAX_CONSISTENCY_WINDOW
+                ),
+            );
+        }
         let consistency = if c.enabled {
             let settings = glrmon_core::consistency::ConsistencySettings {
                 window: c.window,
@@ -1407,7 +1590,7 @@ impl Validator {
                 Ok(_) => Some(settings),
                 Err(e) => {
                     let field = if c.window == 0 { "window" } else { "alpha" };
-                    self.error(format!("{prefix}.consistency.{field}"), e.to_string());
+                    self.error(join(prefix, &format!("consistency.{field}")), e.to_string());
                     None
                 }
             }
@@ -1471,6 +1654,7 @@ impl Validator {
             max_gap: glr.max_gap,
             max_reorder: glr.max_reorder,
             fault_names: faults.iter().map(|f| f.name.clone()).collect(),
+            fault_paths,
             simulation,
             diagnosis,
             consistency,
@@ -1482,6 +1666,41 @@ impl Validator {
     /// reported together with model errors.
     fn glr_ranges(&mut self, prefix: &str, glr: &schema::GlrSpec) {
         let gpath = |f: &str| join(prefix, &format!("glr.{f}"));
+        if glr.window > limits::MAX_WINDOW {
+            self.error(
+                gpath("window"),
+                format!(
+                    "w = {} is more than {} (limits::MAX_WINDOW)",
+                    glr.window,
+                    limits::MAX_WINDOW
+                ),
+            );
+        }
+        for (field, value, max) in [
+            ("max_gap", glr.max_gap, limits::MAX_GAP),
+            ("max_reorder", glr.max_reorder, limits::MAX_REORDER),
+        ] {
+            if value > max {
+                self.error(
+                    gpath(field),
+                    format!(
+                        "{value} is more than {max} (limits::{})",
+                        field.to_uppercase()
+                    ),
+                );
+            }
+        }
+        if let Some(schema::WarmUpSpec::Samples(n)) = glr.warm_up
+            && n > limits::MAX_WARM_UP
+        {
+            self.error(
+                gpath("warm_up"),
+                format!(
+                    "{n} is more than {} (limits::MAX_WARM_UP)",
+                    limits::MAX_WARM_UP
+                ),
+            );
+        }
         if glr.window < 2 {
             self.error(
                 gpath("window"),
@@ -1570,6 +1789,21 @@ impl Validator {
         }
         let window = spec.glr.window;
         let history = d.history.unwrap_or(window.saturating_mul(2));
+        // The default 2w is bounded by the window's own limit: only explicit values are
+        // checked here, so that an oversized window is blamed on glr.window alone.
+        for (field, value) in [("history", d.history), ("span", d.span)] {
+            if let Some(value) = value
+                && value > limits::MAX_HISTORY
+            {
+                self.error(
+                    dpath(field),
+                    format!(
+                        "{value} samples is more than {} (limits::MAX_HISTORY)",
+                        limits::MAX_HISTORY
+                    ),
+                );
+            }
+        }
         if history < 2 {
             self.error(
                 dpath("history"),
@@ -1602,6 +1836,16 @@ impl Validator {
                 format!("{} must be at least 2", lasso.path_points),
             );
         }
+        if lasso.path_points > limits::MAX_PATH_POINTS {
+            self.error(
+                dpath("lasso.path_points"),
+                format!(
+                    "{} is more than {} (limits::MAX_PATH_POINTS)",
+                    lasso.path_points,
+                    limits::MAX_PATH_POINTS
+                ),
+            );
+        }
         if !(lasso.ratio > 0.0 && lasso.ratio < 1.0) {
             self.error(
                 dpath("lasso.ratio"),
@@ -1623,6 +1867,32 @@ impl Validator {
             lasso,
             alpha,
         }
+    }
+
+    /// n and p within [`limits::MAX_STATES`] and [`limits::MAX_OUTPUTS`].
+    fn dimension_limits(&mut self, prefix: &str, n: usize, p: usize) -> bool {
+        let mut ok = true;
+        if n > limits::MAX_STATES {
+            self.error(
+                join(prefix, "model.F"),
+                format!(
+                    "is {n}×{n}: at most {} states (limits::MAX_STATES)",
+                    limits::MAX_STATES
+                ),
+            );
+            ok = false;
+        }
+        if p > limits::MAX_OUTPUTS {
+            self.error(
+                join(prefix, "model.H"),
+                format!(
+                    "has {p} rows: at most {} outputs (limits::MAX_OUTPUTS)",
+                    limits::MAX_OUTPUTS
+                ),
+            );
+            ok = false;
+        }
+        ok
     }
 
     fn observability(&mut self, prefix: &str, model: &Lpv) {
@@ -1766,7 +2036,7 @@ impl Validator {
         (g, j): (&LpvMatrix, &LpvMatrix),
         scaling: Option<&SignalScaling>,
         columns: &Columns,
-    ) -> Vec<FaultPlan> {
+    ) -> (Vec<FaultPlan>, Vec<String>) {
         if spec.faults.is_empty() {
             self.error(
                 join(prefix, "faults"),
@@ -1775,6 +2045,7 @@ impl Validator {
         }
         let expanded = self.expand_shortcuts(prefix, &spec.faults, dims, columns);
         let mut out = Vec::new();
+        let mut paths = Vec::new();
         for (i, (path, f)) in expanded.iter().enumerate() {
             if expanded[..i].iter().any(|(_, g)| g.name == f.name) {
                 self.error(path.clone(), format!("duplicate fault name \"{}\"", f.name));
@@ -1790,6 +2061,7 @@ impl Validator {
                 && let Some(plan) = self.in_raw_units(path, f, plan, g, scaling)
             {
                 out.push(plan);
+                paths.push(path.clone());
             }
         }
         let known = out.iter().filter(|f| f.onset == Onset::Known).count();
@@ -1800,7 +2072,7 @@ impl Validator {
                     .into(),
             );
         }
-        out
+        (out, paths)
     }
 
     /// The dictionary with the `all_sensors` / `all_actuators` shortcuts expanded into
@@ -2224,6 +2496,47 @@ impl Validator {
 }
 
 /// A channel name must be usable in a Zenoh key expression chunk.
+/// Longest instance name (`daemon.instance`, `glrmon run --instance`).
+pub const MAX_INSTANCE_LEN: usize = 64;
+
+/// Checks an instance name: 1 to [`MAX_INSTANCE_LEN`] characters among `A-Z a-z 0-9 _ . -`,
+/// so that it is one plain chunk of the status and liveliness keys
+/// (`glrmon/@status/<instance>`, `glrmon/@instances/<instance>`): no `/`, no wildcard, no
+/// `@`, nothing a shell or a log would mangle.
+///
+/// # Errors
+/// Why the name is refused, as a sentence that follows the field's path.
+///
+/// # Examples
+///
+/// ```
+/// assert!(glrmon_spec::validate_instance("plant-a.01").is_ok());
+/// assert!(glrmon_spec::validate_instance("a/b/**").is_err());
+/// assert!(glrmon_spec::validate_instance("").is_err());
+/// ```
+pub fn validate_instance(name: &str) -> Result<(), String> {
+    if name.is_empty() {
+        return Err("is empty: an instance name is 1 to 64 characters of A-Z a-z 0-9 _ . -".into());
+    }
+    if name.len() > MAX_INSTANCE_LEN {
+        return Err(format!(
+            "has {} characters: at most {MAX_INSTANCE_LEN}",
+            name.len()
+        ));
+    }
+    if let Some(c) = name
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '.' | '-')))
+    {
+        return Err(format!(
+            "\"{}\" contains {c:?}: an instance name is one key chunk of A-Z a-z 0-9 _ . - \
+             (it ends the status and liveliness keys glrmon/@status/<instance>)",
+            name.escape_debug()
+        ));
+    }
+    Ok(())
+}
+
 fn validate_name(name: &str) -> Result<(), String> {
     if name.is_empty() {
         return Err("is empty".into());

@@ -141,6 +141,11 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
             tracing::warn!(shard = %s, "No configured channel falls in this shard.");
         }
     }
+    if let Some(name) = &args.instance
+        && let Err(e) = glrmon_spec::validate_instance(name)
+    {
+        return Err(crate::common::InvalidInput(format!("--instance {e}")).into());
+    }
     let instance = args
         .instance
         .clone()
@@ -239,6 +244,9 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
             {
                 let (bound, task) = glrmon_metrics::serve(addr, Arc::new(source)).await?;
                 tracing::info!(address = %bound, "Serving /metrics, /healthz and /readyz.");
+                if let Some(warning) = glrmon_metrics::exposure_warning(bound) {
+                    tracing::warn!(address = %bound, "{warning}");
+                }
                 Some(task)
             }
         }

@@ -6,8 +6,9 @@ use std::path::PathBuf;
 
 use clap::Args;
 use glrmon_core::Onset;
+use glrmon_core::StepError;
 use glrmon_core::calibration::Target;
-use glrmon_core::information::window_information;
+use glrmon_core::information::{InformationError, warmup_samples, window_information};
 use glrmon_core::isolability::{DEFAULT_CORRELATION_LIMIT, isolability};
 use glrmon_spec::{Channel, ThresholdSource};
 use nalgebra::DMatrix;
@@ -36,15 +37,36 @@ pub(crate) fn run(args: &ValidateArgs) -> anyhow::Result<()> {
             return Err(InvalidInput(format!("{} is invalid", args.file.display())).into());
         }
     };
+    // The model checks that need the filter run (a diverging Σ_k, a fault signature
+    // that is not finite) are configuration errors too: exit 1 with the channel and the
+    // field, like the schema's (issue 21, item 9).
+    let mut warnings: Vec<String> = cfg.warnings.iter().map(ToString::to_string).collect();
+    let mut reports = String::new();
+    let mut errors = Vec::new();
+    for (i, channel) in cfg.channels.iter().enumerate() {
+        let prefix = format!("channels[{i}] \"{}\"", channel.name);
+        match report(channel, &mut warnings) {
+            Ok(text) => reports.push_str(&text),
+            Err(e) => errors.push(format!("{prefix}: {e}")),
+        }
+    }
+    if !errors.is_empty() {
+        println!(
+            "{}: invalid ({} error(s))",
+            args.file.display(),
+            errors.len()
+        );
+        for e in &errors {
+            println!("  error: {e}");
+        }
+        return Err(InvalidInput(format!("{} is invalid", args.file.display())).into());
+    }
     println!(
         "{}: valid, {} channel(s)",
         args.file.display(),
         cfg.channels.len()
     );
-    let mut warnings: Vec<String> = cfg.warnings.iter().map(ToString::to_string).collect();
-    for channel in &cfg.channels {
-        print!("{}", report(channel, &mut warnings)?);
-    }
+    print!("{reports}");
     for w in &warnings {
         println!("warning: {w}");
     }
@@ -62,21 +84,117 @@ fn fmt_matrix(m: &DMatrix<f64>) -> String {
     format!("[{}]", rows.join(", "))
 }
 
+/// Most arithmetic operations the isolability report may take (about 2 s on one core
+/// of a 2020s machine in a release build): beyond it, the report is skipped and only
+/// the filter is checked (see [`report_work`]).
+const REPORT_WORK_BUDGET: f64 = 2e9;
+
+/// The operations [`window_information`] takes on `channel`: (warm-up + w) measured
+/// steps, each updating up to w onsets at about n²m + pnm + pm² + m³/3 operations, plus
+/// the filter's n³ + n²p per step.
+fn report_work(channel: &Channel) -> f64 {
+    let known = channel.onsets().iter().all(|o| *o == Onset::Known);
+    let w = channel.window.window as f64;
+    let steps = warmup_samples(channel.window.window, known) as f64 + w;
+    let slots = if known { 1.0 } else { w };
+    let d = channel.dims;
+    let (n, p, m) = (
+        d.states as f64,
+        d.outputs as f64,
+        (channel.fault_names.len() as f64).max(1.0),
+    );
+    let per_slot = n * n * m + p * n * m + p * m * m + m * m * m / 3.0 + 1.0;
+    steps * (slots * per_slot + n * n * n + n * n * p)
+}
+
+/// Why the filter run of `glrmon validate` failed, as a configuration error naming the
+/// field (issue 21, item 9).
+fn filter_error(channel: &Channel, e: &InformationError, k: u64) -> anyhow::Error {
+    let text = match e {
+        InformationError::Step(StepError::Numerical { what }) => {
+            let f = channel.model.matrices()[0].base().clone();
+            let radius = f
+                .complex_eigenvalues()
+                .iter()
+                .map(|z| z.norm())
+                .fold(0.0_f64, f64::max);
+            if radius >= 1.0 {
+                format!(
+                    "model.F: unstable (spectral radius {radius:.4} ≥ 1) and the Kalman filter \
+                     diverges on it: {what} at k = {k} (a mode of F on or outside the unit \
+                     circle that H does not observe makes P_k grow without bound: measure it, \
+                     or stabilise the model)"
+                )
+            } else {
+                format!(
+                    "model: the Kalman filter fails: {what} at k = {k} (check Q, R, P0 and \
+                     the range of the scheduling signals in [channels.simulation])"
+                )
+            }
+        }
+        InformationError::Step(step) => {
+            format!("simulation: the simulated sample k = {k} is refused: {step}")
+        }
+        other => format!("model: {other}"),
+    };
+    InvalidInput(text).into()
+}
+
 /// The Fisher information C_k(r) of the dictionary over one window
 /// ([`window_information`]), on the channel's simulated inputs and signals, with the
-/// steady-state Σ when the model is LTI and the Riccati recursion has converged.
+/// steady-state Σ when the model is LTI and the Riccati recursion has converged. With
+/// `window = Some(w)`, the window setting is replaced by w (a short window that checks
+/// the filter only).
 fn channel_information(
     channel: &Channel,
+    window: Option<usize>,
 ) -> anyhow::Result<(DMatrix<f64>, Option<DMatrix<f64>>, usize)> {
-    let mut det = channel.detector()?;
-    let mut sim = simulator(channel, 1, &[], 0, &[])?;
+    let mut short;
+    let channel = match window {
+        Some(w) => {
+            short = channel.clone();
+            short.window.window = w;
+            short.window.min_lag = short.window.min_lag.min(w - 1);
+            &short
+        }
+        None => channel,
+    };
+    let mut det = channel
+        .detector()
+        .map_err(|e| InvalidInput(format!("model: {e}")))?;
+    let mut sim =
+        simulator(channel, 1, &[], 0, &[]).map_err(|e| InvalidInput(format!("simulation: {e}")))?;
+    let count = std::cell::Cell::new(0_u64);
     let samples = std::iter::repeat_with(|| {
         let s = sim.next_sample();
+        count.set(count.get() + 1);
         (s.u, s.y, s.p)
     });
-    let info = window_information(&mut det, samples)?;
+    let info = window_information(&mut det, samples)
+        .map_err(|e| filter_error(channel, &e, count.get().saturating_sub(1)))?;
     let steady = (channel.model_is_constant() && info.converged).then_some(info.covariance);
     Ok((info.information, steady, info.samples))
+}
+
+/// The faults whose own information (diagonal entry) is not finite, by their paths; or,
+/// should every diagonal entry be finite, those with a non-finite entry in their row.
+fn non_finite_faults(channel: &Channel, info: &DMatrix<f64>) -> Vec<String> {
+    let mut bad: Vec<usize> = (0..info.nrows())
+        .filter(|&j| !info[(j, j)].is_finite())
+        .collect();
+    if bad.is_empty() {
+        bad = (0..info.nrows())
+            .filter(|&j| info.row(j).iter().any(|x| !x.is_finite()))
+            .collect();
+    }
+    bad.into_iter()
+        .map(|j| {
+            channel
+                .fault_path(j)
+                .map(|p| p.split_once(": ").map_or(p, |(_, f)| f).to_owned())
+                .unwrap_or_else(|| format!("faults \"{}\"", channel.fault_names[j]))
+        })
+        .collect()
 }
 
 fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<String> {
@@ -252,7 +370,40 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
             }
         );
     }
-    let (info, steady, samples) = channel_information(channel)?;
+    let work = report_work(channel);
+    if work > REPORT_WORK_BUDGET {
+        // The filter alone (a 2-sample window), so that a diverging model is still
+        // refused; the isolability report would take too long.
+        let (_, steady, _) = channel_information(channel, Some(2))?;
+        if let Some(sigma) = steady {
+            let _ = writeln!(
+                s,
+                "  steady-state innovation covariance Σ = {}",
+                fmt_matrix(&sigma)
+            );
+        }
+        let _ = writeln!(
+            s,
+            "  isolability: not computed (about {work:.1e} operations for w = {} and m = {}, \
+             more than validate's budget of {REPORT_WORK_BUDGET:.0e}; the filter was checked \
+             over {} samples)",
+            channel.window.window,
+            channel.fault_names.len(),
+            warmup_samples(2, false) + 2
+        );
+        return Ok(s);
+    }
+    let (info, steady, samples) = channel_information(channel, None)?;
+    let bad = non_finite_faults(channel, &info);
+    if !bad.is_empty() {
+        return Err(InvalidInput(format!(
+            "{}: the fault signature is not finite over the window (information matrix has a \
+             non-finite entry): an expression of the column divides by zero or overflows on \
+             the simulated samples",
+            bad.join(", ")
+        ))
+        .into());
+    }
     match steady {
         Some(sigma) => {
             let _ = writeln!(
@@ -274,7 +425,8 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
             );
         }
     }
-    let rep = isolability(&info, DEFAULT_CORRELATION_LIMIT)?;
+    let rep = isolability(&info, DEFAULT_CORRELATION_LIMIT)
+        .map_err(|e| InvalidInput(format!("faults: {e}")))?;
     let _ = writeln!(
         s,
         "  isolability over {samples} samples (Fisher information F = C_k(r), Basseville 1996 §5-6):"
