@@ -56,7 +56,13 @@ fn main() {
         max_order: 40,
         ..IdentSettings::default()
     };
-    for samples in [3_000, 100_000] {
+    let only: Option<usize> = std::env::args().nth(1).and_then(|a| a.parse().ok());
+    let max_order: Option<usize> = std::env::args().nth(2).and_then(|a| a.parse().ok());
+    let settings = IdentSettings {
+        max_order: max_order.unwrap_or(40),
+        ..settings
+    };
+    for samples in only.map_or(vec![3_000, 100_000], |n| vec![n]) {
         let data = experiment(samples, &mut Normals(26));
         let mut best = f64::INFINITY;
         let mut chosen = 0;

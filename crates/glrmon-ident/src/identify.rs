@@ -258,29 +258,33 @@ pub fn identify(
         Some(n) => vec![n],
         None => (1..=settings.max_order.min(supported)).collect(),
     };
+    // Every order is independent of the others: they are spread over the cores, and
+    // collected in order (the same result as one after the other, bit for bit).
+    let outcomes = parallel_map(&orders, |&n| match sub.model(n) {
+        Ok(model) => {
+            let candidate = evaluate(&model, &pre.experiments, &holdout_start, horizon, l, p)?;
+            Ok((candidate, Some(model)))
+        }
+        Err(err @ IdentError::OrderAboveRank { .. }) => Err(err),
+        Err(err) => Ok((
+            Candidate {
+                order: n,
+                aic: f64::INFINITY,
+                bic: f64::INFINITY,
+                parameters: parameters(n, l, p),
+                holdout_nrmse: DVector::from_element(p, f64::NAN),
+                predictor_spectral_radius: f64::NAN,
+                failure: Some(err.to_string()),
+            },
+            None,
+        )),
+    });
     let mut candidates = Vec::with_capacity(orders.len());
     let mut models = Vec::with_capacity(orders.len());
-    for &n in &orders {
-        match sub.model(n) {
-            Ok(model) => {
-                let candidate = evaluate(&model, &pre.experiments, &holdout_start, horizon, l, p)?;
-                candidates.push(candidate);
-                models.push(Some(model));
-            }
-            Err(err @ IdentError::OrderAboveRank { .. }) => return Err(err),
-            Err(err) => {
-                candidates.push(Candidate {
-                    order: n,
-                    aic: f64::INFINITY,
-                    bic: f64::INFINITY,
-                    parameters: parameters(n, l, p),
-                    holdout_nrmse: DVector::from_element(p, f64::NAN),
-                    predictor_spectral_radius: f64::NAN,
-                    failure: Some(err.to_string()),
-                });
-                models.push(None);
-            }
-        }
+    for outcome in outcomes {
+        let (candidate, model) = outcome?;
+        candidates.push(candidate);
+        models.push(model);
     }
 
     let best = candidates
@@ -660,4 +664,31 @@ pub fn to_physical(scaled: &InnovationModel, scaling: &Scaling) -> InnovationMod
         r: &sy_m * &scaled.r * &sy_m,
         p: scaled.p.clone(),
     }
+}
+
+/// `f` of every item, in order, computed on up to as many threads as the machine has
+/// cores (contiguous runs of items per thread); a thread that panicked has its items
+/// computed again on the caller's.
+fn parallel_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let threads = std::thread::available_parallelism()
+        .map_or(1, std::num::NonZero::get)
+        .min(items.len())
+        .max(1);
+    let chunk = items.len().div_ceil(threads).max(1);
+    std::thread::scope(|scope| {
+        let f = &f;
+        let handles: Vec<_> = items
+            .chunks(chunk)
+            .map(|part| {
+                (
+                    part,
+                    scope.spawn(move || part.iter().map(f).collect::<Vec<R>>()),
+                )
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|(part, h)| h.join().unwrap_or_else(|_| part.iter().map(f).collect()))
+            .collect()
+    })
 }

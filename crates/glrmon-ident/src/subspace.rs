@@ -294,28 +294,83 @@ impl Subspace {
 
 /// Hankel columns (window starts) per block of Hᵀ in [`lq_factor`]: memory stays
 /// O((block + m)·m) however long the recordings are.
-const BLOCK_WINDOWS: usize = 4096;
+const BLOCK_WINDOWS: usize = 1024;
+
+/// Parts of the windows factored separately in [`lq_factor`] (a tall-skinny QR):
+/// fixed, whatever the machine, so that the result's bits do not depend on its cores.
+const PARTS: usize = 4;
 
 /// L of H = L Qᵀ (m × m, lower triangular), through the QR of Hᵀ (Hᵀ = Q R, L = Rᵀ; Q is
 /// never formed). Hᵀ is factored a block of windows at a time: the R of [R_prev; block]
 /// is the R of all rows so far (up to row signs, which flip columns of L and leave
 /// every row inner product, hence every projection, unchanged).
+///
+/// The windows are cut into [`PARTS`] contiguous parts of about equal size, each
+/// factored on a thread of its own, and the R of the stacked parts' R factors is the R
+/// of all (tall-skinny QR, Demmel et al. 2012, "Communication-optimal parallel and
+/// sequential QR and LU factorizations", §3): the same numbers on any machine, about
+/// twice as fast on two cores.
 fn lq_factor(experiments: &[Experiment], i: usize, layout: Layout, columns: usize) -> DMatrix<f64> {
     let scale = 1.0 / (columns as f64).sqrt();
-    let mut r = DMatrix::<f64>::zeros(0, layout.rows);
-    for exp in experiments {
+    // Every block of windows, in order: (experiment, first window, windows).
+    let mut blocks = Vec::new();
+    for (e, exp) in experiments.iter().enumerate() {
         let windows = exp.samples() + 1 - 2 * i;
         let mut start = 0;
         while start < windows {
             let len = BLOCK_WINDOWS.min(windows - start);
-            let block = hankel_rows(exp, i, layout, start, len, scale);
+            blocks.push((e, start, len));
+            start += len;
+        }
+    }
+    let total: usize = blocks.iter().map(|b| b.2).sum();
+    let mut parts: Vec<Vec<(usize, usize, usize)>> = vec![Vec::new(); PARTS];
+    let mut done = 0;
+    for block in blocks {
+        let part = (done * PARTS / total.max(1)).min(PARTS - 1);
+        parts[part].push(block);
+        done += block.2;
+    }
+    let factor = |part: &[(usize, usize, usize)]| {
+        let mut r = DMatrix::<f64>::zeros(0, layout.rows);
+        for &(e, start, len) in part {
+            let block = hankel_rows(&experiments[e], i, layout, start, len, scale);
             let mut stacked = DMatrix::zeros(r.nrows() + len, layout.rows);
             stacked.rows_mut(0, r.nrows()).copy_from(&r);
             stacked.rows_mut(r.nrows(), len).copy_from(&block);
             r = stacked.qr().r();
-            start += len;
         }
+        r
+    };
+    let factors: Vec<DMatrix<f64>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = parts
+            .iter()
+            .map(|part| scope.spawn(|| factor(part)))
+            .collect();
+        handles
+            .into_iter()
+            .zip(&parts)
+            // A part whose thread could not finish is factored here instead.
+            .map(|(h, part)| h.join().unwrap_or_else(|_| factor(part)))
+            .collect()
+    });
+    let rows: usize = factors.iter().map(DMatrix::nrows).sum();
+    let mut stacked = DMatrix::zeros(rows, layout.rows);
+    let mut at = 0;
+    for f in &factors {
+        stacked.rows_mut(at, f.nrows()).copy_from(f);
+        at += f.nrows();
     }
+    let r = if factors.iter().filter(|f| f.nrows() > 0).count() > 1 {
+        stacked.qr().r()
+    } else {
+        // One part (short recordings): its R is already the factor, bit for bit the
+        // sequential one.
+        factors
+            .into_iter()
+            .find(|f| f.nrows() > 0)
+            .unwrap_or(stacked)
+    };
     r.transpose()
 }
 
