@@ -4,7 +4,7 @@ CARGO ?= cargo
 
 .DEFAULT_GOAL := help
 
-.PHONY: help deps deps-zenohd build test fmt fmt-check lint unit doc check-deps check-config fuzz-build fuzz msrv demo bench bench-e2e bench-replay tank-table
+.PHONY: help deps deps-zenohd build test fmt fmt-check lint unit doc check-deps check-config fuzz-build fuzz fuzz-all msrv demo bench bench-e2e bench-replay tank-table
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z0-9_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-11s %s\n", $$1, $$2}'
@@ -53,14 +53,25 @@ check-config: ## glrmon validate every file in config/
 	@$(CARGO) build -q -p glrmon-cli
 	@g=$${CARGO_TARGET_DIR:-target}/debug/glrmon; for f in config/*.toml config/examples/*.toml; do $$g validate $$f >/dev/null || { $$g validate $$f; exit 1; }; echo "valid: $$f"; done
 
-fuzz-build: ## build the fuzz targets (fuzz/: sample, record, status, config, expression, CSV and MCAP decoders) so they keep compiling
+fuzz-build: ## build the fuzz targets (fuzz/: sample, monitor, record, status, config, expression, CSV and MCAP decoders) and run each on its regression inputs (fuzz/regressions/)
 	$(CARGO) build --manifest-path fuzz/Cargo.toml --target-dir target
+	@for t in $(FUZZ_TARGETS); do \
+		if [ -d fuzz/regressions/$$t ]; then \
+			target/debug/$$t fuzz/regressions/$$t -runs=0 >/dev/null 2>target/fuzz-$$t.log \
+				|| { cat target/fuzz-$$t.log; echo "fuzz target $$t fails on its regression inputs"; exit 1; }; \
+		fi; \
+	done
 
+FUZZ_TARGETS := samples monitor records status config expressions csv mcap
 FUZZ_TARGET ?= samples
 FUZZ_SECONDS ?= 60
-fuzz: ## run one fuzz target with cargo-fuzz (nightly): make fuzz FUZZ_TARGET=config FUZZ_SECONDS=600
+fuzz: ## run one fuzz target with cargo-fuzz (nightly), from its corpus and regression inputs: make fuzz FUZZ_TARGET=config FUZZ_SECONDS=600
 	@command -v cargo-fuzz >/dev/null || $(CARGO) install cargo-fuzz --locked
-	cd fuzz && $(CARGO) +nightly fuzz run $(FUZZ_TARGET) -- -max_total_time=$(FUZZ_SECONDS)
+	mkdir -p fuzz/corpus/$(FUZZ_TARGET)
+	cd fuzz && $(CARGO) +nightly fuzz run $(FUZZ_TARGET) corpus/$(FUZZ_TARGET) $$([ -d regressions/$(FUZZ_TARGET) ] && echo regressions/$(FUZZ_TARGET)) -- -max_total_time=$(FUZZ_SECONDS)
+
+fuzz-all: ## every fuzz target in turn, FUZZ_SECONDS each (make fuzz-all FUZZ_SECONDS=600)
+	@for t in $(FUZZ_TARGETS); do $(MAKE) --no-print-directory fuzz FUZZ_TARGET=$$t || exit 1; done
 
 MSRV := $(shell sed -n 's/^rust-version = "\(.*\)"/\1/p' Cargo.toml)
 msrv: ## check the workspace on the declared rust-version (installs that toolchain with rustup; std APIs newer than it are already refused by clippy's incompatible_msrv in make lint)

@@ -372,7 +372,8 @@ fn live_run_recorded_then_replayed_gives_identical_records() {
             &[
                 "\"channel\":\"unstable\",\"samples\":650,",
                 "\"sequence_reset\":1",
-                "\"wrong_dimension\":1",
+                // `{"y": [1, 2, 3]}` has no `u` for a model with an input.
+                "\"missing_field\":1",
                 "\"channel\":\"ltv3\",\"samples\":200,",
             ],
         );
@@ -388,13 +389,13 @@ fn live_run_recorded_then_replayed_gives_identical_records() {
     let (live, end, damage) = read_all(&finished[0]);
     assert_eq!((end, damage), (ReadEnd::Finished, 0));
     let count = |m: &Messages, c: &str, k: &str| m.get(&(c.to_owned(), k)).map_or(0, Vec::len);
-    // 600 + 50 samples and `{"y": [1, 2, 3]}`, which decodes (the monitor rejects its
-    // dimensions).
+    // 600 + 50 samples and `{"y": [1, 2, 3]}`, which decodes (the monitor rejects it:
+    // no `u`).
     assert_eq!(count(&live, "unstable", "inputs"), 651);
     assert_eq!(count(&live, "ltv3", "inputs"), 200);
     // `{"y": [1,` is refused at intake; `[]` is an empty batch.
     assert_eq!(count(&live, "unstable", "intake"), 1);
-    // invalid_json, wrong_dimension and the sequence_reset of the renumbered samples.
+    // invalid_json, missing_field and the sequence_reset of the renumbered samples.
     assert_eq!(count(&live, "unstable", "error"), 3);
     assert!(count(&live, "unstable", "alarm") >= 1);
     assert!(count(&live, "unstable", "isolation") >= 1);
