@@ -528,7 +528,7 @@ impl<R: Read + Seek> McapReader<R> {
             }
             op::CHUNK => return self.read_chunk(start, len),
             op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA => {
-                match mcap::parse_record(opcode, &self.body) {
+                match parse_record(opcode, &self.body) {
                     Ok(r) => {
                         let r = r.into_owned();
                         self.accept(r);
@@ -540,7 +540,7 @@ impl<R: Read + Seek> McapReader<R> {
             // nothing a replay needs, but parsed: a chunk whose opcode was damaged into
             // one of these must not vanish unreported.
             _ => {
-                if let Err(e) = mcap::parse_record(opcode, &self.body) {
+                if let Err(e) = parse_record(opcode, &self.body) {
                     self.invalid_record(start, len, opcode, &e.to_string());
                 } else if let Some(why) = misframed(opcode, &self.body) {
                     self.invalid_record(start, len, opcode, &why);
@@ -864,7 +864,7 @@ fn read_summary(input: &mut (impl Read + Seek), size: u64) -> Result<Summary, io
         else {
             break;
         };
-        match mcap::parse_record(opcode, &bytes[at + 9..end]).map(McapRecord::into_owned) {
+        match parse_record(opcode, &bytes[at + 9..end]).map(McapRecord::into_owned) {
             Ok(McapRecord::ChunkIndex(c)) => {
                 if c.chunk_start_offset >= 8
                     && c.chunk_start_offset < summary_start
@@ -969,7 +969,7 @@ fn parse_chunk(
     scratch: &mut Vec<u8>,
 ) -> Result<((u64, u64), Vec<McapRecord<'static>>), ChunkError> {
     let McapRecord::Chunk { header, data } =
-        mcap::parse_record(op::CHUNK, body).map_err(|e| ChunkError::Framing(e.to_string()))?
+        parse_record(op::CHUNK, body).map_err(|e| ChunkError::Framing(e.to_string()))?
     else {
         return Err(ChunkError::Framing("not a chunk".into()));
     };
@@ -1040,7 +1040,7 @@ fn parse_chunk(
             .and_then(|l| (at + 9).checked_add(l))
             .filter(|&e| e <= records.len())
             .ok_or_else(|| bad(format!("a record at byte {at} claims {len} bytes")))?;
-        let record = mcap::parse_record(opcode, &records[at + 9..end])
+        let record = parse_record(opcode, &records[at + 9..end])
             .map_err(|e| bad(format!("record at byte {at}: {e}")))?;
         out.push(record.into_owned());
         at = end;
@@ -1062,9 +1062,124 @@ fn read_full(input: &mut impl Read, buf: &mut [u8]) -> io::Result<usize> {
     Ok(filled)
 }
 
+/// `mcap::parse_record` of a record body whose length prefixes have first been checked
+/// to fit in it. The mcap crate reserves a string's or byte array's claimed length
+/// before reading it, so a damaged prefix in a 100-byte record asked for 4 GiB (found
+/// by `make fuzz FUZZ_TARGET=mcap`, fuzz/regressions/mcap/).
+fn parse_record(opcode: u8, body: &[u8]) -> Result<McapRecord<'_>, String> {
+    lengths_fit(opcode, body)?;
+    mcap::parse_record(opcode, body).map_err(|e| e.to_string())
+}
+
+/// A field of a record's layout (MCAP specification, "Records").
+#[derive(Clone, Copy)]
+enum Field {
+    /// So many fixed bytes.
+    Fixed(usize),
+    /// A u32 length, then that many bytes (string, byte array, map or array).
+    Prefixed32,
+    /// A map of strings to strings: a u32 byte length, then (string, string) pairs.
+    StringMap,
+    /// A u64 length, then that many bytes.
+    Prefixed64,
+}
+
+/// Checks that every length prefix of the record's layout fits in `body`.
+fn lengths_fit(opcode: u8, body: &[u8]) -> Result<(), String> {
+    use Field::{Fixed, Prefixed32, Prefixed64, StringMap};
+    let layout: &[Field] = match opcode {
+        op::HEADER => &[Prefixed32, Prefixed32],
+        op::SCHEMA => &[Fixed(2), Prefixed32, Prefixed32, Prefixed32],
+        op::CHANNEL => &[Fixed(4), Prefixed32, Prefixed32, StringMap],
+        op::CHUNK => &[Fixed(28), Prefixed32, Prefixed64],
+        op::MESSAGE_INDEX => &[Fixed(2), Prefixed32],
+        op::CHUNK_INDEX => &[Fixed(32), Prefixed32, Fixed(8), Prefixed32, Fixed(16)],
+        op::ATTACHMENT => &[Fixed(16), Prefixed32, Prefixed32, Prefixed64, Fixed(4)],
+        op::ATTACHMENT_INDEX => &[Fixed(40), Prefixed32, Prefixed32],
+        op::STATISTICS => &[Fixed(42), Prefixed32],
+        op::METADATA => &[Prefixed32, StringMap],
+        op::METADATA_INDEX => &[Fixed(16), Prefixed32],
+        _ => &[],
+    };
+    let mut at = 0usize;
+    let short = |what: &str, at: usize| {
+        format!(
+            "a {what} at byte {at} runs past the record's {} bytes",
+            body.len()
+        )
+    };
+    let prefixed = |at: usize, width: usize| -> Result<usize, String> {
+        let head = body
+            .get(at..at + width)
+            .ok_or_else(|| short("length", at))?;
+        let mut bytes = [0u8; 8];
+        bytes[..width].copy_from_slice(head);
+        let len = usize::try_from(u64::from_le_bytes(bytes)).unwrap_or(usize::MAX);
+        let end = (at + width)
+            .checked_add(len)
+            .filter(|&e| e <= body.len())
+            .ok_or_else(|| short("length-prefixed field", at))?;
+        Ok(end)
+    };
+    for field in layout {
+        at = match *field {
+            Fixed(n) => {
+                let end = at.checked_add(n).filter(|&e| e <= body.len());
+                end.ok_or_else(|| short("fixed field", at))?
+            }
+            Prefixed32 => prefixed(at, 4)?,
+            Prefixed64 => prefixed(at, 8)?,
+            StringMap => {
+                let end = prefixed(at, 4)?;
+                let mut entry = at + 4;
+                while entry < end {
+                    entry = prefixed(entry, 4)?;
+                    entry = prefixed(entry, 4)?;
+                    if entry > end {
+                        return Err(short("map entry", entry));
+                    }
+                }
+                end
+            }
+        };
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fuzzer's out-of-memory input (fuzz/regressions/mcap/): an attachment whose
+    /// name claims 4 GiB inside a 100-byte record is refused before mcap reserves it.
+    #[test]
+    fn length_prefixes_beyond_the_record_are_refused_before_parsing() {
+        let mut body = vec![0u8; 16];
+        body.extend_from_slice(&u32::MAX.to_le_bytes());
+        body.extend_from_slice(b"abc");
+        let e = super::lengths_fit(op::ATTACHMENT, &body).unwrap_err();
+        assert!(e.contains("runs past the record's 23 bytes"), "{e}");
+        let mut good = vec![0u8; 16];
+        for s in [&b"name"[..], b"text/plain"] {
+            good.extend_from_slice(&(s.len() as u32).to_le_bytes());
+            good.extend_from_slice(s);
+        }
+        good.extend_from_slice(&3u64.to_le_bytes());
+        good.extend_from_slice(b"xyz");
+        good.extend_from_slice(&0u32.to_le_bytes());
+        assert_eq!(super::lengths_fit(op::ATTACHMENT, &good), Ok(()));
+        assert!(super::parse_record(op::ATTACHMENT, &good).is_ok());
+        // A channel whose metadata map holds a string claiming more than the map.
+        let mut channel = vec![0u8; 4];
+        for s in [&b"t"[..], b"json"] {
+            channel.extend_from_slice(&(s.len() as u32).to_le_bytes());
+            channel.extend_from_slice(s);
+        }
+        channel.extend_from_slice(&8u32.to_le_bytes());
+        channel.extend_from_slice(&1000u32.to_le_bytes());
+        channel.extend_from_slice(&[0u8; 4]);
+        assert!(super::lengths_fit(op::CHANNEL, &channel).is_err());
+    }
     use crate::{FileHeader, FileOptions, McapFile};
 
     fn sample_file() -> (Vec<u8>, usize) {
