@@ -1080,23 +1080,27 @@ enum Field {
     Prefixed32,
     /// A map of strings to strings: a u32 byte length, then (string, string) pairs.
     StringMap,
+    /// A u32 byte length, then entries of this fixed size (an integer map or an array of
+    /// fixed records): mcap reads whole entries until the length is used up, so a length
+    /// that is not a multiple would make it read past the field and misread the rest.
+    Entries(usize),
     /// A u64 length, then that many bytes.
     Prefixed64,
 }
 
 /// Checks that every length prefix of the record's layout fits in `body`.
 fn lengths_fit(opcode: u8, body: &[u8]) -> Result<(), String> {
-    use Field::{Fixed, Prefixed32, Prefixed64, StringMap};
+    use Field::{Entries, Fixed, Prefixed32, Prefixed64, StringMap};
     let layout: &[Field] = match opcode {
         op::HEADER => &[Prefixed32, Prefixed32],
         op::SCHEMA => &[Fixed(2), Prefixed32, Prefixed32, Prefixed32],
         op::CHANNEL => &[Fixed(4), Prefixed32, Prefixed32, StringMap],
         op::CHUNK => &[Fixed(28), Prefixed32, Prefixed64],
-        op::MESSAGE_INDEX => &[Fixed(2), Prefixed32],
-        op::CHUNK_INDEX => &[Fixed(32), Prefixed32, Fixed(8), Prefixed32, Fixed(16)],
+        op::MESSAGE_INDEX => &[Fixed(2), Entries(16)],
+        op::CHUNK_INDEX => &[Fixed(32), Entries(10), Fixed(8), Prefixed32, Fixed(16)],
         op::ATTACHMENT => &[Fixed(16), Prefixed32, Prefixed32, Prefixed64, Fixed(4)],
         op::ATTACHMENT_INDEX => &[Fixed(40), Prefixed32, Prefixed32],
-        op::STATISTICS => &[Fixed(42), Prefixed32],
+        op::STATISTICS => &[Fixed(42), Entries(10)],
         op::METADATA => &[Prefixed32, StringMap],
         op::METADATA_INDEX => &[Fixed(16), Prefixed32],
         _ => &[],
@@ -1129,6 +1133,17 @@ fn lengths_fit(opcode: u8, body: &[u8]) -> Result<(), String> {
             }
             Prefixed32 => prefixed(at, 4)?,
             Prefixed64 => prefixed(at, 8)?,
+            Entries(size) => {
+                let end = prefixed(at, 4)?;
+                if (end - at - 4) % size != 0 {
+                    return Err(format!(
+                        "a field at byte {at} holds {} bytes, not a whole number of {size}-byte \
+                         entries",
+                        end - at - 4
+                    ));
+                }
+                end
+            }
             StringMap => {
                 let end = prefixed(at, 4)?;
                 let mut entry = at + 4;
@@ -1179,6 +1194,15 @@ mod tests {
         channel.extend_from_slice(&1000u32.to_le_bytes());
         channel.extend_from_slice(&[0u8; 4]);
         assert!(super::lengths_fit(op::CHANNEL, &channel).is_err());
+        // The fuzzer's second find: a chunk index whose offset map holds 6 bytes, not a
+        // multiple of its 10-byte entries; mcap read on into the compression string.
+        let mut index = vec![0u8; 32];
+        index.extend_from_slice(&6u32.to_le_bytes());
+        index.extend_from_slice(&[0u8; 6 + 8]);
+        index.extend_from_slice(&0u32.to_le_bytes());
+        index.extend_from_slice(&[0u8; 16]);
+        let e = super::lengths_fit(op::CHUNK_INDEX, &index).unwrap_err();
+        assert!(e.contains("not a whole number of 10-byte entries"), "{e}");
     }
     use crate::{FileHeader, FileOptions, McapFile};
 
