@@ -1135,7 +1135,7 @@ fn lengths_fit(opcode: u8, body: &[u8]) -> Result<(), String> {
             Prefixed64 => prefixed(at, 8)?,
             Entries(size) => {
                 let end = prefixed(at, 4)?;
-                if (end - at - 4) % size != 0 {
+                if !(end - at - 4).is_multiple_of(size) {
                     return Err(format!(
                         "a field at byte {at} holds {} bytes, not a whole number of {size}-byte \
                          entries",
