@@ -273,6 +273,18 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         zid = %session.zid(),
         "Monitoring started."
     );
+    // The signal handlers go in before the readiness line: a SIGHUP (systemctl reload)
+    // or SIGTERM that follows it at once must be handled, not take the default action
+    // (which ends the process without a drain).
+    #[cfg(unix)]
+    let signals = {
+        use tokio::signal::unix::{SignalKind, signal};
+        (
+            signal(SignalKind::hangup()).ok(),
+            signal(SignalKind::terminate()).ok(),
+            signal(SignalKind::interrupt()).ok(),
+        )
+    };
     // Lets tests and supervisors know intake is open.
     println!(
         "glrmon run: instance {instance} monitoring {} channel(s){}",
@@ -283,19 +295,26 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     let mut applied = cfg;
     #[cfg(unix)]
     {
-        use tokio::signal::unix::{SignalKind, signal};
-        match signal(SignalKind::hangup()) {
-            Ok(mut hup) => loop {
-                tokio::select! {
-                    () = wait_for_signal() => break,
-                    _ = hup.recv() => {
-                        applied = tokio::task::block_in_place(|| {
-                            reload(&args.config, applied, shard, &runtime)
-                        });
-                    }
+        let (mut hup, mut term, mut int) = signals;
+        // A stream that could not be made waits forever (its signal keeps its default).
+        async fn next(s: &mut Option<tokio::signal::unix::Signal>) {
+            match s {
+                Some(s) => {
+                    s.recv().await;
                 }
-            },
-            Err(_) => wait_for_signal().await,
+                None => std::future::pending().await,
+            }
+        }
+        loop {
+            tokio::select! {
+                () = next(&mut term) => break,
+                () = next(&mut int) => break,
+                () = next(&mut hup) => {
+                    applied = tokio::task::block_in_place(|| {
+                        reload(&args.config, applied, shard, &runtime)
+                    });
+                }
+            }
         }
     }
     #[cfg(not(unix))]
