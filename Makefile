@@ -51,7 +51,7 @@ check-deps: ## glrmon-core's and glrmon-ident's normal dependencies are nalgebra
 
 check-config: ## glrmon validate every file in config/
 	@$(CARGO) build -q -p glrmon-cli
-	@g=$${CARGO_TARGET_DIR:-target}/debug/glrmon; for f in config/*.toml config/examples/*.toml; do $$g validate $$f >/dev/null || { $$g validate $$f; exit 1; }; echo "valid: $$f"; done
+	@g=$${CARGO_TARGET_DIR:-target}/debug/glrmon; for f in config/*.toml config/examples/*.toml; do $$g validate --config $$f >/dev/null || { $$g validate --config $$f; exit 1; }; echo "valid: $$f"; done
 
 fuzz-build: ## build the fuzz targets (fuzz/: sample, monitor, record, status, config, expression, CSV and MCAP decoders) and run each on its regression inputs (fuzz/regressions/)
 	$(CARGO) build --manifest-path fuzz/Cargo.toml --target-dir target

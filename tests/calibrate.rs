@@ -49,7 +49,8 @@ fn calibrated_threshold_gives_its_false_alarm_rate_on_an_independent_run() {
     // Everything else of the file is kept (comments included).
     let first_comment = text.lines().find(|l| l.starts_with('#')).unwrap_or("");
     assert!(written.contains(first_comment));
-    let validate = String::from_utf8_lossy(&glrmon(&["validate", cfg]).stdout).into_owned();
+    let validate =
+        String::from_utf8_lossy(&glrmon(&["validate", "--config", cfg]).stdout).into_owned();
     assert!(
         validate.contains("calibrated for one false-alarm episode per 10000 samples"),
         "{validate}"
@@ -225,7 +226,8 @@ fn issue_20_two_recordings_and_a_sample_far_target_are_written_and_validated() {
         written.contains(&format!("source = \"{a}, {b}\"")),
         "{written}"
     );
-    let validate = String::from_utf8_lossy(&glrmon(&["validate", cfg]).stdout).into_owned();
+    let validate =
+        String::from_utf8_lossy(&glrmon(&["validate", "--config", cfg]).stdout).into_owned();
     let shown = format!(
         "threshold {threshold:.4} (calibrated for a fraction 0.01 of fault-free samples above \
          it on {samples} fault-free samples, {exceedances} above in"

@@ -19,7 +19,7 @@ fn demo_prints_one_alarm_for_the_faulty_channel_with_the_right_isolation() {
     let out = glrmon()
         .args(["demo", "--seconds", "6", "--rate", "0", "--output"])
         .arg(&jsonl)
-        .arg("--record")
+        .arg("--output")
         .arg(&mcap)
         .output()
         .unwrap();
@@ -172,4 +172,265 @@ fn a_closed_pipe_ends_an_offline_command_quietly() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert_eq!(out.status.signal(), Some(13), "{:?}: {stderr}", out.status);
+}
+
+/// A scratch directory removed at the end of the test.
+struct Scratch(std::path::PathBuf);
+
+impl Scratch {
+    fn new(name: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("glrmon-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        Scratch(dir)
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+const EXAMPLE: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../config/examples/paper2014-unstable.toml"
+);
+
+/// Every spelling of an earlier version is a usage error (exit 2) whose message gives
+/// the new one: one flag vocabulary across the commands.
+#[test]
+fn old_spellings_are_usage_errors_naming_the_new_one() {
+    let cases: &[(&[&str], &str)] = &[
+        (&["validate", EXAMPLE], "--config FILE"),
+        (
+            &[
+                "simulate",
+                "--config",
+                EXAMPLE,
+                "--samples",
+                "10",
+                "--fault",
+                "x0_jump",
+                "--magnitude",
+                "4",
+                "--output",
+                "x.csv",
+            ],
+            "NAME:MAGNITUDE",
+        ),
+        (
+            &[
+                "simulate",
+                "--config",
+                EXAMPLE,
+                "--samples",
+                "10",
+                "--fault",
+                "x0_jump:4",
+                "--magnitude",
+                "4",
+                "--output",
+                "x.csv",
+            ],
+            "--fault NAME:MAGNITUDE",
+        ),
+        (
+            &["evaluate", "--config", EXAMPLE, "--json", "runs.json"],
+            "--json-out runs.json",
+        ),
+        (&["demo", "--record", "x.mcap"], "--output x.mcap"),
+        (&["watch", "--mode", "routr"], "router"),
+        (&["watch", "--listen", "127.0.0.1:1"], "tcp/127.0.0.1:1"),
+        (
+            &["run", "--config", EXAMPLE, "--connect", "tcp/host"],
+            "HOST:PORT",
+        ),
+    ];
+    for (args, hint) in cases {
+        let out = glrmon().args(*args).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains(hint),
+            "{args:?}: wanted «{hint}» in {stderr}"
+        );
+    }
+}
+
+/// Every command's `--help` ends with examples, and the top line says what glrmon is.
+#[test]
+fn every_help_has_examples() {
+    let top = glrmon().arg("--help").output().unwrap();
+    let top = String::from_utf8_lossy(&top.stdout).into_owned();
+    assert!(
+        top.starts_with("Detect, date, isolate and size faults"),
+        "{top}"
+    );
+    let commands: Vec<String> = top
+        .lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .filter_map(|l| l.split_whitespace().next().map(str::to_owned))
+        .filter(|c| c != "help")
+        .collect();
+    assert!(commands.len() >= 14, "{commands:?}");
+    for c in &commands {
+        let out = glrmon().args([c.as_str(), "--help"]).output().unwrap();
+        let help = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success(), "{c}");
+        assert!(help.contains("Examples:\n  glrmon "), "{c} --help:\n{help}");
+    }
+}
+
+/// `glrmon --version` names the commit it was built from.
+#[test]
+fn version_names_the_commit() {
+    let out = glrmon().arg("--version").output().unwrap();
+    let v = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        v.starts_with(&format!("glrmon {} (git ", env!("CARGO_PKG_VERSION"))),
+        "{v}"
+    );
+}
+
+/// Completion scripts for every shell clap knows and the manual pages, one per
+/// command, generated from the parser.
+#[test]
+fn completions_and_manual_pages_are_generated() {
+    for shell in ["bash", "zsh", "fish", "elvish", "powershell"] {
+        let out = glrmon().args(["completions", shell]).output().unwrap();
+        assert!(out.status.success(), "{shell}");
+        let script = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            script.contains("identify"),
+            "{shell}: no subcommand in the script"
+        );
+        assert!(script.contains("log-format"), "{shell}: no global flag");
+    }
+    let scratch = Scratch::new("man");
+    let out = glrmon()
+        .args(["man", "--out-dir"])
+        .arg(&scratch.0)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let main = std::fs::read_to_string(scratch.0.join("glrmon.1")).unwrap();
+    assert!(
+        main.starts_with(".ie") || main.contains(".TH glrmon 1"),
+        "{main}"
+    );
+    assert!(
+        main.contains("glrmon\\-run(1)") || main.contains("glrmon-run"),
+        "{main}"
+    );
+    let run = std::fs::read_to_string(scratch.0.join("glrmon-run.1")).unwrap();
+    assert!(run.contains("\\-\\-config"), "{run}");
+}
+
+/// Runs the daemon on a free loopback port for a second with `flags` before the
+/// command, stops it with SIGTERM and returns its standard error.
+fn daemon_log(flags: &[&str]) -> String {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let child = glrmon()
+        .args(flags)
+        .args(["run", "--config", EXAMPLE, "--listen"])
+        .arg(format!("tcp/127.0.0.1:{port}"))
+        .env("GLRMON_LOG", "info")
+        .env_remove("NO_COLOR")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    // SAFETY: kill(2) on the child's pid with SIGTERM.
+    unsafe {
+        libc::kill(child.id() as libc::pid_t, libc::SIGTERM);
+    }
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// `--log-format json`: every line on standard error is a JSON object with an
+/// ISO-8601 UTC timestamp, a level and a message; `--color always` colours text logs,
+/// `auto` leaves a pipe plain.
+#[test]
+fn json_logs_parse_and_colour_follows_the_flag() {
+    let stderr = daemon_log(&["--log-format", "json"]);
+    let mut messages = Vec::new();
+    for line in stderr.lines() {
+        let v: serde_json::Value =
+            serde_json::from_str(line).unwrap_or_else(|e| panic!("{e}: {line}"));
+        let ts = v["timestamp"].as_str().unwrap();
+        assert!(
+            ts.len() == 24 && ts.ends_with('Z') && ts.as_bytes()[10] == b'T',
+            "{ts}"
+        );
+        assert!(v["level"].is_string(), "{line}");
+        messages.push(v["message"].as_str().unwrap().to_owned());
+    }
+    assert!(
+        messages.iter().any(|m| m == "Monitoring started."),
+        "{stderr}"
+    );
+    assert!(messages.iter().any(|m| m == "Stopped."), "{stderr}");
+
+    assert!(daemon_log(&["--color", "always"]).contains("\u{1b}["));
+    assert!(!daemon_log(&["--color", "auto"]).contains('\u{1b}'));
+    assert!(!daemon_log(&["--color", "never"]).contains('\u{1b}'));
+}
+
+/// `glrmon replay X --report r.html`, the demo's hint: the report, and no JSON lines
+/// on the terminal; `--output -` still asks for them.
+#[test]
+fn a_report_alone_writes_no_json_lines() {
+    let scratch = Scratch::new("report");
+    let csv = scratch.0.join("data.csv");
+    let sim = glrmon()
+        .args(["simulate", "--config", EXAMPLE, "--samples", "400"])
+        .args(["--fault", "x0_jump:4", "--onset", "201", "--output"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(sim.status.success());
+    let report = scratch.0.join("r.html");
+    let out = glrmon()
+        .args(["replay", "--config", EXAMPLE, "--quiet", "--report"])
+        .arg(&report)
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    assert!(
+        out.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    assert!(std::fs::metadata(&report).unwrap().len() > 10_000);
+    let out = glrmon()
+        .args([
+            "replay", "--config", EXAMPLE, "--quiet", "--output", "-", "--report",
+        ])
+        .arg(&report)
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert_eq!(
+        String::from_utf8_lossy(&out.stdout).lines().count(),
+        400 + 3
+    );
 }

@@ -66,7 +66,7 @@ const INVALID: [(&str, &str); 12] = [
 fn invalid_configurations_exit_1_naming_channel_and_field() {
     for (file, expected) in INVALID {
         let out = Command::new(env!("CARGO_BIN_EXE_glrmon"))
-            .arg("validate")
+            .args(["validate", "--config"])
             .arg(corpus(file))
             .output()
             .unwrap();
@@ -87,7 +87,7 @@ fn invalid_configurations_exit_1_naming_channel_and_field() {
 fn the_largest_window_validates_within_seconds() {
     let t = Instant::now();
     let out = Command::new(env!("CARGO_BIN_EXE_glrmon"))
-        .arg("validate")
+        .args(["validate", "--config"])
         .arg(corpus("window-1e5-valid.toml"))
         .output()
         .unwrap();

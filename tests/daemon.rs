@@ -161,11 +161,9 @@ fn simulated(channel: &str, fault: Option<(&str, u64, f64)>, n: u64) -> Vec<Vec<
     if let Some((f, onset, mag)) = fault {
         cmd.args([
             "--fault",
-            f,
+            &format!("{f}:{mag}"),
             "--onset",
             &onset.to_string(),
-            "--magnitude",
-            &mag.to_string(),
         ]);
     }
     assert!(cmd.status().unwrap().success());

@@ -38,7 +38,7 @@ fn simulate_then_diagnose_finds_exactly_the_injected_faults() {
             .args(["simulate", "--config"])
             .arg(&config)
             .args(["--channel", "ltv3", "--samples", "101", "--seed", "7"])
-            .args(["--fault", &injected.join(","), "--magnitude", "1,1,1,1,1"])
+            .args(["--fault", &injected.map(|f| format!("{f}:1")).join(",")])
             .arg("--output")
             .arg(&csv),
     );
@@ -187,7 +187,7 @@ fn replay_emits_the_diagnosis_right_after_the_alarm() {
             .args(["simulate", "--config"])
             .arg(&config)
             .args(["--samples", "200", "--seed", "11"])
-            .args(["--fault", &injected.join(","), "--magnitude", "1,1,1,1,1"])
+            .args(["--fault", &injected.map(|f| format!("{f}:1")).join(",")])
             .arg("--output")
             .arg(&csv),
     );

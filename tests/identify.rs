@@ -101,7 +101,7 @@ fn identify_calibrate_replay_on_the_quadruple_tank() {
         "NIS {nis}"
     );
     assert_eq!(report["period"], 5.0);
-    let validate = ok(&["validate", cfg]);
+    let validate = ok(&["validate", "--config", cfg]);
     assert!(validate.contains("tank"), "{validate}");
 
     // Writing over it needs --force.
@@ -203,7 +203,7 @@ fn named_columns_constant_columns_and_missing_ones() {
     );
     let written = std::fs::read_to_string(&config).unwrap();
     assert!(written.contains("u = [\"P1\", \"P2\"]"), "{written}");
-    let validate = ok(&["validate", cfg]);
+    let validate = ok(&["validate", "--config", cfg]);
     assert!(validate.contains("L3_bias"), "{validate}");
     // The export replays as it is: SP and spare are skipped.
     let out = ok(&["replay", "--config", cfg, data]);

@@ -219,11 +219,9 @@ fn simulate(dir: &Path, fault: Option<u64>, n: u64) -> Rows {
     if let Some(onset) = fault {
         for a in [
             "--fault",
-            "actuator_bias",
+            "actuator_bias:0.5",
             "--onset",
             &onset.to_string(),
-            "--magnitude",
-            "0.5",
         ] {
             args.push(a.to_owned());
         }

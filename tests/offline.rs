@@ -108,11 +108,9 @@ fn simulate_replay(
         "--seed",
         &seed.to_string(),
         "--fault",
-        fault,
+        &format!("{fault}:{magnitude}"),
         "--onset",
         &onset.to_string(),
-        "--magnitude",
-        magnitude,
         "--output",
         &csv,
     ]));
@@ -129,7 +127,7 @@ fn every_shipped_config_validates_with_an_isolability_report() {
         files.push(e.unwrap().path().display().to_string());
     }
     for f in files {
-        let out = ok(&glrmon(&["validate", &f]));
+        let out = ok(&glrmon(&["validate", "--config", &f]));
         assert!(out.contains(": valid"), "{out}");
         assert!(out.contains("isolability over"), "{out}");
         assert!(out.contains("condition number"), "{out}");
@@ -145,7 +143,7 @@ fn validate_lists_every_error_and_exits_1() {
         .replace("R = 0.0025", "R = -1.0")
         .replace("min_lag = 1", "min_lag = 100");
     std::fs::write(&bad, text).unwrap();
-    let out = glrmon(&["validate", &bad]);
+    let out = glrmon(&["validate", "--config", &bad]);
     assert_eq!(out.status.code(), Some(1));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
@@ -172,7 +170,7 @@ fn issue19_validate_accepts_paper2014_gas_q_with_a_warning() {
         1,
     );
     std::fs::write(&file, text).unwrap();
-    let out = ok(&glrmon(&["validate", &file]));
+    let out = ok(&glrmon(&["validate", "--config", &file]));
     assert!(out.contains(": valid, 1 channel(s)"), "{out}");
     let warning = out
         .lines()
@@ -216,7 +214,7 @@ unknown_input = ["50 + 10*sin(0.05*k)"]
 "#,
     )
     .unwrap();
-    let out = ok(&glrmon(&["validate", &file]));
+    let out = ok(&glrmon(&["validate", "--config", &file]));
     assert!(
         out.contains("unknown input: E has 1 column(s), decoupled from the innovation: the GLR runs on 1 of the 2 output directions"),
         "{out}"
@@ -332,11 +330,9 @@ fn replaying_the_same_csv_twice_gives_byte_identical_jsonl() {
         "--samples",
         "500",
         "--fault",
-        "x1_jump",
+        "x1_jump:2",
         "--onset",
         "250",
-        "--magnitude",
-        "2",
         "--output",
         &csv,
     ]));
@@ -355,11 +351,9 @@ fn replaying_the_same_csv_twice_gives_byte_identical_jsonl() {
         "--samples",
         "500",
         "--fault",
-        "x1_jump",
+        "x1_jump:2",
         "--onset",
         "250",
-        "--magnitude",
-        "2",
         "--output",
         &csv2,
     ]));
@@ -383,11 +377,9 @@ fn simulated_mcap_and_csv_replay_to_identical_jsonl() {
             "--seed",
             "5",
             "--fault",
-            "actuator_bias",
+            "actuator_bias:0.5",
             "--onset",
             "1500",
-            "--magnitude",
-            "0.5",
             "--output",
             out,
         ]
@@ -716,7 +708,7 @@ fn evaluate_dc_motor_reports_detection_delay_and_confusion() {
         "actuator_bias:0.5",
         "--runs",
         "200",
-        "--json",
+        "--json-out",
         &json,
         "--report",
         &html,
@@ -780,7 +772,7 @@ fn evaluate_dc_motor_reports_detection_delay_and_confusion() {
             "speed_sensor_drift:0.01",
             "--runs",
             "200",
-            "--json",
+            "--json-out",
             &json,
         ]));
         let v: serde_json::Value =

@@ -351,10 +351,10 @@ fn live_run_recorded_then_replayed_gives_identical_records() {
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let config = write_config(&scratch.0, &endpoint, "");
     let mut daemon = Daemon::start(&config);
-    let fault = ["--fault", "x0_jump", "--onset", "201", "--magnitude", "4"];
+    let fault = ["--fault", "x0_jump:4", "--onset", "201"];
     publish(&config, "unstable", 600, 3, &fault, &endpoint);
     // Known-profile faults of the 2021 example act from the first sample.
-    let faults = ["--fault", "f05,f16,f28,f39,f42", "--magnitude", "1,1,1,1,1"];
+    let faults = ["--fault", "f05:1,f16:1,f28:1,f39:1,f42:1"];
     publish(&config, "ltv3", 200, 11, &faults, &endpoint);
     {
         use zenoh::Wait as _;

@@ -7,8 +7,21 @@ use std::path::Path;
 use glrmon_sim::{Injection, Simulator};
 use glrmon_spec::Channel;
 
+use crate::flags::FaultArg;
+
 /// Where `run` listens and `watch`/`simulate --publish` connect when nothing is given.
 pub(crate) const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7447";
+
+/// How the user ran this binary, for commands printed as hints: `glrmon` when it was
+/// found on the PATH, else the path it was run by (`target/release/glrmon` after
+/// `make demo`), so the hint can be pasted as it is.
+pub(crate) fn invoked_as() -> String {
+    std::env::args_os()
+        .next()
+        .map(std::path::PathBuf::from)
+        .filter(|p| p.components().count() > 1)
+        .map_or_else(|| "glrmon".to_owned(), |p| p.display().to_string())
+}
 
 /// A user's input or configuration is at fault (exit code 1).
 #[derive(Debug)]
@@ -58,32 +71,22 @@ pub(crate) fn pick<'a>(
         .map_err(|e| InvalidInput(e.to_string()).into())
 }
 
-/// The channel's simulator ([`glrmon_sim::from_channel`]) with the fault(s) named by
-/// `--fault` injected at `--onset` with the `--magnitude`s.
+/// The channel's simulator ([`glrmon_sim::from_channel`]) with the `--fault`
+/// faults injected at `onset`.
 pub(crate) fn simulator(
     channel: &Channel,
     seed: u64,
-    faults: &[String],
+    faults: &[FaultArg],
     onset: u64,
-    magnitudes: &[f64],
 ) -> anyhow::Result<Simulator> {
     let sim = glrmon_sim::from_channel(channel, seed)?;
     if faults.is_empty() {
-        if !magnitudes.is_empty() {
-            return Err(InvalidInput("--magnitude given without --fault".into()).into());
-        }
         return Ok(sim);
     }
-    if faults.len() != magnitudes.len() {
-        return Err(InvalidInput(format!(
-            "--fault names {} fault(s) but --magnitude gives {} value(s)",
-            faults.len(),
-            magnitudes.len()
-        ))
-        .into());
-    }
-    let magnitude = glrmon_sim::fault_magnitudes(channel, faults, magnitudes)
-        .map_err(|e| InvalidInput(e.to_string()))?;
+    let names: Vec<String> = faults.iter().map(|f| f.name.clone()).collect();
+    let magnitudes: Vec<f64> = faults.iter().map(|f| f.magnitude).collect();
+    let magnitude = glrmon_sim::fault_magnitudes(channel, &names, &magnitudes)
+        .map_err(|e| InvalidInput(format!("--fault: {e}")))?;
     Ok(glrmon_sim::inject(
         sim,
         channel,

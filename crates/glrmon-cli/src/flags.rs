@@ -11,14 +11,17 @@ pub(crate) struct ZenohArgs {
     /// A Zenoh JSON5 configuration file, passed through untouched (TLS, auth, ACL).
     #[arg(long = "zenoh-config")]
     pub(crate) zenoh_config: Option<PathBuf>,
-    /// `peer` (default) or `client`.
-    #[arg(long)]
-    pub(crate) mode: Option<String>,
-    /// Endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable).
-    #[arg(long)]
+    /// The Zenoh session's mode. Default: `peer` for `run` and `demo`; `client` for
+    /// the tools that talk to a daemon (`watch`, `status`, `simulate --publish`,
+    /// `play`), connecting to tcp/127.0.0.1:7447 unless `--connect` or `--listen`
+    /// says otherwise.
+    #[arg(long, value_enum)]
+    pub(crate) mode: Option<Mode>,
+    /// Endpoint to connect to, PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447 (repeatable).
+    #[arg(long, value_name = "ENDPOINT", value_parser = endpoint)]
     pub(crate) connect: Vec<String>,
-    /// Endpoint to listen on, e.g. tcp/127.0.0.1:7447 (repeatable).
-    #[arg(long)]
+    /// Endpoint to listen on, PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447 (repeatable).
+    #[arg(long, value_name = "ENDPOINT", value_parser = endpoint)]
     pub(crate) listen: Vec<String>,
     /// Disable multicast scouting (it is off by default; the flag is accepted for
     /// compatibility with Zenoh's tools).
@@ -60,8 +63,8 @@ impl ZenohArgs {
         if self.zenoh_config.is_some() {
             s.config_file.clone_from(&self.zenoh_config);
         }
-        if self.mode.is_some() {
-            s.mode.clone_from(&self.mode);
+        if let Some(mode) = self.mode {
+            s.mode = Some(mode.as_str().to_owned());
         }
         if !self.connect.is_empty() {
             s.connect.clone_from(&self.connect);
@@ -73,5 +76,140 @@ impl ZenohArgs {
             s.multicast_scouting = Some(false);
         }
         s
+    }
+}
+
+/// A Zenoh session mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum Mode {
+    /// Talks to other peers directly and routes for its clients.
+    Peer,
+    /// Talks through one peer or router only.
+    Client,
+    /// Routes between peers and clients (as zenohd does).
+    Router,
+}
+
+impl Mode {
+    /// Zenoh's name of the mode.
+    pub(crate) fn as_str(self) -> &'static str {
+        match self {
+            Mode::Peer => "peer",
+            Mode::Client => "client",
+            Mode::Router => "router",
+        }
+    }
+}
+
+/// Checks a Zenoh endpoint, `PROTOCOL/ADDRESS[?metadata][#config]`, when the command
+/// line is parsed; an IP transport's address needs a host and a port.
+pub(crate) fn endpoint(s: &str) -> Result<String, String> {
+    let hint = |why: &str| {
+        let example = if s.contains('/') {
+            "tcp/127.0.0.1:7447".to_owned()
+        } else {
+            format!("tcp/{s}")
+        };
+        format!("{why}: an endpoint is PROTOCOL/ADDRESS, e.g. {example}")
+    };
+    let Some((protocol, rest)) = s.split_once('/') else {
+        return Err(hint("no protocol"));
+    };
+    if protocol.is_empty()
+        || !protocol
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-')
+    {
+        return Err(hint(&format!("\"{protocol}\" is not a protocol")));
+    }
+    let address = rest.split(['?', '#']).next().unwrap_or_default();
+    if matches!(protocol, "tcp" | "udp" | "tls" | "quic" | "ws") {
+        let port_ok = address
+            .rsplit_once(':')
+            .is_some_and(|(host, port)| !host.is_empty() && port.parse::<u16>().is_ok());
+        if !port_ok {
+            return Err(hint(&format!("\"{address}\" is not HOST:PORT")));
+        }
+    }
+    s.parse::<zenoh::config::EndPoint>()
+        .map_err(|_| hint("not a Zenoh endpoint"))?;
+    Ok(s.to_owned())
+}
+
+/// A fault of the channel's dictionary and its magnitude θ: `--fault NAME:MAGNITUDE`
+/// (the one spelling of every command that injects faults).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct FaultArg {
+    /// The fault's name in the dictionary.
+    pub(crate) name: String,
+    /// Its magnitude θ (finite).
+    pub(crate) magnitude: f64,
+}
+
+impl std::str::FromStr for FaultArg {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let Some((name, magnitude)) = s.rsplit_once(':') else {
+            return Err(format!(
+                "expected NAME:MAGNITUDE, e.g. {s}:1.5 (the magnitude is part of --fault; \
+                 there is no --magnitude)"
+            ));
+        };
+        if name.is_empty() {
+            return Err("the fault name before ':' is empty".into());
+        }
+        let magnitude = magnitude
+            .trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|m| m.is_finite())
+            .ok_or_else(|| format!("\"{magnitude}\" is not a finite number"))?;
+        Ok(FaultArg {
+            name: name.to_owned(),
+            magnitude,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fault_arguments() {
+        let f: FaultArg = "y0_bias:-2.5".parse().unwrap();
+        assert_eq!(
+            f,
+            FaultArg {
+                name: "y0_bias".into(),
+                magnitude: -2.5
+            }
+        );
+        assert!(
+            "y0_bias"
+                .parse::<FaultArg>()
+                .unwrap_err()
+                .contains("NAME:MAGNITUDE")
+        );
+        assert!(":1".parse::<FaultArg>().is_err());
+        assert!("a:inf".parse::<FaultArg>().is_err());
+        assert!("a:".parse::<FaultArg>().is_err());
+    }
+
+    #[test]
+    fn endpoints_are_checked_when_parsed() {
+        assert_eq!(
+            endpoint("tcp/127.0.0.1:7447").unwrap(),
+            "tcp/127.0.0.1:7447"
+        );
+        assert!(endpoint("tcp/[::1]:7447").is_ok());
+        assert!(endpoint("tcp/localhost:7447#iface=lo").is_ok());
+        let e = endpoint("127.0.0.1:1").unwrap_err();
+        assert!(e.contains("e.g. tcp/127.0.0.1:1"), "{e}");
+        assert!(endpoint("tcp/127.0.0.1").is_err());
+        assert!(endpoint("tcp/127.0.0.1:99999").is_err());
+        assert!(endpoint("/127.0.0.1:1").is_err());
+        assert!(endpoint("t c p/127.0.0.1:1").is_err());
     }
 }

@@ -1,6 +1,81 @@
-//! What the binary logs for the libraries' events.
+//! The log: its format (`--log-format`), colour (`--color`, `NO_COLOR`), time zone
+//! (`--local-time`), and what the binary logs for the libraries' events.
 
+use std::io::IsTerminal as _;
+
+use clap::ValueEnum;
+use glrmon_report::clock::{Zone, format_time};
 use glrmon_runtime::{RuntimeEvents, SinkError};
+use tracing_subscriber::fmt::format::Writer;
+use tracing_subscriber::fmt::time::FormatTime;
+
+/// How log lines are written to standard error.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub(crate) enum LogFormat {
+    /// `2026-12-02T16:22:05.250Z  INFO message key=value`, for people.
+    Text,
+    /// One JSON object per line (`timestamp`, `level`, `target`, `message` and the
+    /// event's fields), for journald, Loki, Vector or jq.
+    Json,
+}
+
+/// When log lines carry ANSI colour codes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub(crate) enum ColorChoice {
+    /// Only when standard error is a terminal and `NO_COLOR` is unset or empty.
+    Auto,
+    /// Always, even into a file or a pipe.
+    Always,
+    /// Never.
+    Never,
+}
+
+impl ColorChoice {
+    /// Whether to colour, given whether stderr is a terminal and the value of
+    /// `NO_COLOR` (<https://no-color.org>: any non-empty value turns colour off).
+    fn colors(self, terminal: bool, no_color: Option<&str>) -> bool {
+        match self {
+            ColorChoice::Always => true,
+            ColorChoice::Never => false,
+            ColorChoice::Auto => terminal && no_color.is_none_or(str::is_empty),
+        }
+    }
+}
+
+/// Log timestamps: ISO-8601 to the millisecond, in UTC or the local zone.
+struct Timestamps(Zone);
+
+impl FormatTime for Timestamps {
+    fn format_time(&self, w: &mut Writer<'_>) -> std::fmt::Result {
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0.0, |d| d.as_secs_f64());
+        w.write_str(&format_time(now, self.0))
+    }
+}
+
+/// Installs the log: `GLRMON_LOG` filters it (default `info,zenoh=warn`).
+pub(crate) fn init(format: LogFormat, color: ColorChoice, zone: Zone) {
+    let filter = tracing_subscriber::EnvFilter::try_from_env("GLRMON_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,zenoh=warn"));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_timer(Timestamps(zone));
+    match format {
+        LogFormat::Text => {
+            let no_color = std::env::var("NO_COLOR").ok();
+            let ansi = color.colors(std::io::stderr().is_terminal(), no_color.as_deref());
+            builder.with_ansi(ansi).init();
+        }
+        LogFormat::Json => builder
+            .json()
+            .flatten_event(true)
+            .with_current_span(false)
+            .with_span_list(false)
+            .init(),
+    }
+}
 
 /// Logs sink failures (data lost: ERROR).
 pub(crate) struct LogEvents;
@@ -8,5 +83,20 @@ pub(crate) struct LogEvents;
 impl RuntimeEvents for LogEvents {
     fn sink_error(&self, error: &SinkError) {
         tracing::error!(error = %error, "A result could not be delivered.");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn auto_colours_a_terminal_unless_no_color_is_set() {
+        assert!(ColorChoice::Auto.colors(true, None));
+        assert!(ColorChoice::Auto.colors(true, Some("")));
+        assert!(!ColorChoice::Auto.colors(true, Some("1")));
+        assert!(!ColorChoice::Auto.colors(false, None));
+        assert!(ColorChoice::Always.colors(false, Some("1")));
+        assert!(!ColorChoice::Never.colors(true, None));
     }
 }

@@ -9,14 +9,15 @@ mod common;
 mod flags;
 mod log;
 mod print;
+mod version;
 
 use std::process::ExitCode;
 
-use clap::Parser as _;
+use clap::{CommandFactory as _, Parser as _};
 
 use crate::cli::{Cli, Command};
 use crate::commands::{
-    calibrate, demo, diagnose, evaluate, identify, recover, replay, run, simulate, status,
+    calibrate, demo, diagnose, docs, evaluate, identify, recover, replay, run, simulate, status,
     validate, watch,
 };
 use crate::common::InvalidInput;
@@ -29,20 +30,25 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Some((name, hint)) = cli.command.old_spelling() {
+        let mut cmd = Cli::command();
+        cmd.build();
+        let kind = clap::error::ErrorKind::ArgumentConflict;
+        match cmd.find_subcommand_mut(name) {
+            Some(sub) => sub.error(kind, hint).exit(),
+            None => cmd.error(kind, hint).exit(),
+        }
+    }
     if cli.command.writes_to_a_pipe_only() {
         quiet_broken_pipe();
     }
-    let filter = tracing_subscriber::EnvFilter::try_from_env("GLRMON_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,zenoh=warn"));
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .init();
+    log::init(cli.log_format, cli.color, cli.zone());
+    print::set_zone(cli.zone());
     let result = match &cli.command {
         Command::Demo(args) => demo::run(args),
         Command::Validate(args) => validate::run(args),
         Command::Simulate(args) => simulate::run(args),
-        Command::Replay(args) => replay::run(args),
+        Command::Replay(args) => replay::run(args, cli.zone()),
         Command::Recover(args) => recover::run(args),
         Command::Identify(args) => identify::run(args),
         Command::Calibrate(args) => calibrate::run(args),
@@ -51,6 +57,8 @@ fn main() -> ExitCode {
         Command::Run(args) => run::run(args),
         Command::Watch(args) => watch::run(args),
         Command::Status(args) => status::run(args),
+        Command::Completions(args) => docs::completions(args),
+        Command::Man(args) => docs::man(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,6 +1,9 @@
 //! Human-readable one-line rendering of alarms, as `glrmon watch` prints them.
 
 use std::fmt::Write as _;
+use std::sync::OnceLock;
+
+use glrmon_report::clock::{Zone, format_time, is_wall_clock};
 
 use glrmon_wire::{
     Alarm, AlarmEnd, Consistency, Diagnosis, ErrorRecord, IsolationResult, IsolationUpdate, Record,
@@ -20,25 +23,58 @@ pub(crate) fn line(record: &Record) -> Option<String> {
     }
 }
 
-/// `isolated=[…] magnitude=[…] minmax=[…]` of an alarm or an isolation update.
+/// Most faults an alarm line names in `magnitude=[…]` and `minmax=[…]`; `--json`
+/// gives all of them.
+const MAX_LISTED: usize = 5;
+
+/// `isolated=[…] magnitude=[…] minmax=[…]` of an alarm or an isolation update. A
+/// dictionary of more than [`MAX_LISTED`] faults lists the isolated faults first, then
+/// the others with the largest minmax statistics, up to [`MAX_LISTED`] in all, and
+/// says how many it left out.
 fn isolation_fields(isolation: &[IsolationResult], faults: &[String], magnitude: &[f64]) -> String {
     let isolated: Vec<&str> = isolation
         .iter()
         .filter(|i| i.isolated)
         .map(|i| i.fault.as_str())
         .collect();
+    let mut listed: Vec<usize> = (0..faults.len().min(magnitude.len())).collect();
+    let mut tests: Vec<&IsolationResult> = isolation.iter().collect();
+    let mut left_out = 0;
+    if faults.len() > MAX_LISTED {
+        let test_of = |name: &str| isolation.iter().find(|t| t.fault == name);
+        let rank = |name: &str| {
+            test_of(name).map_or((false, f64::NEG_INFINITY), |t| (t.isolated, t.minmax))
+        };
+        listed.sort_by(|&a, &b| {
+            let (ia, ma) = rank(&faults[a]);
+            let (ib, mb) = rank(&faults[b]);
+            ib.cmp(&ia).then(mb.total_cmp(&ma))
+        });
+        left_out = listed.len().saturating_sub(MAX_LISTED);
+        listed.truncate(MAX_LISTED);
+        tests = listed.iter().filter_map(|&i| test_of(&faults[i])).collect();
+    }
     let mut mag = String::new();
-    for (i, (name, v)) in faults.iter().zip(magnitude).enumerate() {
-        let sep = if i == 0 { "" } else { ", " };
-        let _ = write!(mag, "{sep}{name} {v:.3}");
+    for (n, &i) in listed.iter().enumerate() {
+        let sep = if n == 0 { "" } else { ", " };
+        let _ = write!(mag, "{sep}{} {:.3}", faults[i], magnitude[i]);
     }
-    let mut tests = String::new();
-    for (i, t) in isolation.iter().enumerate() {
-        let sep = if i == 0 { "" } else { ", " };
-        let _ = write!(tests, "{sep}{} {:.1}/{:.1}", t.fault, t.minmax, t.threshold);
+    let mut minmax = String::new();
+    for (n, t) in tests.iter().enumerate() {
+        let sep = if n == 0 { "" } else { ", " };
+        let _ = write!(
+            minmax,
+            "{sep}{} {:.1}/{:.1}",
+            t.fault, t.minmax, t.threshold
+        );
     }
+    let more = if left_out > 0 {
+        format!(" (+{left_out} more faults: --json lists all)")
+    } else {
+        String::new()
+    };
     format!(
-        "isolated=[{}] magnitude=[{mag}] minmax=[{tests}]",
+        "isolated=[{}] magnitude=[{mag}] minmax=[{minmax}]{more}",
         isolated.join(", ")
     )
 }
@@ -135,9 +171,23 @@ fn error_line(e: &ErrorRecord) -> String {
     )
 }
 
-/// ` t=…` (the sample's time in seconds) when the record carries one.
+/// The zone of the wall-clock times in the lines (`--local-time`), set once by `main`.
+static ZONE: OnceLock<Zone> = OnceLock::new();
+
+/// Shows wall-clock times in `zone` from now on (UTC until called).
+pub(crate) fn set_zone(zone: Zone) {
+    let _ = ZONE.set(zone);
+}
+
+/// ` t=…` when the record carries the sample's time: ISO-8601 for a wall-clock time,
+/// seconds otherwise ([`glrmon_report::clock`]).
 fn time(t: Option<f64>) -> String {
-    t.map_or_else(String::new, |t| format!(" t={t:.3}"))
+    let zone = ZONE.get().copied().unwrap_or_default();
+    match t {
+        Some(t) if is_wall_clock(t) => format!(" t={}", format_time(t, zone)),
+        Some(t) => format!(" t={t:.3}"),
+        None => String::new(),
+    }
 }
 
 #[cfg(test)]
@@ -204,5 +254,40 @@ mod tests {
             line(&Record::Isolation(u)).unwrap(),
             "ISOL  pump3 k=203 alarm_k=201 onset=200 glr=25.0 (threshold 27.6) isolated=[] magnitude=[x0_jump 3.500] minmax=[x0_jump 0.5/6.6]"
         );
+    }
+
+    #[test]
+    fn large_dictionaries_list_isolated_then_strongest_faults_only() {
+        let faults: Vec<String> = (0..31).map(|i| format!("y{i}_bias")).collect();
+        let isolation: Vec<IsolationResult> = (0..31)
+            .map(|i| IsolationResult {
+                fault: format!("y{i}_bias"),
+                minmax: f64::from(i),
+                sensitivity: 100.0,
+                threshold: 6.6,
+                isolated: i == 3,
+            })
+            .collect();
+        let a = Alarm {
+            channel: "plant".into(),
+            k: 900,
+            t: Some(1_796_191_746.296),
+            glr: 300.0,
+            threshold: 40.0,
+            onset: 880,
+            magnitude: (0..31).map(f64::from).collect(),
+            isolation,
+            faults,
+            update_k: None,
+        };
+        let text = line(&Record::Alarm(a)).unwrap();
+        assert_eq!(
+            text,
+            "ALARM plant k=900 onset=880 glr=300.0 (threshold 40.0) isolated=[y3_bias] \
+             magnitude=[y3_bias 3.000, y30_bias 30.000, y29_bias 29.000, y28_bias 28.000, y27_bias 27.000] \
+             minmax=[y3_bias 3.0/6.6, y30_bias 30.0/6.6, y29_bias 29.0/6.6, y28_bias 28.0/6.6, y27_bias 27.0/6.6] \
+             (+26 more faults: --json lists all) t=2026-12-02T06:09:06.296Z"
+        );
+        assert!(text.len() < 400, "{} characters", text.len());
     }
 }

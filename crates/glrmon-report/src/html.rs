@@ -8,9 +8,10 @@ use glrmon_wire::{Alarm, Diagnosis, IsolationResult};
 
 use crate::Report;
 use crate::channel::{ChannelState, MAX_ALARMS, MAX_COMPONENTS, MAX_DIAGNOSES, MAX_ERRORS};
+use crate::clock::{Zone, date, format_time};
 use crate::decimate::ColumnId;
 use crate::escape::escape;
-use crate::svg::{Axis, Category, Figure, ONSET, PALETTE, RED, Swatch, fmt_num};
+use crate::svg::{Axis, Category, Figure, ONSET, PALETTE, RED, Swatch, TimeAxis, fmt_num};
 
 /// Lines drawn per figure of vector components (ε_k, θ̂); the rest are named in the caption.
 const MAX_LINES: usize = 10;
@@ -76,7 +77,14 @@ pub(crate) fn write_page<W: Write>(report: &Report, mut out: W) -> io::Result<()
 
     let mut fig_id = 0;
     for (i, (name, ch)) in report.channels.iter().enumerate() {
-        let section = channel_section(i, name, ch, report.options.width_points, &mut fig_id);
+        let section = channel_section(
+            i,
+            name,
+            ch,
+            report.options.width_points,
+            report.options.zone,
+            &mut fig_id,
+        );
         out.write_all(section.as_bytes())?;
     }
     out.write_all(b"</body></html>\n")?;
@@ -255,13 +263,18 @@ fn channel_section(
     name: &str,
     ch: &ChannelState,
     width_points: usize,
+    zone: Zone,
     fig_id: &mut usize,
 ) -> String {
     let mut s = format!(
         "<section id=\"ch-{index}\">\n<h2>Channel <code>{}</code></h2>\n",
         escape(name)
     );
-    let t_pairs = time_pairs(ch);
+    let t_axis = TimeAxis {
+        pairs: time_pairs(ch),
+        zone,
+    };
+    let t_pairs = &t_axis.pairs;
     let mut facts = format!("{} stat records", ch.stats);
     if let Some((lo, hi)) = ch.k_range {
         let _ = write!(facts, ", k = {lo} … {hi}");
@@ -269,9 +282,10 @@ fn channel_section(
     if let (Some(first), Some(last)) = (t_pairs.first(), t_pairs.last()) {
         let _ = write!(
             facts,
-            ", t = {} s … {} s (grey second row under the k axis)",
-            fmt_num(first.1),
-            fmt_num(last.1)
+            ", t = {} … {} (grey second row under the k axis{})",
+            format_time(first.1, zone),
+            format_time(last.1, zone),
+            date(first.1, zone).map_or_else(String::new, |d| format!(", times of day on {d}"))
         );
     }
     let _ = write!(
@@ -281,17 +295,17 @@ fn channel_section(
     let _ = writeln!(s, "<p class=\"note\">{facts}</p>");
 
     if ch.stats > 0 {
-        s.push_str(&innovation_figure(ch, &t_pairs, fig_id));
-        s.push_str(&glr_figure(ch, &t_pairs, fig_id));
-        s.push_str(&onset_figure(ch, &t_pairs, fig_id));
-        s.push_str(&magnitude_figure(ch, &t_pairs, fig_id));
+        s.push_str(&innovation_figure(ch, &t_axis, fig_id));
+        s.push_str(&glr_figure(ch, &t_axis, fig_id));
+        s.push_str(&onset_figure(ch, &t_axis, fig_id));
+        s.push_str(&magnitude_figure(ch, &t_axis, fig_id));
     } else {
         s.push_str(
             "<p class=\"note\">No stat records for this channel: no time-series figures.</p>\n",
         );
     }
     if ch.alarms_total > 0 || ch.alarm_ends > 0 {
-        s.push_str(&alarm_section(ch, fig_id));
+        s.push_str(&alarm_section(ch, zone, fig_id));
     }
     if ch.diagnoses_total > 0 {
         s.push_str(&diagnosis_section(ch, fig_id));
@@ -374,7 +388,7 @@ fn decorate_alarms(fig: &mut Figure, ch: &ChannelState) {
     }
 }
 
-fn innovation_figure(ch: &ChannelState, t_pairs: &[(f64, f64)], fig_id: &mut usize) -> String {
+fn innovation_figure(ch: &ChannelState, t_axis: &TimeAxis, fig_id: &mut usize) -> String {
     let (lo, hi) = columns_range(ch, &ch.innovation).unwrap_or((-1.0, 1.0));
     let mut fig = Figure::new(
         "Kalman innovation ε_k",
@@ -383,7 +397,7 @@ fn innovation_figure(ch: &ChannelState, t_pairs: &[(f64, f64)], fig_id: &mut usi
         200.0,
     );
     fig.set_class("innovation");
-    fig.set_secondary_x(t_pairs.to_vec());
+    fig.set_secondary_x(t_axis);
     decorate_alarms(&mut fig, ch);
     fig.hline(0.0, "#999", None, "zero");
     let picked = pick_components(ch, &ch.innovation);
@@ -418,7 +432,7 @@ fn omitted_note(shown: usize, total: usize, what: &str) -> String {
     }
 }
 
-fn glr_figure(ch: &ChannelState, t_pairs: &[(f64, f64)], fig_id: &mut usize) -> String {
+fn glr_figure(ch: &ChannelState, t_axis: &TimeAxis, fig_id: &mut usize) -> String {
     let glr_range = ch.grid.range(ch.glr);
     let thr_range = ch.grid.range(ch.threshold);
     let alarm_threshold = ch.alarms.first().map(|a| a.threshold);
@@ -438,7 +452,7 @@ fn glr_figure(ch: &ChannelState, t_pairs: &[(f64, f64)], fig_id: &mut usize) -> 
         260.0,
     );
     fig.set_class("glr");
-    fig.set_secondary_x(t_pairs.to_vec());
+    fig.set_secondary_x(t_axis);
     decorate_alarms(&mut fig, ch);
     let mut onsets: Vec<u64> = ch.alarms.iter().map(|a| a.onset).collect();
     onsets.sort_unstable();
@@ -509,7 +523,7 @@ fn glr_figure(ch: &ChannelState, t_pairs: &[(f64, f64)], fig_id: &mut usize) -> 
     figure(&fig, fig_id, &caption)
 }
 
-fn onset_figure(ch: &ChannelState, t_pairs: &[(f64, f64)], fig_id: &mut usize) -> String {
+fn onset_figure(ch: &ChannelState, t_axis: &TimeAxis, fig_id: &mut usize) -> String {
     let (lo, hi) = ch.grid.range(ch.onset).unwrap_or((0.0, 1.0));
     let (lo, hi) = ch.alarms.iter().fold((lo, hi), |(l, h), a| {
         (l.min(a.onset as f64), h.max(a.onset as f64))
@@ -521,7 +535,7 @@ fn onset_figure(ch: &ChannelState, t_pairs: &[(f64, f64)], fig_id: &mut usize) -
         200.0,
     );
     fig.set_class("onset");
-    fig.set_secondary_x(t_pairs.to_vec());
+    fig.set_secondary_x(t_axis);
     decorate_alarms(&mut fig, ch);
     if let Some((k0, k1)) = ch.k_range {
         fig.polyline(
@@ -548,7 +562,7 @@ fn onset_figure(ch: &ChannelState, t_pairs: &[(f64, f64)], fig_id: &mut usize) -
     )
 }
 
-fn magnitude_figure(ch: &ChannelState, t_pairs: &[(f64, f64)], fig_id: &mut usize) -> String {
+fn magnitude_figure(ch: &ChannelState, t_axis: &TimeAxis, fig_id: &mut usize) -> String {
     let (lo, hi) = columns_range(ch, &ch.magnitude).unwrap_or((-1.0, 1.0));
     let mut fig = Figure::new(
         "Magnitude estimate θ̂ at r̂",
@@ -557,7 +571,7 @@ fn magnitude_figure(ch: &ChannelState, t_pairs: &[(f64, f64)], fig_id: &mut usiz
         220.0,
     );
     fig.set_class("magnitude");
-    fig.set_secondary_x(t_pairs.to_vec());
+    fig.set_secondary_x(t_axis);
     decorate_alarms(&mut fig, ch);
     fig.hline(0.0, "#999", None, "zero");
     let names = ch.fault_names();
@@ -579,7 +593,7 @@ fn magnitude_figure(ch: &ChannelState, t_pairs: &[(f64, f64)], fig_id: &mut usiz
     figure(&fig, fig_id, &caption)
 }
 
-fn alarm_section(ch: &ChannelState, fig_id: &mut usize) -> String {
+fn alarm_section(ch: &ChannelState, zone: Zone, fig_id: &mut usize) -> String {
     let mut s = format!(
         "<h3>Alarms</h3>\n<p class=\"note\">{} alarm{}, {} episode{} ended.{}</p>\n",
         ch.alarms_total,
@@ -622,7 +636,7 @@ fn alarm_section(ch: &ChannelState, fig_id: &mut usize) -> String {
             s,
             "<tr><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{end}</td><td>{}</td><td>{}</td><td class=\"num\">{update_k}</td><td class=\"num\">{update_onset}</td><td>{update_isolated}</td></tr>",
             a.k,
-            a.t.map_or("–".to_owned(), fmt_num),
+            a.t.map_or("–".to_owned(), |t| format_time(t, zone)),
             fmt_num(a.glr),
             fmt_num(a.threshold),
             a.onset,

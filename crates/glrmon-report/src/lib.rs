@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 
 mod channel;
+pub mod clock;
 mod decimate;
 mod escape;
 mod evaluation;
@@ -31,6 +32,8 @@ pub struct ReportOptions {
     /// Most points drawn per series (l_k, each ε_k component, …) after decimation; at
     /// least 4. About twice the figure width in pixels keeps every spike visible.
     pub width_points: usize,
+    /// The zone wall-clock sample times are shown in ([`clock`]).
+    pub zone: clock::Zone,
 }
 
 impl Default for ReportOptions {
@@ -38,6 +41,7 @@ impl Default for ReportOptions {
         ReportOptions {
             title: "glrmon replay report".to_owned(),
             width_points: 2000,
+            zone: clock::Zone::Utc,
         }
     }
 }

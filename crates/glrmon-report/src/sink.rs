@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use glrmon_runtime::{Interest, Output, Sink, SinkError};
 
+use crate::clock::Zone;
 use crate::{Report, ReportOptions};
 
 /// Collects the records it is handed and writes the HTML report on
@@ -16,13 +17,15 @@ pub struct ReportSink {
 }
 
 impl ReportSink {
-    /// A report titled after `input` (the replayed file), to be written to `path`.
+    /// A report titled after `input` (the replayed file), to be written to `path`, with
+    /// wall-clock times in `zone`.
     #[must_use]
-    pub fn new(path: &Path, input: &Path) -> Self {
+    pub fn new(path: &Path, input: &Path, zone: Zone) -> Self {
         Self {
             path: path.to_owned(),
             report: Some(Report::new(ReportOptions {
                 title: format!("glrmon replay of {}", input.display()),
+                zone,
                 ..ReportOptions::default()
             })),
         }

@@ -5,6 +5,7 @@
 
 use std::fmt::Write as _;
 
+use crate::clock::{Zone, time_of_day};
 use crate::escape::escape;
 
 /// Series colours: Tableau 10 without red (kept for alarms), then three dark tones, so
@@ -26,6 +27,14 @@ const RIGHT: f64 = 24.0;
 const MIN_LEFT: f64 = 88.0;
 const CHAR_W: f64 = 6.8;
 const FONT: f64 = 12.0;
+
+/// The sample times under a figure's k axis: pairs `(k, t)` and the zone wall-clock
+/// times are shown in.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct TimeAxis {
+    pub(crate) pairs: Vec<(f64, f64)>,
+    pub(crate) zone: Zone,
+}
 
 /// How values map to the axis.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -280,6 +289,7 @@ pub(crate) struct Figure {
     categories: Vec<Category>,
     /// k → t pairs (increasing k) for a second row of x tick labels in seconds.
     secondary_x: Vec<(f64, f64)>,
+    secondary_zone: Zone,
     left: f64,
     /// Width of the whole SVG, margins included.
     total_width: f64,
@@ -354,6 +364,7 @@ impl Figure {
             y,
             categories,
             secondary_x: Vec::new(),
+            secondary_zone: Zone::Utc,
             left,
             total_width: FIG_WIDTH,
             w: FIG_WIDTH - left - RIGHT,
@@ -377,9 +388,26 @@ impl Figure {
         self.stacked_legend = true;
     }
 
-    /// Labels x ticks a second time with the interpolated time `t` (pairs `(k, t)`).
-    pub(crate) fn set_secondary_x(&mut self, pairs: Vec<(f64, f64)>) {
-        self.secondary_x = pairs;
+    /// Labels x ticks a second time with the interpolated time `t` (pairs `(k, t)`):
+    /// the time of day for wall-clock times, else seconds.
+    pub(crate) fn set_secondary_x(&mut self, axis: &TimeAxis) {
+        self.secondary_x.clone_from(&axis.pairs);
+        self.secondary_zone = axis.zone;
+    }
+
+    /// Decimals of a second the time-of-day tick labels need: ticks closer than a
+    /// second apart show tenths or hundredths.
+    fn tick_decimals(&self) -> usize {
+        let (Some(first), Some(last)) = (self.secondary_x.first(), self.secondary_x.last()) else {
+            return 0;
+        };
+        let per_tick = (last.1 - first.1).abs() / (self.w / 90.0).max(2.0);
+        match per_tick {
+            p if p >= 1.0 => 0,
+            p if p >= 0.1 => 1,
+            p if p >= 0.01 => 2,
+            _ => 3,
+        }
     }
 
     /// Plot-area width in pixels.
@@ -686,11 +714,13 @@ impl Figure {
                 h = self.h
             );
             if let Some(t) = interpolate(&self.secondary_x, v) {
+                let label = time_of_day(t, self.secondary_zone, self.tick_decimals())
+                    .unwrap_or_else(|| format!("{} s", fmt_num(t)));
                 let _ = write!(
                     s,
-                    r##"<text x="{px:.1}" y="{:.1}" text-anchor="middle" fill="#777" font-size="11">{} s</text>"##,
+                    r##"<text x="{px:.1}" y="{:.1}" text-anchor="middle" fill="#777" font-size="11">{}</text>"##,
                     self.h + 32.0,
-                    escape(&fmt_num(t))
+                    escape(&label)
                 );
             }
         }

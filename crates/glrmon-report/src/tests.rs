@@ -488,6 +488,7 @@ fn odd_records_do_not_panic() {
     let mut report = Report::new(ReportOptions {
         title: String::new(),
         width_points: 0,
+        zone: crate::clock::Zone::Utc,
     });
     // An alarm_end without its alarm, out-of-order and extreme k, a diagnosis without a
     // path, rows of the wrong length, non-finite values.
@@ -516,4 +517,32 @@ fn odd_records_do_not_panic() {
     let html = render(&report);
     assert!(html.ends_with("</body></html>\n"));
     assert!(html.contains("No regularisation path with positive λ"));
+}
+
+/// A live recording's wall-clock `t` labels the k axis with times of day and the facts
+/// line with ISO-8601 times, not with "1.796e9 s".
+#[test]
+fn wall_clock_times_are_shown_as_times_of_day() {
+    let t0 = 1_796_191_746.0;
+    let mut report = Report::new(ReportOptions::default());
+    for k in 0..400 {
+        let Record::Stat(mut s) = stat(CHANNEL, k, glr_at(k)) else {
+            unreachable!()
+        };
+        s.t = Some(t0 + k as f64 * 0.5);
+        report.add(&Record::from(s));
+    }
+    let mut out = Vec::new();
+    report.write_html(&mut out).unwrap();
+    let html = String::from_utf8(out).unwrap();
+    assert!(
+        html.contains("t = 2026-12-02T06:09:06.000Z … 2026-12-02T06:12:25.500Z"),
+        "facts line"
+    );
+    assert!(html.contains("times of day on 2026-12-02 UTC"));
+    assert!(
+        html.contains(">06:10:"),
+        "a tick labelled with a time of day"
+    );
+    assert!(!html.contains("e9 s<"), "no epoch seconds on an axis");
 }

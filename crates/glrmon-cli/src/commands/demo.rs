@@ -17,6 +17,8 @@ use clap::Args;
 use glrmon_monitor::Monitor;
 use glrmon_runtime::{FnSink, Output, Runtime, Sink};
 use glrmon_sim::SimSample;
+
+use crate::common::InvalidInput;
 use glrmon_wire::{Record, Sample, decode_record, encode_sample};
 use glrmon_zenoh::{SessionSettings, ZenohSink, ZenohSource};
 use zenoh::Wait as _;
@@ -44,17 +46,48 @@ pub(crate) struct DemoArgs {
     seed: u64,
     /// Also listen on this endpoint (e.g. tcp/127.0.0.1:7447) so that `glrmon watch`
     /// in another terminal sees the results.
-    #[arg(long)]
+    #[arg(long, value_name = "ENDPOINT", value_parser = crate::flags::endpoint)]
     listen: Vec<String>,
-    /// Also write every record (stat, alarm, alarm_end, error) as JSON lines here.
-    #[arg(long)]
-    output: Option<PathBuf>,
-    /// The MCAP recording of every input and result (`glrmon replay` re-runs it).
-    #[arg(long, default_value = "glrmon-demo.mcap")]
-    record: PathBuf,
-    /// Do not write the MCAP recording.
+    /// Where the results go, by the name's extension: `.mcap`, the MCAP recording of
+    /// every input and result (`glrmon replay` re-runs it; default
+    /// glrmon-demo.mcap); any other name, every record (stat, alarm, alarm_end, error)
+    /// as JSON lines. Give it twice for both.
+    #[arg(long, value_name = "FILE")]
+    output: Vec<PathBuf>,
+    /// Write no MCAP recording.
     #[arg(long)]
     no_record: bool,
+    /// Replaced by `--output FILE.mcap` (refused with a hint: `Command::old_spelling`).
+    #[arg(long, hide = true)]
+    pub(crate) record: Option<PathBuf>,
+}
+
+/// The demo's outputs: the MCAP recording (unless `--no-record`) and the JSON lines
+/// file, from the `--output` names' extensions.
+fn outputs(args: &DemoArgs) -> anyhow::Result<(Option<PathBuf>, Option<PathBuf>)> {
+    let (mcap, jsonl): (Vec<&PathBuf>, Vec<&PathBuf>) = args.output.iter().partition(|p| {
+        p.extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
+    });
+    if mcap.len() > 1 || jsonl.len() > 1 {
+        return Err(InvalidInput(
+            "--output: at most one .mcap recording and one JSON lines file".into(),
+        )
+        .into());
+    }
+    let record = match (mcap.first(), args.no_record) {
+        (Some(p), true) => {
+            return Err(InvalidInput(format!(
+                "--output {} and --no-record contradict each other",
+                p.display()
+            ))
+            .into());
+        }
+        (Some(p), false) => Some((*p).clone()),
+        (None, true) => None,
+        (None, false) => Some(PathBuf::from("glrmon-demo.mcap")),
+    };
+    Ok((record, jsonl.first().map(|p| (*p).clone())))
 }
 
 pub(crate) fn run(args: &DemoArgs) -> anyhow::Result<()> {
@@ -65,6 +98,7 @@ pub(crate) fn run(args: &DemoArgs) -> anyhow::Result<()> {
 }
 
 async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
+    let (record, jsonl) = outputs(args)?;
     let cfg = glrmon_spec::parse(DEMO_CONFIG)
         .map_err(|e| anyhow::anyhow!("embedded demo config: {e}"))?;
     let rate_hz = if args.rate > 0.0 { args.rate } else { 100.0 };
@@ -118,7 +152,7 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
             }
         })),
     ];
-    if let Some(p) = &args.output {
+    if let Some(p) = &jsonl {
         let file = std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?;
         let w = Mutex::new(std::io::BufWriter::new(file));
         sinks.push(Box::new(FnSink::new("jsonl", move |o: &Output| {
@@ -130,10 +164,8 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
             }
         })));
     }
-    let recorder_stats = if args.no_record {
-        None
-    } else {
-        let directory = match args.record.parent() {
+    let recorder_stats = if let Some(record) = &record {
+        let directory = match record.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
             _ => PathBuf::from("."),
         };
@@ -150,6 +182,8 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         let stats = recorder.stats();
         sinks.push(Box::new(recorder));
         Some(stats)
+    } else {
+        None
     };
     let mut settings = glrmon_runtime::RuntimeSettings::from_spec(&cfg.daemon);
     settings.stat_every = 1;
@@ -162,9 +196,17 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     for (i, c) in cfg.channels.iter().enumerate() {
         let seed = args.seed.wrapping_add(i as u64);
         let sim = if c.name == FAULT.0 {
-            crate::common::simulator(c, seed, &[FAULT.1.to_owned()], FAULT.2, &[FAULT.3])?
+            crate::common::simulator(
+                c,
+                seed,
+                &[crate::flags::FaultArg {
+                    name: FAULT.1.to_owned(),
+                    magnitude: FAULT.3,
+                }],
+                FAULT.2,
+            )?
         } else {
-            crate::common::simulator(c, seed, &[], 0, &[])?
+            crate::common::simulator(c, seed, &[], 0)?
         };
         let publisher = session
             .declare_publisher(c.key.clone())
@@ -278,20 +320,20 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
             );
         }
     }
-    if let Some(p) = &args.output {
+    if let Some(p) = &jsonl {
         println!("records written to {}", p.display());
     }
-    if let Some(stats) = recorder_stats {
+    if let (Some(stats), Some(record)) = (recorder_stats, &record) {
         let finished = stats.finished.lock().map(|f| f.clone()).unwrap_or_default();
         if let Some(file) = finished.last() {
-            std::fs::rename(file, &args.record).with_context(|| {
-                format!("renaming {} to {}", file.display(), args.record.display())
-            })?;
+            std::fs::rename(file, record)
+                .with_context(|| format!("renaming {} to {}", file.display(), record.display()))?;
             println!(
-                "recording: {} ({} messages); replay it with: glrmon replay {} --report report.html",
-                args.record.display(),
+                "recording: {} ({} messages); replay it with: {} replay {} --report report.html",
+                record.display(),
                 stats.messages.load(Ordering::Relaxed),
-                args.record.display()
+                crate::common::invoked_as(),
+                record.display()
             );
         }
     }

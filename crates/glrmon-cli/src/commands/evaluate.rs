@@ -18,6 +18,7 @@ use glrmon_report::{Evaluation, FaultEvaluation};
 
 use crate::common::pick;
 use crate::common::{InvalidInput, load_config};
+use crate::flags::FaultArg;
 
 #[derive(Debug, Args)]
 pub(crate) struct EvaluateArgs {
@@ -27,10 +28,16 @@ pub(crate) struct EvaluateArgs {
     /// Channel (optional when the configuration has one channel).
     #[arg(long)]
     channel: Option<String>,
-    /// A fault to inject and its magnitude, `NAME:MAGNITUDE`; repeat for several
-    /// (evaluated one at a time). Default: every fault of the dictionary at magnitude 1.
-    #[arg(long = "fault")]
-    faults: Vec<String>,
+    /// A fault to inject and its magnitude θ, `NAME:MAGNITUDE`; repeat (or separate
+    /// with commas) for several, evaluated one at a time. Default: every fault of the
+    /// dictionary at magnitude 1.
+    #[arg(
+        long = "fault",
+        value_name = "NAME:MAGNITUDE",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    faults: Vec<FaultArg>,
     /// Runs per fault.
     #[arg(long, default_value_t = 200)]
     runs: u64,
@@ -43,9 +50,16 @@ pub(crate) struct EvaluateArgs {
     /// Seed of the first run (run i uses seed + i).
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Also write the results as JSON here.
+    /// Print the results as JSON instead of the table.
     #[arg(long)]
-    json: Option<PathBuf>,
+    json: bool,
+    /// Also write the results as JSON to this file.
+    #[arg(long, value_name = "PATH")]
+    json_out: Option<PathBuf>,
+    /// Arguments left over; `--json PATH` of earlier versions lands here (see
+    /// `Command::old_spelling`).
+    #[arg(hide = true)]
+    pub(crate) stray: Vec<String>,
     /// Also write a self-contained HTML report here: per injected fault, histograms of
     /// the detection delay and of the onset error r̂ − r, the summary and the confusion
     /// matrix.
@@ -66,24 +80,16 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
         args.faults
             .iter()
             .map(|f| {
-                let (name, mag) = f
-                    .split_once(':')
-                    .ok_or_else(|| InvalidInput(format!("--fault {f}: expected NAME:MAGNITUDE")))?;
-                let mag: f64 = mag
-                    .parse()
-                    .ok()
-                    .filter(|m: &f64| m.is_finite())
-                    .ok_or_else(|| {
-                        InvalidInput(format!("--fault {f}: \"{mag}\" is not a finite number"))
-                    })?;
-                if !channel.fault_names.iter().any(|n| n == name) {
+                if !channel.fault_names.contains(&f.name) {
                     return Err(InvalidInput(format!(
-                        "--fault {f}: channel \"{}\" has no fault \"{name}\" (faults: {})",
+                        "--fault {}: channel \"{}\" has no fault \"{}\" (faults: {})",
+                        f.name,
                         channel.name,
+                        f.name,
                         channel.fault_names.join(", ")
                     )));
                 }
-                Ok((name.to_owned(), mag))
+                Ok((f.name.clone(), f.magnitude))
             })
             .collect::<Result<_, _>>()?
     };
@@ -103,15 +109,17 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
         .iter()
         .map(|r| summarize(r, onset, &columns))
         .collect();
-    print!(
-        "{}",
-        text(&channel.name, &columns, &summaries, onset, samples)
-    );
-    if let Some(path) = &args.json {
-        std::fs::write(
-            path,
-            glrmon_eval::json(&channel.name, &channel.fault_names, &results, onset)?,
-        )?;
+    let json = || glrmon_eval::json(&channel.name, &channel.fault_names, &results, onset);
+    if args.json {
+        println!("{}", json()?);
+    } else {
+        print!(
+            "{}",
+            text(&channel.name, &columns, &summaries, onset, samples)
+        );
+    }
+    if let Some(path) = &args.json_out {
+        std::fs::write(path, json()?)?;
     }
     if let Some(path) = &args.report {
         let detector = if channel.chi2_detector {

@@ -4,6 +4,7 @@
 pub(crate) mod calibrate;
 pub(crate) mod demo;
 pub(crate) mod diagnose;
+pub(crate) mod docs;
 pub(crate) mod evaluate;
 pub(crate) mod identify;
 pub(crate) mod recover;

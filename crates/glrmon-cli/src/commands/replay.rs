@@ -14,6 +14,7 @@ use glrmon_input::{CsvReader, CsvReplayed, McapInput, McapReplayed, ReplayError,
 use glrmon_monitor::Monitor;
 use glrmon_record::{FileHeader, McapFileSink};
 use glrmon_report::ReportSink;
+use glrmon_report::clock::Zone;
 use glrmon_runtime::{ChannelPipeline, Fanout, FnSink, Interest, JsonLinesSink, Output, Sink};
 use glrmon_wire::{DecodeLimits, Record};
 
@@ -32,8 +33,9 @@ pub(crate) struct ReplayArgs {
     channel: Option<String>,
     /// Recorded samples: CSV (one channel) or MCAP (a `glrmon run` or `demo` recording).
     input: PathBuf,
-    /// Output: JSON lines, or an MCAP file when the name ends in .mcap (default: JSON
-    /// lines on standard output).
+    /// Output: JSON lines, or an MCAP file when the name ends in .mcap; `-` is
+    /// standard output. Default: JSON lines on standard output, none when `--report`
+    /// is given.
     #[arg(long)]
     output: Option<PathBuf>,
     /// Also write a self-contained HTML report (plots of the innovation, l_k, onset and
@@ -55,10 +57,15 @@ type AlarmLines = Arc<Mutex<Vec<String>>>;
 /// The output sinks of `args`, and a sink keeping the alarm lines for the summary.
 fn output_sinks(
     args: &ReplayArgs,
+    zone: Zone,
     header: &FileHeader,
 ) -> anyhow::Result<(Vec<Box<dyn Sink>>, AlarmLines)> {
     let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
     match &args.output {
+        Some(p) if p.as_os_str() == "-" => sinks.push(Box::new(JsonLinesSink::new(
+            std::io::BufWriter::with_capacity(1 << 16, std::io::stdout()),
+            args.stat_every,
+        ))),
         Some(p) if is_mcap(p) => {
             let sink = McapFileSink::create(p, header)
                 .with_context(|| format!("creating {}", p.display()))?;
@@ -72,13 +79,16 @@ fn output_sinks(
                 args.stat_every,
             )));
         }
+        // A report is what the user asked for: the terminal is not flooded with
+        // records besides.
+        None if args.report.is_some() => {}
         None => sinks.push(Box::new(JsonLinesSink::new(
             std::io::BufWriter::with_capacity(1 << 16, std::io::stdout()),
             args.stat_every,
         ))),
     }
     if let Some(p) = &args.report {
-        sinks.push(Box::new(ReportSink::new(p, &args.input)));
+        sinks.push(Box::new(ReportSink::new(p, &args.input, zone)));
     }
     let lines = AlarmLines::default();
     let kept = lines.clone();
@@ -117,15 +127,16 @@ fn take_lines(lines: &AlarmLines) -> Vec<String> {
     )
 }
 
-pub(crate) fn run(args: &ReplayArgs) -> anyhow::Result<()> {
+/// Replays `args.input`; wall-clock times in the report are shown in `zone`.
+pub(crate) fn run(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
     if is_mcap(&args.input) {
-        replay_mcap(args)
+        replay_mcap(args, zone)
     } else {
-        replay_csv(args)
+        replay_csv(args, zone)
     }
 }
 
-fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
+fn replay_csv(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
     let Some(config) = &args.config else {
         return Err(InvalidInput(format!(
             "{}: a CSV file needs --config (only MCAP recordings carry their configuration)",
@@ -146,7 +157,7 @@ fn replay_csv(args: &ReplayArgs) -> anyhow::Result<()> {
             args.input.display().to_string(),
         )]),
     };
-    let (sinks, lines) = output_sinks(args, &header)?;
+    let (sinks, lines) = output_sinks(args, zone, &header)?;
     let mut fanout = Fanout::new(sinks, 1);
     let mut pipeline = ChannelPipeline::new(0, monitor, fanout.plan());
     let CsvReplayed { rows, rejected } =
@@ -175,7 +186,7 @@ fn replay_error(e: ReplayError) -> anyhow::Error {
     }
 }
 
-fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
+fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
     let mut input = McapInput::open(&args.input).map_err(input_error)?;
     let cfg = match &args.config {
         Some(path) => load_config(path)?,
@@ -214,7 +225,7 @@ fn replay_mcap(args: &ReplayArgs) -> anyhow::Result<()> {
             args.input.display().to_string(),
         )]),
     };
-    let (sinks, lines) = output_sinks(args, &header)?;
+    let (sinks, lines) = output_sinks(args, zone, &header)?;
     let mut fanout = Fanout::new(sinks, 1);
     let mut channels: Vec<ChannelPipeline> = monitors
         .into_iter()

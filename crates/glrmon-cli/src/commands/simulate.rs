@@ -10,6 +10,7 @@ use glrmon_sim::SimSample;
 use glrmon_spec::Channel;
 
 use crate::common::{InvalidInput, load_config, pick, simulator};
+use crate::flags::FaultArg;
 
 #[derive(Debug, Args)]
 pub(crate) struct SimulateArgs {
@@ -25,15 +26,21 @@ pub(crate) struct SimulateArgs {
     /// Seed of every random draw (noise, random signals).
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Fault(s) to inject, comma-separated names of the channel's dictionary.
-    #[arg(long, value_delimiter = ',')]
-    fault: Vec<String>,
+    /// A fault of the channel's dictionary to inject and its magnitude θ,
+    /// `NAME:MAGNITUDE`; repeat (or separate with commas) to inject several at once.
+    #[arg(
+        long = "fault",
+        value_name = "NAME:MAGNITUDE",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    faults: Vec<FaultArg>,
     /// Onset r of the injected fault(s).
     #[arg(long, default_value_t = 0)]
     onset: u64,
-    /// Magnitude(s) θ, one per fault given in --fault.
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
-    magnitude: Vec<f64>,
+    /// Replaced by `--fault NAME:MAGNITUDE`.
+    #[arg(long, hide = true, allow_hyphen_values = true)]
+    pub(crate) magnitude: Vec<String>,
     /// Exogenous signals p(k) from a CSV file (header `p0,p1,…`, one row per sample)
     /// instead of the config's `simulation.signals` expressions.
     #[arg(long)]
@@ -62,7 +69,7 @@ impl SimulateArgs {
 pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let cfg = load_config(&args.config)?;
     let channel = pick(&cfg, args.channel.as_deref())?;
-    let mut sim = simulator(channel, args.seed, &args.fault, args.onset, &args.magnitude)?;
+    let mut sim = simulator(channel, args.seed, &args.faults, args.onset)?;
     if let Some(path) = &args.signals {
         let rows = read_signals(path, channel.dims.signals, args.samples)?;
         sim = sim.with_signals(Box::new(move |k, out: &mut [f64]| {

@@ -19,22 +19,31 @@ use crate::common::simulator;
 #[derive(Debug, Args)]
 pub(crate) struct ValidateArgs {
     /// Configuration file.
-    file: PathBuf,
+    #[arg(long, required_unless_present = "file")]
+    config: Option<PathBuf>,
+    /// The file as a positional argument, as earlier versions took it (refused with
+    /// a hint: `Command::old_spelling`).
+    #[arg(hide = true)]
+    pub(crate) file: Option<PathBuf>,
 }
 
 pub(crate) fn run(args: &ValidateArgs) -> anyhow::Result<()> {
-    let cfg = match glrmon_spec::load(&args.file) {
+    let file = args
+        .config
+        .as_deref()
+        .ok_or_else(|| InvalidInput("--config FILE is required".into()))?;
+    let cfg = match glrmon_spec::load(file) {
         Ok(c) => c,
         Err(errors) => {
             println!(
                 "{}: invalid ({} error(s))",
-                args.file.display(),
+                file.display(),
                 errors.errors.len()
             );
             for e in &errors.errors {
                 println!("  error: {e}");
             }
-            return Err(InvalidInput(format!("{} is invalid", args.file.display())).into());
+            return Err(InvalidInput(format!("{} is invalid", file.display())).into());
         }
     };
     // The model checks that need the filter run (a diverging Σ_k, a fault signature
@@ -51,19 +60,15 @@ pub(crate) fn run(args: &ValidateArgs) -> anyhow::Result<()> {
         }
     }
     if !errors.is_empty() {
-        println!(
-            "{}: invalid ({} error(s))",
-            args.file.display(),
-            errors.len()
-        );
+        println!("{}: invalid ({} error(s))", file.display(), errors.len());
         for e in &errors {
             println!("  error: {e}");
         }
-        return Err(InvalidInput(format!("{} is invalid", args.file.display())).into());
+        return Err(InvalidInput(format!("{} is invalid", file.display())).into());
     }
     println!(
         "{}: valid, {} channel(s)",
-        args.file.display(),
+        file.display(),
         cfg.channels.len()
     );
     print!("{reports}");
@@ -163,7 +168,7 @@ fn channel_information(
         .detector()
         .map_err(|e| InvalidInput(format!("model: {e}")))?;
     let mut sim =
-        simulator(channel, 1, &[], 0, &[]).map_err(|e| InvalidInput(format!("simulation: {e}")))?;
+        simulator(channel, 1, &[], 0).map_err(|e| InvalidInput(format!("simulation: {e}")))?;
     let count = std::cell::Cell::new(0_u64);
     let samples = std::iter::repeat_with(|| {
         let s = sim.next_sample();
