@@ -3,6 +3,7 @@
 
 use clap::{Parser, Subcommand};
 
+use crate::commands::config;
 use crate::commands::{
     calibrate, demo, diagnose, evaluate, identify, recover, replay, run, simulate, status,
     validate, watch,
@@ -59,6 +60,8 @@ pub(crate) enum Command {
     /// Ask every running instance for its status and print a table (instance, shard,
     /// channels, samples/s, alarms, errors, drops, reconnections, uptime).
     Status(status::StatusArgs),
+    /// The configuration's JSON Schema, and a commented template to start from.
+    Config(config::ConfigArgs),
 }
 
 impl Command {
@@ -73,7 +76,8 @@ impl Command {
             | Command::Calibrate(_)
             | Command::Evaluate(_)
             | Command::Recover(_)
-            | Command::Diagnose(_) => true,
+            | Command::Diagnose(_)
+            | Command::Config(_) => true,
             Command::Simulate(args) => !args.publishes(),
             Command::Demo(_) | Command::Run(_) | Command::Watch(_) | Command::Status(_) => false,
         }

@@ -25,6 +25,7 @@ pub mod expr;
 pub mod keys;
 pub mod limits;
 pub mod schema;
+pub mod template;
 pub mod write;
 
 use std::fmt;
