@@ -31,8 +31,12 @@ pub(crate) fn run(args: &ValidateArgs) -> anyhow::Result<()> {
                 args.file.display(),
                 errors.errors.len()
             );
+            let file = args.file.display().to_string();
             for e in &errors.errors {
-                println!("  error: {e}");
+                match e.location {
+                    Some(_) => println!("  error: {}", e.in_file(&file)),
+                    None => println!("  error: {e}"),
+                }
             }
             return Err(InvalidInput(format!("{} is invalid", args.file.display())).into());
         }
@@ -40,7 +44,15 @@ pub(crate) fn run(args: &ValidateArgs) -> anyhow::Result<()> {
     // The model checks that need the filter run (a diverging Σ_k, a fault signature
     // that is not finite) are configuration errors too: exit 1 with the channel and the
     // field, like the schema's (issue 21, item 9).
-    let mut warnings: Vec<String> = cfg.warnings.iter().map(ToString::to_string).collect();
+    let file = args.file.display().to_string();
+    let mut warnings: Vec<String> = cfg
+        .warnings
+        .iter()
+        .map(|w| match w.location {
+            Some(_) => w.in_file(&file),
+            None => w.to_string(),
+        })
+        .collect();
     let mut reports = String::new();
     let mut errors = Vec::new();
     for (i, channel) in cfg.channels.iter().enumerate() {
