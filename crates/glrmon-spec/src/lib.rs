@@ -25,6 +25,7 @@ pub mod expr;
 pub mod keys;
 pub mod limits;
 mod locate;
+pub mod reference;
 pub mod schema;
 pub mod template;
 pub mod write;

@@ -47,7 +47,7 @@ pub struct ZenohSpec {
     /// Path of a Zenoh JSON5 configuration file, passed to Zenoh untouched (the keys
     /// below are applied on top of it). Default: none (Zenoh's defaults).
     pub config: Option<PathBuf>,
-    /// Session mode: `peer` (default), `client` or `router`.
+    /// Session mode: `peer`, `client` or `router`. Default `peer`.
     #[schemars(extend("enum" = ["peer", "client", "router"]))]
     pub mode: Option<String>,
     /// Endpoints to connect to, e.g. `["tcp/127.0.0.1:7447"]`. Default: none.
@@ -187,7 +187,7 @@ pub struct RecordingSpec {
     /// Chunk size in KiB before compression (1 to 1048576). Default 1024.
     #[serde(default = "default_chunk_kb")]
     pub chunk_kb: u64,
-    /// Chunk compression: `zstd` (default) or `none`.
+    /// Chunk compression: `zstd` or `none`. Default `zstd`.
     #[schemars(extend("enum" = ["zstd", "none"]))]
     #[serde(default = "default_compression")]
     pub compression: String,
