@@ -53,6 +53,10 @@ check-config: ## glrmon validate every file in config/
 	@$(CARGO) build -q -p glrmon-cli
 	@g=$${CARGO_TARGET_DIR:-target}/debug/glrmon; for f in config/*.toml config/examples/*.toml; do $$g validate --config $$f >/dev/null || { $$g validate --config $$f; exit 1; }; echo "valid: $$f"; done
 
+.PHONY: config-doc
+config-doc: ## regenerate docs/CONFIG.md (the configuration reference) from the configuration types
+	$(CARGO) run -q -p glrmon-spec --example config_reference > docs/CONFIG.md
+
 fuzz-build: ## build the fuzz targets (fuzz/: sample, monitor, record, status, config, expression, CSV and MCAP decoders) and run each on its regression inputs (fuzz/regressions/)
 	$(CARGO) build --manifest-path fuzz/Cargo.toml --target-dir target
 	@for t in $(FUZZ_TARGETS); do \

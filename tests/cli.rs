@@ -434,3 +434,60 @@ fn a_report_alone_writes_no_json_lines() {
         400 + 3
     );
 }
+
+/// `glrmon config init` writes a template that `glrmon validate` accepts, refuses to
+/// overwrite without --force, and refuses a channel name validation would refuse;
+/// `glrmon config schema` prints JSON.
+#[test]
+fn config_init_writes_a_valid_template_and_schema_prints_json() {
+    let dir = std::env::temp_dir().join(format!("glrmon-config-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("glrmon.toml");
+    let _ = std::fs::remove_file(&file);
+    let init = |extra: &[&str]| {
+        glrmon()
+            .args(["config", "init", "--channel", "tank", "--output"])
+            .arg(&file)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = init(&[]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&file).unwrap();
+    assert!(text.contains("name = \"tank\""), "{text}");
+    let out = glrmon()
+        .args(["validate", "--config"])
+        .arg(&file)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{stdout}");
+    assert!(stdout.contains("valid, 1 channel(s)"), "{stdout}");
+    assert!(!stdout.contains("warning"), "{stdout}");
+
+    let out = init(&[]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--force"));
+    assert!(init(&["--force"]).status.success());
+
+    let out = glrmon()
+        .args(["config", "init", "--channel", "a b"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+
+    let out = glrmon().args(["config", "schema"]).output().unwrap();
+    assert!(out.status.success());
+    let schema: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(schema["definitions"]["ChannelSpec"].is_object());
+
+    let help = glrmon().args(["config", "--help"]).output().unwrap();
+    let help = String::from_utf8_lossy(&help.stdout);
+    assert!(help.contains("Examples:"), "{help}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -4,6 +4,7 @@
 use clap::{Parser, Subcommand};
 use glrmon_report::clock::Zone;
 
+use crate::commands::config;
 use crate::commands::{
     calibrate, demo, diagnose, docs, evaluate, identify, recover, replay, run, simulate, status,
     validate, watch,
@@ -137,6 +138,8 @@ pub(crate) enum Command {
         after_help = "Examples:\n  glrmon status\n  glrmon status 'plant-*' --json --connect tcp/10.0.0.5:7447"
     )]
     Status(status::StatusArgs),
+    /// The configuration's JSON Schema, and a commented template to start from.
+    Config(config::ConfigArgs),
     /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
     #[command(
         after_help = "Examples:\n  glrmon completions bash > /etc/bash_completion.d/glrmon\n  glrmon completions zsh > \"${fpath[1]}/_glrmon\"\n  glrmon completions fish > ~/.config/fish/completions/glrmon.fish"
@@ -161,7 +164,8 @@ impl Command {
             | Command::Calibrate(_)
             | Command::Evaluate(_)
             | Command::Recover(_)
-            | Command::Diagnose(_) => true,
+            | Command::Diagnose(_)
+            | Command::Config(_) => true,
             Command::Simulate(args) => !args.publishes(),
             Command::Completions(_) | Command::Man(_) => true,
             Command::Demo(_) | Command::Run(_) | Command::Watch(_) | Command::Status(_) => false,

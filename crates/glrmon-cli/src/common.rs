@@ -56,10 +56,13 @@ pub(crate) fn read_ahead_error(
     }
 }
 
-/// Loads a configuration; every problem becomes one line of an [`InvalidInput`].
+/// Loads a configuration; every problem becomes one line of an [`InvalidInput`],
+/// `file:line:column: path: reason` where the line is known.
 pub(crate) fn load_config(path: &Path) -> anyhow::Result<glrmon_spec::Config> {
-    glrmon_spec::load(path)
-        .map_err(|e| InvalidInput(format!("{} is invalid:\n{e}", path.display())).into())
+    glrmon_spec::load(path).map_err(|e| {
+        let file = path.display().to_string();
+        InvalidInput(format!("{file} is invalid:\n{}", e.in_file(&file))).into()
+    })
 }
 
 /// The channel a command works on (`--channel`, or the only one).

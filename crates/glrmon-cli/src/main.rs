@@ -16,6 +16,7 @@ use std::process::ExitCode;
 use clap::{CommandFactory as _, Parser as _};
 
 use crate::cli::{Cli, Command};
+use crate::commands::config;
 use crate::commands::{
     calibrate, demo, diagnose, docs, evaluate, identify, recover, replay, run, simulate, status,
     validate, watch,
@@ -57,6 +58,7 @@ fn main() -> ExitCode {
         Command::Run(args) => run::run(args),
         Command::Watch(args) => watch::run(args),
         Command::Status(args) => status::run(args),
+        Command::Config(args) => config::run(args),
         Command::Completions(args) => docs::completions(args),
         Command::Man(args) => docs::man(args),
     };

@@ -24,7 +24,10 @@ pub mod edit;
 pub mod expr;
 pub mod keys;
 pub mod limits;
+mod locate;
+pub mod reference;
 pub mod schema;
+pub mod template;
 pub mod write;
 
 use std::fmt;
@@ -43,6 +46,7 @@ use nalgebra::{DMatrix, DVector};
 pub use crate::covariance::PSD_TOLERANCE;
 use crate::covariance::Verdict;
 use crate::expr::{Expr, ExprColumn, ExprContext};
+pub use crate::locate::did_you_mean;
 use crate::schema::{
     ChannelSpec, ConfigFile, DaemonSpec, DiagnosisSpec, EntrySpec, FaultSpec, MatrixSpec,
     RecordingSpec, ZenohSpec,
@@ -55,19 +59,63 @@ pub struct Problem {
     pub path: String,
     /// Why.
     pub message: String,
+    /// The line and column of the offending key (or of the deepest enclosing key the
+    /// file has) in the TOML text, when known.
+    pub location: Option<Location>,
+}
+
+/// A position in the configuration's text.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Location {
+    /// Line, from 1.
+    pub line: usize,
+    /// Column in characters, from 1.
+    pub column: usize,
+}
+
+impl Problem {
+    /// The problem as a compiler prints it, `file.toml:12:5: channels[0] "a": …` (the
+    /// file alone when the location is unknown).
+    ///
+    /// ```
+    /// let text = "[[channels]]\nname = \"a\"\n[channels.model]\nF = [[0.9]]\nH = [[1.0, 0.0]]\nQ = 0.01\nR = 0.04\n";
+    /// let errors = glrmon_spec::parse(text).unwrap_err();
+    /// assert!(errors.errors.iter().any(|e| e
+    ///     .in_file("plant.toml")
+    ///     .starts_with("plant.toml:4:1: channels[0] \"a\": model.F is 1×1 but H has 2 columns")));
+    /// ```
+    #[must_use]
+    pub fn in_file(&self, file: &str) -> String {
+        match self.location {
+            Some(l) => format!("{file}:{}:{}: {}", l.line, l.column, Body(self)),
+            None => format!("{file}: {}", Body(self)),
+        }
+    }
+}
+
+/// A problem's path and message, without its location.
+struct Body<'a>(&'a Problem);
+
+impl fmt::Display for Body<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let p = self.0;
+        // "model.F is 3×2 but …" reads as a sentence; other reasons follow a colon.
+        let verb = ["is ", "has ", "names ", "cannot ", "evaluates ", "drives "];
+        if p.path.is_empty() {
+            write!(f, "{}", p.message)
+        } else if verb.iter().any(|v| p.message.starts_with(v)) {
+            write!(f, "{} {}", p.path, p.message)
+        } else {
+            write!(f, "{}: {}", p.path, p.message)
+        }
+    }
 }
 
 impl fmt::Display for Problem {
+    /// The path and the message, `channels[0] "a": …`; [`Problem::in_file`] adds the
+    /// file and the location, `file:12:5: …`.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        // "model.F is 3×2 but …" reads as a sentence; other reasons follow a colon.
-        let verb = ["is ", "has ", "names ", "cannot ", "evaluates ", "drives "];
-        if self.path.is_empty() {
-            write!(f, "{}", self.message)
-        } else if verb.iter().any(|v| self.message.starts_with(v)) {
-            write!(f, "{} {}", self.path, self.message)
-        } else {
-            write!(f, "{}: {}", self.path, self.message)
-        }
+        write!(f, "{}", Body(self))
     }
 }
 
@@ -76,6 +124,16 @@ impl fmt::Display for Problem {
 pub struct SpecErrors {
     /// The errors, in file order.
     pub errors: Vec<Problem>,
+}
+
+impl SpecErrors {
+    /// Every problem as [`Problem::in_file`] prints it, one per line:
+    /// `file.toml:12:5: channels[0] "a": …`.
+    #[must_use]
+    pub fn in_file(&self, file: &str) -> String {
+        let lines: Vec<String> = self.errors.iter().map(|e| e.in_file(file)).collect();
+        lines.join("\n")
+    }
 }
 
 impl fmt::Display for SpecErrors {
@@ -295,7 +353,11 @@ impl Config {
 #[non_exhaustive]
 pub enum ChannelChoiceError {
     /// No channel has that name.
-    #[error("no channel \"{name}\" in the configuration (channels: {})", channels.join(", "))]
+    #[error(
+        "no channel \"{name}\" in the configuration (channels: {}){}",
+        channels.join(", "),
+        channel_suggestion(name, channels)
+    )]
     Unknown {
         /// The name asked for.
         name: String,
@@ -305,6 +367,12 @@ pub enum ChannelChoiceError {
     /// No name was given and the configuration does not have exactly one channel.
     #[error("the configuration has several channels: choose one with --channel")]
     Ambiguous,
+}
+
+/// `; did you mean "x"?` when a channel's name is close to `name`.
+fn channel_suggestion(name: &str, channels: &[String]) -> String {
+    let names: Vec<&str> = channels.iter().map(String::as_str).collect();
+    did_you_mean(name, &names).map_or_else(String::new, |s| format!("; did you mean \"{s}\"?"))
 }
 
 /// How a fault column is computed.
@@ -649,7 +717,7 @@ fn validate_recording(v: &mut Validator, r: &schema::RecordingSpec) {
     if !matches!(r.compression.as_str(), "zstd" | "none") {
         v.error(
             "recording.compression".into(),
-            format!("\"{}\" is not one of zstd, none", r.compression),
+            locate::not_one_of(&r.compression, &["zstd", "none"]),
         );
     }
     if r.queue == 0 {
@@ -694,6 +762,54 @@ fn validate_recording(v: &mut Validator, r: &schema::RecordingSpec) {
     }
 }
 
+/// The JSON Schema (draft 7) of a configuration file, pretty-printed: derived from the
+/// very types the TOML is deserialised into ([`schema::ConfigFile`]), with their doc
+/// comments as descriptions and their defaults. Editors that validate TOML against a
+/// JSON Schema (taplo, VS Code's Even Better TOML) complete and check keys with it;
+/// `glrmon config schema` prints it.
+///
+/// It checks what the types check (keys, types, the keyword lists); the rest (shapes
+/// against n, p and l, expressions, limits) is [`parse`]'s.
+///
+/// ```
+/// let schema: serde_json::Value = serde_json::from_str(&glrmon_spec::json_schema()).unwrap();
+/// assert_eq!(schema["title"], "glrmon configuration");
+/// ```
+#[must_use]
+pub fn json_schema() -> String {
+    let generator = schemars::generate::SchemaSettings::draft07().into_generator();
+    let mut schema = generator.into_root_schema_for::<ConfigFile>();
+    schema.insert("title".into(), "glrmon configuration".into());
+    let mut value = schema.to_value();
+    unwrap_descriptions(&mut value);
+    // Serialising a `serde_json::Value` cannot fail.
+    serde_json::to_string_pretty(&value).unwrap_or_default()
+}
+
+/// Doc comments are wrapped at 88 columns: their line breaks become spaces in the
+/// schema's descriptions (an editor wraps them itself); blank lines stay paragraphs.
+fn unwrap_descriptions(value: &mut serde_json::Value) {
+    match value {
+        serde_json::Value::Object(map) => {
+            for (key, v) in map.iter_mut() {
+                if key == "description"
+                    && let serde_json::Value::String(text) = v
+                {
+                    *text = text
+                        .split("\n\n")
+                        .map(|p| p.split('\n').collect::<Vec<_>>().join(" "))
+                        .collect::<Vec<_>>()
+                        .join("\n\n");
+                } else {
+                    unwrap_descriptions(v);
+                }
+            }
+        }
+        serde_json::Value::Array(items) => items.iter_mut().for_each(unwrap_descriptions),
+        _ => {}
+    }
+}
+
 /// Reads and validates a configuration file.
 ///
 /// # Errors
@@ -703,6 +819,7 @@ pub fn load(path: &Path) -> Result<Config, SpecErrors> {
         errors: vec![Problem {
             path: path.display().to_string(),
             message: format!("cannot read: {e}"),
+            location: None,
         }],
     })?;
     parse(&text)
@@ -713,11 +830,26 @@ pub fn load(path: &Path) -> Result<Config, SpecErrors> {
 /// # Errors
 /// [`SpecErrors`] with every problem found.
 pub fn parse(text: &str) -> Result<Config, SpecErrors> {
-    let file: ConfigFile = toml::from_str(text).map_err(|e| SpecErrors {
-        errors: vec![Problem {
-            path: String::new(),
-            message: e.to_string().trim_end().to_owned(),
-        }],
+    let file: ConfigFile = toml::from_str(text).map_err(|e| {
+        let spans = locate::Spans::new(text);
+        // A syntax error keeps toml's rendering (its line, and the line quoted with a
+        // caret); an error of the schema (an unknown key, a wrong type) is located
+        // and, for an unknown key, gets the closest known one.
+        let problem = match e.span() {
+            Some(span) if spans.parsed() => Problem {
+                path: String::new(),
+                message: locate::with_field_suggestion(e.message().trim_end()),
+                location: Some(spans.location(span.start)),
+            },
+            _ => Problem {
+                path: String::new(),
+                message: e.to_string().trim_end().to_owned(),
+                location: None,
+            },
+        };
+        SpecErrors {
+            errors: vec![problem],
+        }
     })?;
     let mut v = Validator::default();
     if file.channels.is_empty() {
@@ -731,7 +863,7 @@ pub fn parse(text: &str) -> Result<Config, SpecErrors> {
     {
         v.error(
             "zenoh.mode".into(),
-            format!("\"{mode}\" is not one of peer, client, router"),
+            locate::not_one_of(mode, &["peer", "client", "router"]),
         );
     }
     let d = &file.daemon;
@@ -818,6 +950,13 @@ pub fn parse(text: &str) -> Result<Config, SpecErrors> {
             channels.push(c);
         }
     }
+    if !(v.errors.is_empty() && v.warnings.is_empty()) {
+        let spans = locate::Spans::new(text);
+        let names: Vec<&str> = file.channels.iter().map(|c| c.name.as_str()).collect();
+        for p in v.errors.iter_mut().chain(v.warnings.iter_mut()) {
+            p.location = spans.locate(&p.path, &names);
+        }
+    }
     if v.errors.is_empty() {
         Ok(Config {
             zenoh: file.zenoh,
@@ -832,6 +971,14 @@ pub fn parse(text: &str) -> Result<Config, SpecErrors> {
     }
 }
 
+/// `message`, with `; did you mean "x"?` when a candidate is close to `word`.
+fn suggest(mut message: String, word: &str, candidates: &[&str]) -> String {
+    if let Some(s) = did_you_mean(word, candidates) {
+        message.push_str(&format!("; did you mean \"{s}\"?"));
+    }
+    message
+}
+
 #[derive(Default)]
 struct Validator {
     errors: Vec<Problem>,
@@ -844,11 +991,19 @@ fn join(prefix: &str, field: &str) -> String {
 
 impl Validator {
     fn error(&mut self, path: String, message: String) {
-        self.errors.push(Problem { path, message });
+        self.errors.push(Problem {
+            path,
+            message,
+            location: None,
+        });
     }
 
     fn warn(&mut self, path: String, message: String) {
-        self.warnings.push(Problem { path, message });
+        self.warnings.push(Problem {
+            path,
+            message,
+            location: None,
+        });
     }
 
     /// A matrix as an [`LpvMatrix`]; `square` gives n for a scalar.
@@ -1405,7 +1560,7 @@ impl Validator {
             Some(other) => {
                 self.error(
                     gpath("detector"),
-                    format!("\"{other}\" is not one of glr, chi2"),
+                    locate::not_one_of(other, &["glr", "chi2"]),
                 );
                 false
             }
@@ -1512,7 +1667,7 @@ impl Validator {
                 Some(other) => {
                     self.error(
                         gpath("threshold_mode"),
-                        format!("\"{other}\" is not one of bonferroni, chi2"),
+                        locate::not_one_of(other, &["bonferroni", "chi2"]),
                     );
                     false
                 }
@@ -1537,10 +1692,13 @@ impl Validator {
             for name in &g.faults {
                 match faults.iter().position(|f| &f.name == name) {
                     Some(i) => idx.push(i),
-                    None => self.error(
-                        gpath(&format!("groups[{gi}]")),
-                        format!("unknown fault \"{name}\""),
-                    ),
+                    None => {
+                        let names: Vec<&str> = faults.iter().map(|f| f.name.as_str()).collect();
+                        self.error(
+                            gpath(&format!("groups[{gi}].faults")),
+                            suggest(format!("unknown fault \"{name}\""), name, &names),
+                        );
+                    }
                 }
             }
             if idx.is_empty() {
@@ -1558,7 +1716,11 @@ impl Validator {
                 if !tests.contains(&name.as_str()) {
                     self.error(
                         gpath(&format!("calibrated.isolation.{name}")),
-                        format!("no isolation test \"{name}\" (tests: {})", tests.join(", ")),
+                        suggest(
+                            format!("no isolation test \"{name}\" (tests: {})", tests.join(", ")),
+                            name,
+                            &tests,
+                        ),
                     );
                 } else if !(t.is_finite() && *t > 0.0) {
                     self.error(
@@ -1757,7 +1919,7 @@ impl Validator {
             Some(other) => {
                 self.error(
                     dpath("residual"),
-                    format!("\"{other}\" is not one of kalman, kitanidis"),
+                    locate::not_one_of(other, &["kalman", "kitanidis"]),
                 );
                 ResidualKind::Kalman
             }
@@ -2234,7 +2396,7 @@ impl Validator {
             other => {
                 self.error(
                     format!("{path}.onset"),
-                    format!("\"{other}\" is not one of step, impulse, ramp, known"),
+                    locate::not_one_of(other, &["step", "impulse", "ramp", "known"]),
                 );
                 return None;
             }
@@ -2344,7 +2506,18 @@ impl Validator {
             other => {
                 self.error(
                     format!("{path}.kind"),
-                    format!("\"{other}\" is not one of custom, actuator_bias, actuator_gain, sensor_bias, sensor_drift, all_sensors, all_actuators"),
+                    locate::not_one_of(
+                        other,
+                        &[
+                            "custom",
+                            "actuator_bias",
+                            "actuator_gain",
+                            "sensor_bias",
+                            "sensor_drift",
+                            "all_sensors",
+                            "all_actuators",
+                        ],
+                    ),
                 );
                 return None;
             }

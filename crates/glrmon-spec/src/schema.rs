@@ -3,84 +3,110 @@
 //! Matrix entries are written row by row (`H = [[1.0, 0.0]]` is 1×2). A matrix may be a
 //! scalar (times the identity; square matrices only), a dense array of rows, or an LPV
 //! table `{ base = [[..]], p0 = [[..]], p3 = [[..]] }` meaning M_0 + p0·M_p0 + p3·M_p3.
+//!
+//! Every type here also describes itself as a JSON Schema ([`schemars::JsonSchema`]):
+//! [`crate::json_schema`] derives the schema editors validate a configuration against
+//! from these very types, and their doc comments become its descriptions (and the key
+//! tables of docs/CONFIG.md), so each field's comment says what it is, its unit or
+//! shape, and its default.
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
+use schemars::{JsonSchema, Schema, SchemaGenerator, json_schema};
 use serde::Deserialize;
 
-/// A whole configuration file: one deployment.
-#[derive(Debug, Clone, Deserialize)]
+/// A whole glrmon configuration file: one deployment (Zenoh session, recording,
+/// daemon settings and the monitored channels).
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ConfigFile {
-    /// Zenoh session settings (used by `glrmon run`).
+    /// `[zenoh]`: Zenoh session settings, used by `glrmon run` and the other commands
+    /// that talk to Zenoh. Optional: every key has a default.
     #[serde(default)]
     pub zenoh: ZenohSpec,
-    /// Recording settings (used by `glrmon run`).
+    /// `[recording]`: MCAP recording of the daemon's inputs and results, used by
+    /// `glrmon run`. Optional: recording is off by default.
     #[serde(default)]
     pub recording: RecordingSpec,
-    /// Daemon settings (used by `glrmon run`).
+    /// `[daemon]`: worker threads, queues, limits and endpoints of `glrmon run`.
+    /// Optional: every key has a default.
     #[serde(default)]
     pub daemon: DaemonSpec,
-    /// The monitored channels.
+    /// `[[channels]]`: the monitored channels, one table each; at least one is required
+    /// (an empty list is an error found after parsing).
     #[serde(default)]
     pub channels: Vec<ChannelSpec>,
 }
 
-/// Zenoh session settings.
-#[derive(Debug, Clone, Default, Deserialize)]
+/// `[zenoh]`: Zenoh session settings.
+#[derive(Debug, Clone, Default, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ZenohSpec {
-    /// A Zenoh JSON5 configuration file, passed through untouched.
+    /// Path of a Zenoh JSON5 configuration file, passed to Zenoh untouched (the keys
+    /// below are applied on top of it). Default: none (Zenoh's defaults).
     pub config: Option<PathBuf>,
-    /// `peer` (default) or `client`.
+    /// Session mode: `peer`, `client` or `router`. Default `peer`.
+    #[schemars(extend("enum" = ["peer", "client", "router"]))]
     pub mode: Option<String>,
-    /// Endpoints to connect to, e.g. `tcp/127.0.0.1:7447`.
+    /// Endpoints to connect to, e.g. `["tcp/127.0.0.1:7447"]`. Default: none.
     #[serde(default)]
     pub connect: Vec<String>,
-    /// Endpoints to listen on.
+    /// Endpoints to listen on, e.g. `["tcp/0.0.0.0:7447"]`. Default: none.
     #[serde(default)]
     pub listen: Vec<String>,
-    /// Multicast scouting (default off).
+    /// Multicast scouting for peers on the local network (boolean). Default: off.
     pub multicast_scouting: Option<bool>,
 }
 
-/// Daemon settings: workers, queues, output decimation, shutdown.
-#[derive(Debug, Clone, Deserialize)]
+/// `[daemon]`: workers, queues, output decimation, shutdown, instance name, sharding
+/// and metrics of `glrmon run`.
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DaemonSpec {
-    /// Worker threads over which channels are sharded (default: available cores).
+    /// Worker threads over which the channels are spread (1 to 1024). Default: the
+    /// number of available cores.
     pub workers: Option<usize>,
-    /// Capacity of each worker's queue in payloads (default 4096); a full queue drops.
+    /// Capacity of each worker's queue, in payloads (1 to 4194304). A full queue drops
+    /// the payload (counted). Default 4096.
     #[serde(default = "default_worker_queue")]
     pub worker_queue: usize,
-    /// Capacity of each worker's queue in MiB of payloads (default 64): memory is
-    /// bounded in bytes as well as in payloads; a payload beyond it is dropped.
+    /// Capacity of each worker's queue in MiB of payloads: memory is bounded in bytes as
+    /// well as in payloads; a payload beyond it is dropped. At least
+    /// `max_payload_bytes`. Default 64.
     #[serde(default = "default_worker_queue_mb")]
     pub worker_queue_mb: f64,
-    /// Capacity of all worker queues together in MiB (default 256).
+    /// Capacity of all worker queues together, in MiB. At least `max_payload_bytes`.
+    /// Default 256.
     #[serde(default = "default_intake_mb")]
     pub intake_mb: f64,
-    /// Capacity of the output queue in records (default 16384).
+    /// Capacity of the output (publication) queue, in records (1 to 4194304).
+    /// Default 16384.
     #[serde(default = "default_output_queue")]
     pub output_queue: usize,
-    /// Publish one `stat` record in this many per channel (default 10; 0: none).
+    /// Publish one `stat` record (the per-sample statistics) in this many samples per
+    /// channel; 0 publishes none. Default 10.
     #[serde(default = "default_stat_every")]
     pub stat_every: u64,
-    /// Largest accepted payload in bytes (default 1 MiB).
+    /// Largest accepted payload, in bytes (1 to 67108864); a larger one is refused as
+    /// `too_large`. Default 1048576 (1 MiB).
     #[serde(default = "default_max_payload")]
     pub max_payload_bytes: usize,
-    /// Bound on the shutdown drain in seconds (default 5).
+    /// Longest drain of the queues at shutdown, in seconds (finite, positive).
+    /// Default 5.
     #[serde(default = "default_shutdown")]
     pub shutdown_timeout: f64,
-    /// Instance name for the status queryable and liveliness token (default: host-pid).
+    /// Instance name used by the status queryable and the liveliness token (no `/`,
+    /// `*`, `$`, `?`, `#`, `@` or whitespace). Default: `<host>-<pid>`.
     pub instance: Option<String>,
     /// `"i/N"`: this instance monitors only the channels whose name hashes to shard i
     /// of N (0 ≤ i < N; a stable FNV-1a hash), so that N instances started from one
-    /// configuration split its channels between them (docs/OPERATIONS.md).
+    /// configuration split its channels between them (docs/OPERATIONS.md). Default:
+    /// every channel.
     pub shard: Option<String>,
-    /// Local address (`host:port`) of the Prometheus `/metrics`, `/healthz` and
-    /// `/readyz` endpoints; none by default.
+    /// Local address (`host:port`, e.g. `127.0.0.1:9464`) of the Prometheus `/metrics`,
+    /// `/healthz` and `/readyz` endpoints. Default: none (no HTTP endpoint).
     pub metrics: Option<String>,
 }
 
@@ -124,45 +150,52 @@ fn default_shutdown() -> f64 {
     5.0
 }
 
-/// Recording settings (`[recording]`): MCAP files of inputs and results.
-#[derive(Debug, Clone, Deserialize)]
+/// `[recording]`: MCAP files of the daemon's inputs and results.
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RecordingSpec {
-    /// Whether `glrmon run` records inputs and results.
+    /// Whether `glrmon run` records inputs and results. Default false.
     #[serde(default)]
     pub enabled: bool,
-    /// Directory of the recordings (default `recordings`).
+    /// Directory of the recordings, created if missing. Default `recordings` (relative
+    /// to the working directory).
     pub directory: Option<PathBuf>,
-    /// File name prefix (default `glrmon`): `<prefix>-<UTC time>-<n>.mcap`.
+    /// File name prefix: files are named `<prefix>-<UTC time>-<n>.mcap` (no `/` or
+    /// backslash). Default `glrmon`.
     #[serde(default = "default_prefix")]
     pub prefix: String,
-    /// Record every input sample (default true; needed by `glrmon replay`).
+    /// Record every input sample (needed by `glrmon replay`). Default true.
     #[serde(default = "default_true")]
     pub inputs: bool,
-    /// Record one `stat` record in this many per channel (default 1; 0: none).
+    /// Record one `stat` record in this many samples per channel; 0 records none.
+    /// Default 1.
     #[serde(default = "default_one")]
     pub stat_every: u64,
-    /// Start a new file at this size in MB (default 1024).
+    /// Start a new file at this size, in MB (finite, positive). Default 1024.
     #[serde(default = "default_max_file_mb")]
     pub max_file_mb: f64,
-    /// Start a new file after this many seconds (default 3600).
+    /// Start a new file after this many seconds (finite, positive). Default 3600.
     #[serde(default = "default_max_file_seconds")]
     pub max_file_seconds: f64,
-    /// Delete the oldest recordings while the total exceeds this many MB (default: no cap).
+    /// Delete the oldest recordings while their total exceeds this many MB (at least
+    /// `max_file_mb`). Default: no cap.
     pub max_total_mb: Option<f64>,
-    /// Close a chunk and flush at least this often, in seconds (default 1).
+    /// Close a chunk and flush at least this often, in seconds (positive, at most 60).
+    /// Default 1.
     #[serde(default = "default_flush_seconds")]
     pub flush_seconds: f64,
-    /// Chunk size in KiB before compression (default 1024).
+    /// Chunk size in KiB before compression (1 to 1048576). Default 1024.
     #[serde(default = "default_chunk_kb")]
     pub chunk_kb: u64,
-    /// `zstd` (default) or `none`.
+    /// Chunk compression: `zstd` or `none`. Default `zstd`.
+    #[schemars(extend("enum" = ["zstd", "none"]))]
     #[serde(default = "default_compression")]
     pub compression: String,
-    /// Messages queued for the file thread (default 65536).
+    /// Messages queued for the file-writing thread (1 to 4194304). Default 65536.
     #[serde(default = "default_recording_queue")]
     pub queue: usize,
-    /// Pre/post-fault capture: inputs kept only around alarms.
+    /// `[recording.capture]`: pre/post-fault capture, inputs recorded only around
+    /// alarms. Default: none (every input is recorded when `inputs` is true).
     pub capture: Option<CaptureSpec>,
 }
 
@@ -188,12 +221,13 @@ impl Default for RecordingSpec {
 
 /// `[recording.capture]`: keep the last `before_seconds` of inputs in memory and write
 /// them, and `after_seconds` more, when an alarm fires.
-#[derive(Debug, Clone, Copy, Deserialize)]
+#[derive(Debug, Clone, Copy, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CaptureSpec {
-    /// Seconds of inputs kept before an alarm.
+    /// Seconds of inputs kept in memory and written before an alarm (0 to 3600).
+    /// Required.
     pub before_seconds: f64,
-    /// Seconds of inputs written after an alarm.
+    /// Seconds of inputs written after an alarm (0 to 3600). Required.
     pub after_seconds: f64,
 }
 
@@ -225,82 +259,102 @@ fn default_recording_queue() -> usize {
     65536
 }
 
-/// One channel of the plant.
-#[derive(Debug, Clone, Deserialize)]
+/// `[[channels]]`: one monitored channel of the plant: a state-space model, its fault
+/// dictionary and the GLR settings.
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ChannelSpec {
-    /// Unique name; results are published under `glrmon/<name>/…`.
+    /// Unique channel name (no `/`, `*`, `$`, `?`, `#`, `@` or whitespace); results are
+    /// published under `glrmon/<name>/…`. Required.
     pub name: String,
-    /// Input key expression (default `plant/<name>`).
+    /// Zenoh key expression the channel's samples arrive on (outside `glrmon/**`).
+    /// Default `plant/<name>`.
     pub key: Option<String>,
-    /// Sample period in seconds, informative.
+    /// Sample period in seconds; informative only (reports). Default: none.
     pub period: Option<f64>,
-    /// Number of exogenous signals p0…p{q−1} per sample (default: the highest index
-    /// used + 1).
+    /// Number q of exogenous (scheduling) signals p0…p{q−1} per sample (at most 1024).
+    /// Default: the highest index used in the model and expressions + 1.
     pub signals: Option<usize>,
-    /// The state-space model.
+    /// `[channels.model]`: the state-space model (Zhang & Basseville 2014, eq. (1)).
+    /// Required.
     pub model: ModelSpec,
-    /// Natural units: the operating point and scale that turn the plant's raw U, Y
-    /// into the model's (`[channels.scaling]`).
+    /// `[channels.scaling]`: natural units, the operating point and scale that turn
+    /// the plant's raw U, Y into the model's. Default: none (the model is in raw
+    /// units).
     pub scaling: Option<ScalingSpec>,
-    /// The CSV column names of the inputs, outputs and signals (`[channels.columns]`).
+    /// `[channels.columns]`: the CSV column names of the inputs, outputs and signals.
+    /// Default: the numbered names `u0`, `y0`, `p0`, …
     pub columns: Option<ColumnsSpec>,
-    /// The fault dictionary.
+    /// `[[channels.faults]]`: the fault dictionary, one table per fault (at most 128
+    /// after the `all_sensors`/`all_actuators` shortcuts). Default: none (a channel
+    /// without faults is refused after parsing).
     #[serde(default)]
     pub faults: Vec<FaultSpec>,
-    /// GLR and alarm settings.
+    /// `[channels.glr]`: GLR window, threshold, alarm and isolation settings.
+    /// Optional: every key has a default.
     #[serde(default)]
     pub glr: GlrSpec,
-    /// How `glrmon simulate` drives this channel.
+    /// `[channels.simulation]`: how `glrmon simulate` (and `glrmon validate`'s
+    /// isolability report) drives this channel. Default: all inputs and signals 0.
     #[serde(default)]
     pub simulation: SimulationSpec,
-    /// Sparse fault diagnosis (Zhang 2021) at alarms and in `glrmon diagnose`.
+    /// `[channels.diagnosis]`: sparse fault diagnosis (Zhang 2021) at alarms and in
+    /// `glrmon diagnose`. Default: off at alarms.
     #[serde(default)]
     pub diagnosis: DiagnosisSpec,
-    /// Filter-consistency monitor (`[channels.consistency]`).
+    /// `[channels.consistency]`: the filter-consistency monitor. Default: on, blocks
+    /// of 500 samples.
     #[serde(default)]
     pub consistency: ConsistencySpec,
 }
 
-/// Model matrices (letters of Zhang & Basseville 2014, eq. (1)).
-#[derive(Debug, Clone, Deserialize)]
+/// `[channels.model]`: the model matrices, letters of Zhang & Basseville 2014,
+/// eq. (1): X_{k+1} = F X_k + G U_k + W_k + Ψ_k(r)·θ,
+/// Y_k = H X_k + J U_k + V_k + Φ_k(r)·θ, with cov(W) = Q, cov(V) = R. Each matrix is a
+/// scalar (times I, square matrices only), rows, or an LPV table.
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ModelSpec {
-    /// F (n×n).
+    /// F: state transition, n×n (n states, at most 128). Required.
     #[serde(rename = "F")]
     pub f: MatrixSpec,
-    /// G (n×l); absent means no known inputs enter the state.
+    /// G: known-input matrix, n×l (l inputs, at most 64). Default: absent, no known
+    /// input enters the state.
     #[serde(rename = "G")]
     pub g: Option<MatrixSpec>,
-    /// H (p×n).
+    /// H: output matrix, p×n (p outputs, at most 64). Required.
     #[serde(rename = "H")]
     pub h: MatrixSpec,
-    /// J (p×l); absent means zero.
+    /// J: feed-through of the known inputs to the outputs, p×l. Default: zero.
     #[serde(rename = "J")]
     pub j: Option<MatrixSpec>,
-    /// Q (n×n), symmetric positive semi-definite. A constant Q whose smallest eigenvalue
-    /// is negative by at most [`PSD_TOLERANCE`](crate::PSD_TOLERANCE) × its spectral
-    /// radius (a rounded printout) is replaced by the nearest PSD matrix, with a warning.
+    /// Q: process-noise covariance cov(W_k), n×n, symmetric positive semi-definite; a
+    /// scalar q means q·I. Required. A constant Q whose smallest eigenvalue is negative
+    /// by at most `PSD_TOLERANCE` (1e-9) × its spectral radius (a rounded printout) is
+    /// replaced by the nearest PSD matrix, with a warning.
     #[serde(rename = "Q")]
     pub q: MatrixSpec,
-    /// R (p×p), symmetric positive definite. A constant R within
-    /// [`PSD_TOLERANCE`](crate::PSD_TOLERANCE) of that has its small eigenvalues raised
-    /// to `PSD_TOLERANCE` × λ_max, with a warning.
+    /// R: measurement-noise covariance cov(V_k), p×p, symmetric positive definite; a
+    /// scalar r means r·I. Required. A constant R within `PSD_TOLERANCE` of that has its
+    /// small eigenvalues raised to `PSD_TOLERANCE` × λ_max, with a warning.
     #[serde(rename = "R")]
     pub r: MatrixSpec,
-    /// Unknown-input matrix E (n×q, q < p): the detector runs on the innovation
-    /// decoupled from E·d_k, and sparse diagnosis on the Kitanidis residual.
+    /// E: unknown-input matrix, n×q with q < p (X_{k+1} gets + E d_k, d_k unknown): the
+    /// detector runs on the innovation decoupled from E d_k (p − q directions), and
+    /// sparse diagnosis on the Kitanidis residual (Zhang 2021 §III-B); H E must have
+    /// full column rank. Constant. Default: none.
     #[serde(rename = "E")]
     pub e: Option<MatrixSpec>,
-    /// Cross-covariance S = E(W_kV_kᵀ) (n×p, constant) of correlated process and
+    /// S: cross-covariance E(W_k V_kᵀ), n×p, constant, of correlated process and
     /// measurement noises: an identified innovation model x⁺ = Ax + Bu + Ke,
     /// y = Cx + Du + e is written Q = K·Re·Kᵀ, R = Re, S = K·Re, and runs at its own
-    /// order with the exact predictor.
+    /// order with the exact predictor. Not with E. Default: none (uncorrelated).
     #[serde(rename = "S")]
     pub s: Option<MatrixSpec>,
-    /// X̂_0 (default 0).
+    /// X̂_0: initial state estimate, n numbers. Default: zeros.
     pub x0: Option<Vec<f64>>,
-    /// P_0 (default I), symmetric positive definite (rounded matrices as for R).
+    /// P_0: initial state covariance, n×n, symmetric positive definite (rounded
+    /// matrices as for R). Default: the identity I.
     #[serde(rename = "P0")]
     pub p0: Option<MatrixSpec>,
 }
@@ -308,30 +362,33 @@ pub struct ModelSpec {
 /// `[channels.scaling]`: model value = (raw value − offset) / scale, per input and
 /// output, applied to every sample on intake (and inverted for simulated samples). An
 /// absent list means offset 0 or scale 1 for each signal of that kind.
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ScalingSpec {
-    /// Operating point of each input u0…u{l−1}.
+    /// Operating point of each input u0…u{l−1}, in raw units (l numbers). Default: 0.
     pub u_offset: Option<Vec<f64>>,
-    /// Scale of each input (finite, positive).
+    /// Scale of each input, in raw units per model unit (l finite, positive numbers).
+    /// Default: 1.
     pub u_scale: Option<Vec<f64>>,
-    /// Operating point of each output y0…y{p−1}.
+    /// Operating point of each output y0…y{p−1}, in raw units (p numbers). Default: 0.
     pub y_offset: Option<Vec<f64>>,
-    /// Scale of each output (finite, positive).
+    /// Scale of each output, in raw units per model unit (p finite, positive numbers).
+    /// Default: 1.
     pub y_scale: Option<Vec<f64>>,
 }
 
 /// `[channels.columns]`: the CSV header names read into u0…, y0…, p0… (in that
 /// order); other columns of such a file are skipped. An absent list keeps the numbered
 /// names (`u0`, `u1`, …).
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ColumnsSpec {
-    /// Names of the inputs' columns.
+    /// CSV column names of the inputs u0…u{l−1} (l names). Default `u0`, `u1`, …
     pub u: Option<Vec<String>>,
-    /// Names of the outputs' columns.
+    /// CSV column names of the outputs y0…y{p−1} (p names). Default `y0`, `y1`, …
     pub y: Option<Vec<String>>,
-    /// Names of the scheduling signals' columns.
+    /// CSV column names of the scheduling signals p0…p{q−1} (q names). Default `p0`,
+    /// `p1`, …
     pub p: Option<Vec<String>>,
 }
 
@@ -347,6 +404,46 @@ pub enum MatrixSpec {
     Lpv(BTreeMap<String, Vec<Vec<f64>>>),
 }
 
+/// The rows of a dense matrix, as a schema: an array of arrays of numbers.
+fn rows_schema(description: &str) -> Schema {
+    json_schema!({
+        "description": description,
+        "type": "array",
+        "minItems": 1,
+        "items": { "type": "array", "minItems": 1, "items": { "type": "number" } }
+    })
+}
+
+/// By hand: the derive would call the LPV table a map of any keys, where only `base`
+/// and `p<i>` are accepted, and `base` is required.
+impl JsonSchema for MatrixSpec {
+    fn schema_name() -> Cow<'static, str> {
+        "Matrix".into()
+    }
+
+    fn json_schema(_: &mut SchemaGenerator) -> Schema {
+        let rows = rows_schema("Dense rows: `[[a, b], [c, d]]` is 2×2, written row by row.");
+        let lpv_rows = rows_schema("Rows of one term, the same shape as `base`.");
+        json_schema!({
+            "description": "A matrix: a scalar s (s·I, square matrices only), dense rows \
+                (`[[1.0, 0.0], [0.0, 1.0]]`, row by row), or an LPV table \
+                `{ base = rows, p0 = rows, … }` meaning M_0 + p0(k)·M_p0 + … \
+                (Zhang & Basseville 2014, eq. (53)).",
+            "anyOf": [
+                { "type": "number", "description": "s·I (square matrices only)." },
+                rows,
+                {
+                    "type": "object",
+                    "description": "LPV table: `base` plus one term per scheduling signal p<i>.",
+                    "required": ["base"],
+                    "propertyNames": { "pattern": "^(base|p[0-9]+)$" },
+                    "additionalProperties": lpv_rows
+                }
+            ]
+        })
+    }
+}
+
 /// A fault column entry: a number or an expression over the sample's signals.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(untagged)]
@@ -357,43 +454,79 @@ pub enum EntrySpec {
     Expr(String),
 }
 
-/// A fault of the dictionary.
-#[derive(Debug, Clone, Deserialize)]
+/// By hand: the derive would say "a number or any string", where the string is an
+/// expression of the grammar of [`crate::expr`].
+impl JsonSchema for EntrySpec {
+    fn schema_name() -> Cow<'static, str> {
+        "Entry".into()
+    }
+
+    fn json_schema(_: &mut SchemaGenerator) -> Schema {
+        json_schema!({
+            "description": "A column entry: a number, or an expression (a string) of the known \
+                inputs `u<i>`, the scheduling signals `p<i>`, their past values `u0[-1]`, \
+                numbers, `+ - * / ^`, the functions sin cos tan exp log sqrt abs min max \
+                pow and the constants pi, e; evaluated at every sample.",
+            "anyOf": [
+                { "type": "number" },
+                { "type": "string", "minLength": 1, "examples": ["-0.5*u0", "p3", "0.2*u0[-1] - p0"] }
+            ]
+        })
+    }
+}
+
+/// `[[channels.faults]]`: one fault of the dictionary, an additive change θ·(Ψ, Φ)
+/// from an unknown onset r (Zhang & Basseville 2014, eq. (1)). Either a `kind`
+/// shortcut with `input`/`output`, or explicit `psi`/`phi` columns.
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FaultSpec {
-    /// Unique name within the channel (required, except for the `all_sensors` and
-    /// `all_actuators` shortcuts, where it is an optional prefix).
+    /// Unique name within the channel, reported in alarms. Required, except for the
+    /// `all_sensors` and `all_actuators` shortcuts, where it is an optional prefix
+    /// (faults `<name>0`, `<name>1`, …).
     #[serde(default)]
     pub name: String,
-    /// `custom` (default when `psi`/`phi` are given), `actuator_bias`, `actuator_gain`,
-    /// `sensor_bias` or `sensor_drift`; or a shortcut for one fault per signal:
-    /// `all_sensors` (a `sensor_bias` per output, named `y0_bias`, …) and
+    /// Fault kind: `custom` (the default; give `psi` and/or `phi`), `actuator_bias`
+    /// (Ψ = G e_i, Φ = J e_i; needs `input`), `actuator_gain` (loss of effectiveness,
+    /// Ψ = −G e_i u_i; needs `input`), `sensor_bias` (Φ = e_j; needs `output`) or
+    /// `sensor_drift` (a sensor bias with a ramp onset); or a shortcut for one fault
+    /// per signal: `all_sensors` (a `sensor_bias` per output, named `y0_bias`, …) and
     /// `all_actuators` (an `actuator_bias` per input, `u0_bias`, …).
+    #[schemars(extend("enum" = ["custom", "actuator_bias", "actuator_gain", "sensor_bias", "sensor_drift", "all_sensors", "all_actuators"]))]
     pub kind: Option<String>,
-    /// Onset profile: `step` (default), `impulse`, `ramp` (default of `sensor_drift`) or
-    /// `known`.
+    /// Onset profile of the fault from its onset r (Zhang & Basseville 2014, eqs. (4),
+    /// (51)): `step` (default; Ψ̃·1{k ≥ r}), `impulse` (a jump entering X_r), `ramp`
+    /// ((k − r + 1)·Ψ̃; the default and only choice of `sensor_drift`) or `known` (the
+    /// columns are the whole profile: no onset search).
+    #[schemars(extend("enum" = ["step", "impulse", "ramp", "known"]))]
     pub onset: Option<String>,
-    /// Input index of actuator faults.
+    /// Index i of the input u_i of an actuator fault (0-based, below l).
     pub input: Option<usize>,
-    /// Output index of sensor faults.
+    /// Index j of the output y_j of a sensor fault (0-based, below p).
     pub output: Option<usize>,
-    /// Ψ̃: state column (n entries).
+    /// Ψ̃: the state fault signature column (Zhang & Basseville 2014), n entries, each
+    /// a number or an expression of `u<i>`, `p<i>`, lags such as `"u0[-1]"`. Default:
+    /// zero. In model units.
     pub psi: Option<Vec<EntrySpec>>,
-    /// Φ̃: output column (p entries).
+    /// Φ̃: the output fault signature column (Zhang & Basseville 2014), p entries, each
+    /// a number or an expression. Default: zero. In model units.
     pub phi: Option<Vec<EntrySpec>>,
 }
 
-/// GLR window, threshold and alarm settings.
-#[derive(Debug, Clone, Deserialize)]
+/// `[channels.glr]`: GLR window, threshold, alarm and isolation settings (Zhang &
+/// Basseville 2014, §4-5).
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GlrSpec {
-    /// w (default 100).
+    /// Window w of candidate onsets r ∈ {k − w + 1, …, k − s} (eq. (37)), in samples
+    /// (at most 100000, lowered by the channel's memory budget). Default 100.
     #[serde(default = "default_window")]
     pub window: usize,
-    /// s (default 1).
+    /// Minimum lag s of the window (eq. (37)), in samples, below w. Default 1.
     #[serde(default = "default_min_lag")]
     pub min_lag: usize,
-    /// Explicit threshold λ on l_k.
+    /// Explicit threshold λ on the GLR statistic l_k (eq. (35)). Default: none (set
+    /// from `false_alarm`).
     pub threshold: Option<f64>,
     /// Target false-alarm probability per sample (default 10⁻⁴ when no threshold is
     /// given): λ is the χ²(m) upper quantile at α/(w − s) (Bonferroni over the window),
@@ -402,29 +535,35 @@ pub struct GlrSpec {
     /// How `false_alarm` becomes λ: `bonferroni` (default; a conservative bound) or
     /// `chi2` (the per-onset quantile; optimistic: the maximum over the window exceeds
     /// it far more often than α).
+    #[schemars(extend("enum" = ["bonferroni", "chi2"]))]
     pub threshold_mode: Option<String>,
-    /// A threshold found by `glrmon calibrate` for a mean time between false alarms.
+    /// `[channels.glr.calibrated]`: a threshold found by `glrmon calibrate` for a mean
+    /// time between false alarms (written by `glrmon calibrate --write`). Default:
+    /// none.
     pub calibrated: Option<CalibratedSpec>,
     /// The detection statistic: `glr` (default; the windowed GLR of Zhang & Basseville
     /// 2014) or `chi2` (the plain χ²(p) test of εᵀΣ⁻¹ε on each sample: the classical
     /// baseline, for comparing with the GLR on your data; alarms then carry r̂ = k).
+    #[schemars(extend("enum" = ["glr", "chi2"]))]
     pub detector: Option<String>,
-    /// Hysteresis h: an episode ends below λ(1 − h) (default 0.1).
+    /// Hysteresis h in [0, 1): an alarm episode ends below λ(1 − h). Default 0.1.
     #[serde(default = "default_hysteresis")]
     pub hysteresis: f64,
-    /// Consecutive samples below λ(1 − h) that end an episode (default 1).
+    /// Consecutive samples below λ(1 − h) that end an episode. Default 1.
     #[serde(default = "default_clear")]
     pub clear_samples: u32,
-    /// Samples between the alarm (raised at the crossing) and its isolation update
-    /// (default n; 0: none).
+    /// Samples between the alarm (raised at the crossing) and its isolation update; 0
+    /// sends none. Default: n (the number of states).
     pub isolation_delay: Option<u32>,
-    /// Type-I probability of each isolation test (default 0.01).
+    /// Type-I probability of each isolation (minmax) test, in (0, 1). Default 0.01.
     #[serde(default = "default_isolation_alpha")]
     pub isolation_alpha: f64,
-    /// Isolation groups (default: each fault against all others).
+    /// `[[channels.glr.groups]]`: isolation groups tested together. Default: each fault
+    /// against all others.
     #[serde(default)]
     pub groups: Vec<GroupSpec>,
-    /// Relative rank cut-off τ for C_k(r) (default 10⁻⁹).
+    /// Relative rank cut-off τ of the information matrix C_k(r), in (0, 1).
+    /// Default 1e-9.
     pub rank_tolerance: Option<f64>,
     /// Largest run of missing samples filled by predict-only steps (default 100); after
     /// a longer one the filter restarts from its initial state.
@@ -449,6 +588,23 @@ pub enum WarmUpSpec {
     Samples(u64),
     /// `"window"`.
     Keyword(String),
+}
+
+/// By hand: the only keyword is `"window"`.
+impl JsonSchema for WarmUpSpec {
+    fn schema_name() -> Cow<'static, str> {
+        "WarmUp".into()
+    }
+
+    fn json_schema(_: &mut SchemaGenerator) -> Schema {
+        json_schema!({
+            "description": "A number of samples (at most 1000000000), or \"window\" (w samples).",
+            "anyOf": [
+                { "type": "integer", "minimum": 0 },
+                { "enum": ["window"] }
+            ]
+        })
+    }
 }
 
 impl Default for GlrSpec {
@@ -497,45 +653,48 @@ fn default_max_reorder() -> u64 {
 }
 
 /// A named group of faults tested together against the others.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GroupSpec {
-    /// Name reported in alarms.
+    /// Group name, reported in alarms. Required.
     pub name: String,
-    /// Fault names.
+    /// Names of the channel's faults in the group. Required.
     pub faults: Vec<String>,
 }
 
-/// How `glrmon simulate` drives the channel.
-#[derive(Debug, Clone, Default, Deserialize)]
+/// `[channels.simulation]`: how `glrmon simulate` drives the channel.
+#[derive(Debug, Clone, Default, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SimulationSpec {
-    /// U_k, one expression of `k` per input (random functions allowed); default 0.
+    /// U_k: one expression of `k` per input (random functions `uniform`, `normal`
+    /// allowed), e.g. `["sin(0.1*k)"]`. Default: 0 for each input.
     #[serde(default)]
     pub inputs: Vec<String>,
-    /// p(k), one expression of `k` per signal; default 0.
+    /// p(k): one expression of `k` per scheduling signal. Default: 0 for each signal.
     #[serde(default)]
     pub signals: Vec<String>,
-    /// Unknown input d_k entering through E, one expression per column of E.
+    /// Unknown input d_k entering through E: one expression of `k` per column of E.
+    /// Default: 0.
     #[serde(default)]
     pub unknown_input: Vec<String>,
-    /// A PI controller closing the loop (for unstable plants).
+    /// `[channels.simulation.controller]`: a PI controller closing the loop (for
+    /// unstable plants). Default: none (open loop).
     pub controller: Option<ControllerSpec>,
 }
 
 /// PI controller `u_k[input] = kp·e_k + I_k`, `I_{k+1} = I_k + ki·e_k`, `e_k = setpoint − y_k[output]`.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ControllerSpec {
-    /// Output measured.
+    /// Index of the output measured (0-based). Required.
     pub output: usize,
-    /// Input driven.
+    /// Index of the input driven (0-based). Required.
     pub input: usize,
-    /// Setpoint.
+    /// Setpoint of the measured output, in model units. Required.
     pub setpoint: f64,
-    /// Proportional gain.
+    /// Proportional gain kp. Required.
     pub kp: f64,
-    /// Integral gain.
+    /// Integral gain ki. Required.
     pub ki: f64,
 }
 
@@ -543,55 +702,57 @@ pub struct ControllerSpec {
 /// diagnosis under sparseness assumption*): when an alarm fires, the residuals of a
 /// Kalman or Kitanidis filter from the onset r̂ to the alarm are regressed on the fault
 /// signatures and the few active faults selected by the Lasso (eq. (39)).
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DiagnosisSpec {
-    /// Run a diagnosis at every alarm of the channel (default false). `glrmon diagnose`
-    /// works whatever this says.
+    /// Run a diagnosis at every alarm of the channel. `glrmon diagnose` works whatever
+    /// this says. Default false.
     #[serde(default)]
     pub enabled: bool,
     /// Residual generator: `kitanidis` (rejects the unknown input E d_k, Zhang 2021
     /// §III-B; the default when the model has E) or `kalman` (§III-A; the default
     /// otherwise).
+    #[schemars(extend("enum" = ["kalman", "kitanidis"]))]
     pub residual: Option<String>,
-    /// Largest number of samples in the regression (default: every sample from r̂ to
-    /// the alarm that the history holds).
+    /// Largest number of samples in the regression (at most 1000000). Default: every
+    /// sample from r̂ to the alarm that the history holds.
     pub span: Option<usize>,
-    /// Samples of filter quantities kept to rebuild the regression at an alarm (default
-    /// 2 × `glr.window`).
+    /// Samples of filter quantities kept to rebuild the regression at an alarm (at most
+    /// 1000000). Default: 2 × `glr.window`.
     pub history: Option<usize>,
     /// Level α of the no-fault test that precedes the λ rule: the probability that a
     /// fault-free span gets a non-empty support (default 0.01; 1 turns the test off and
     /// keeps Zhang 2021's rule, which always selects some faults). See
     /// `glrmon_core::sparse::no_fault_test`.
     pub alpha: Option<f64>,
-    /// Settings of the Lasso path.
+    /// `[channels.diagnosis.lasso]`: settings of the Lasso path. Optional.
     #[serde(default)]
     pub lasso: LassoSpec,
 }
 
 /// `[channels.diagnosis.lasso]`: the λ path of Zhang 2021, eq. (39).
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LassoSpec {
-    /// Number of log-spaced λ values from λ_max down (default 100, at least 2).
+    /// Number of log-spaced λ values from λ_max down (2 to 10000). Default 100.
     pub path_points: Option<usize>,
-    /// λ_min/λ_max, in (0, 1) (default 1e-4).
+    /// λ_min/λ_max, in (0, 1). Default 1e-4.
     pub ratio: Option<f64>,
 }
 
 /// `[channels.consistency]`: the block χ² test of εᵀΣ⁻¹ε that warns when the model no
 /// longer fits the plant (a `consistency` record, distinct from fault alarms).
-#[derive(Debug, Clone, Copy, Deserialize)]
+#[derive(Debug, Clone, Copy, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ConsistencySpec {
-    /// On by default.
+    /// Whether the consistency test runs. Default true.
     #[serde(default = "default_true")]
     pub enabled: bool,
-    /// Samples per block (default 500).
+    /// Samples per block (1 to 100000000). Default 500.
     #[serde(default = "default_consistency_window")]
     pub window: usize,
-    /// Probability that a block of a fitting model falls outside the band (default 10⁻⁶).
+    /// Probability that a block of a fitting model falls outside the band, in (0, 1).
+    /// Default 1e-6.
     #[serde(default = "default_consistency_alpha")]
     pub alpha: f64,
 }
@@ -615,10 +776,10 @@ fn default_consistency_alpha() -> f64 {
 
 /// `[channels.glr.calibrated]`: a threshold from `glrmon calibrate`, with what it was
 /// calibrated for and on.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CalibratedSpec {
-    /// λ.
+    /// The calibrated threshold λ on l_k. Required.
     pub threshold: f64,
     /// Target mean number of samples between false-alarm episodes (this or
     /// `sample_far`).
@@ -627,7 +788,7 @@ pub struct CalibratedSpec {
     /// Target fraction of fault-free samples whose l_k exceeds λ (this or `mtbfa`).
     #[serde(default)]
     pub sample_far: Option<f64>,
-    /// Fault-free samples it was calibrated on.
+    /// Fault-free samples it was calibrated on. Required.
     pub samples: u64,
     /// Episodes at λ on those samples (for `sample_far`, the clusters of exceedances
     /// within the window).
@@ -635,9 +796,9 @@ pub struct CalibratedSpec {
     /// Samples above λ among them (written for `sample_far`).
     #[serde(default)]
     pub exceedances: Option<u64>,
-    /// 95 % confidence interval of λ.
+    /// 95 % confidence interval of λ, `[low, high]`. Required.
     pub interval: [f64; 2],
-    /// Where the data came from (free text).
+    /// Where the data came from (free text). Default empty.
     #[serde(default)]
     pub source: String,
     /// Calibrated isolation thresholds by test name (a fault, or a `[[channels.glr.groups]]`

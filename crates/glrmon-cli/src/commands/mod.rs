@@ -2,6 +2,7 @@
 //! libraries; none imports another.
 
 pub(crate) mod calibrate;
+pub(crate) mod config;
 pub(crate) mod demo;
 pub(crate) mod diagnose;
 pub(crate) mod docs;

@@ -193,17 +193,10 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
         None => input.recorded_config().map_err(input_error)?,
     };
     if let Some(name) = &args.channel
-        && cfg.channel(name).is_none()
+        && let Err(e) = cfg.pick_channel(Some(name))
     {
-        return Err(InvalidInput(format!(
-            "no channel \"{name}\" in the configuration (channels: {})",
-            cfg.channels
-                .iter()
-                .map(|c| c.name.as_str())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ))
-        .into());
+        // "no channel "x" in the configuration (channels: …)", with a suggestion.
+        return Err(InvalidInput(e.to_string()).into());
     }
     input.set_limits(DecodeLimits {
         max_payload_bytes: cfg.daemon.max_payload_bytes,

@@ -1,4 +1,4 @@
-//! `glrmon validate FILE`: every error with its path, or per channel a summary and the
+//! `glrmon validate --config FILE`: every error with its path, or per channel a summary and the
 //! isolability report (Basseville 1996 §5-6) of its fault dictionary.
 
 use std::fmt::Write as _;
@@ -28,28 +28,35 @@ pub(crate) struct ValidateArgs {
 }
 
 pub(crate) fn run(args: &ValidateArgs) -> anyhow::Result<()> {
-    let file = args
+    let path = args
         .config
         .as_deref()
         .ok_or_else(|| InvalidInput("--config FILE is required".into()))?;
-    let cfg = match glrmon_spec::load(file) {
+    let file = path.display().to_string();
+    let cfg = match glrmon_spec::load(path) {
         Ok(c) => c,
         Err(errors) => {
-            println!(
-                "{}: invalid ({} error(s))",
-                file.display(),
-                errors.errors.len()
-            );
+            println!("{file}: invalid ({} error(s))", errors.errors.len());
             for e in &errors.errors {
-                println!("  error: {e}");
+                match e.location {
+                    Some(_) => println!("  error: {}", e.in_file(&file)),
+                    None => println!("  error: {e}"),
+                }
             }
-            return Err(InvalidInput(format!("{} is invalid", file.display())).into());
+            return Err(InvalidInput(format!("{} is invalid", file)).into());
         }
     };
     // The model checks that need the filter run (a diverging Σ_k, a fault signature
     // that is not finite) are configuration errors too: exit 1 with the channel and the
     // field, like the schema's (issue 21, item 9).
-    let mut warnings: Vec<String> = cfg.warnings.iter().map(ToString::to_string).collect();
+    let mut warnings: Vec<String> = cfg
+        .warnings
+        .iter()
+        .map(|w| match w.location {
+            Some(_) => w.in_file(&file),
+            None => w.to_string(),
+        })
+        .collect();
     let mut reports = String::new();
     let mut errors = Vec::new();
     for (i, channel) in cfg.channels.iter().enumerate() {
@@ -60,17 +67,13 @@ pub(crate) fn run(args: &ValidateArgs) -> anyhow::Result<()> {
         }
     }
     if !errors.is_empty() {
-        println!("{}: invalid ({} error(s))", file.display(), errors.len());
+        println!("{}: invalid ({} error(s))", file, errors.len());
         for e in &errors {
             println!("  error: {e}");
         }
-        return Err(InvalidInput(format!("{} is invalid", file.display())).into());
+        return Err(InvalidInput(format!("{} is invalid", file)).into());
     }
-    println!(
-        "{}: valid, {} channel(s)",
-        file.display(),
-        cfg.channels.len()
-    );
+    println!("{}: valid, {} channel(s)", file, cfg.channels.len());
     print!("{reports}");
     for w in &warnings {
         println!("warning: {w}");
@@ -78,15 +81,75 @@ pub(crate) fn run(args: &ValidateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn fmt_matrix(m: &DMatrix<f64>) -> String {
-    let rows: Vec<String> = m
-        .row_iter()
-        .map(|r| {
-            let v: Vec<String> = r.iter().map(|x| format!("{x:.6e}")).collect();
-            format!("[{}]", v.join(", "))
-        })
-        .collect();
-    format!("[{}]", rows.join(", "))
+/// Widest matrix printed on one line.
+const INLINE_COLUMNS: usize = 6;
+/// Widest matrix printed in full, one aligned row per line; a wider one is summarised.
+const FULL_COLUMNS: usize = 12;
+
+/// A matrix for the report, after `label = `: up to [`INLINE_COLUMNS`] columns on the
+/// same line (`[[a, b], [c, d]]`); up to [`FULL_COLUMNS`], one aligned row per line
+/// under the label, indented by `indent`; wider, a summary (shape, diagonal, extreme
+/// entries, condition number), never one line of hundreds of numbers.
+fn fmt_matrix(m: &DMatrix<f64>, indent: &str) -> String {
+    if m.ncols() <= INLINE_COLUMNS {
+        let rows: Vec<String> = m
+            .row_iter()
+            .map(|r| {
+                let v: Vec<String> = r.iter().map(|x| format!("{x:.6e}")).collect();
+                format!("[{}]", v.join(", "))
+            })
+            .collect();
+        return format!("[{}]", rows.join(", "));
+    }
+    let cell = |x: f64| format!("{x:.3e}");
+    let width = m
+        .iter()
+        .map(|x| cell(*x).chars().count())
+        .max()
+        .unwrap_or(0);
+    let mut out = format!("{}×{}", m.nrows(), m.ncols());
+    if m.ncols() <= FULL_COLUMNS {
+        for r in m.row_iter() {
+            let v: Vec<String> = r.iter().map(|x| format!("{:>width$}", cell(*x))).collect();
+            let _ = write!(out, "\n{indent}  {}", v.join(" "));
+        }
+        return out;
+    }
+    let diagonal: Vec<f64> = m.diagonal().iter().copied().collect();
+    let _ = write!(out, ", summarised (more than {FULL_COLUMNS} columns):");
+    let _ = write!(out, "\n{indent}  diagonal:");
+    for chunk in diagonal.chunks(INLINE_COLUMNS) {
+        let v: Vec<String> = chunk
+            .iter()
+            .map(|x| format!("{:>width$}", cell(*x)))
+            .collect();
+        let _ = write!(out, "\n{indent}    {}", v.join(" "));
+    }
+    let (min, max) = m
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+            (lo.min(*x), hi.max(*x))
+        });
+    let off_diagonal = (0..m.nrows())
+        .flat_map(|i| (0..m.ncols()).filter(move |&j| j != i).map(move |j| (i, j)))
+        .map(|(i, j)| m[(i, j)].abs())
+        .fold(0.0_f64, f64::max);
+    let _ = write!(
+        out,
+        "\n{indent}  entries in [{}, {}], largest off-diagonal |entry| {}",
+        cell(min),
+        cell(max),
+        cell(off_diagonal)
+    );
+    if m.is_square() && m.iter().all(|x| x.is_finite()) {
+        let sv = m.clone().singular_values();
+        let (lo, hi) = sv.iter().fold((f64::INFINITY, 0.0_f64), |(lo, hi), x| {
+            (lo.min(*x), hi.max(*x))
+        });
+        let condition = if lo > 0.0 { hi / lo } else { f64::INFINITY };
+        let _ = write!(out, "\n{indent}  condition number {condition:.3e}");
+    }
+    out
 }
 
 /// Most arithmetic operations the isolability report may take (about 2 s on one core
@@ -384,7 +447,7 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
             let _ = writeln!(
                 s,
                 "  steady-state innovation covariance Σ = {}",
-                fmt_matrix(&sigma)
+                fmt_matrix(&sigma, "  ")
             );
         }
         let _ = writeln!(
@@ -414,7 +477,7 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
             let _ = writeln!(
                 s,
                 "  steady-state innovation covariance Σ = {}",
-                fmt_matrix(&sigma)
+                fmt_matrix(&sigma, "  ")
             );
         }
         None if channel.model_is_constant() => {
@@ -447,8 +510,12 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
         rep.c3
     );
     if channel.fault_names.len() <= 12 {
-        let _ = writeln!(s, "    F = {}", fmt_matrix(&info));
-        let _ = writeln!(s, "    correlation = {}", fmt_matrix(&rep.correlation));
+        let _ = writeln!(s, "    F = {}", fmt_matrix(&info, "    "));
+        let _ = writeln!(
+            s,
+            "    correlation = {}",
+            fmt_matrix(&rep.correlation, "    ")
+        );
     } else {
         let _ = writeln!(
             s,
@@ -470,4 +537,41 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
         warnings.push(format!("channel \"{}\": {v}", channel.name));
     }
     Ok(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn small_matrices_stay_on_one_line() {
+        let m = DMatrix::from_row_slice(2, 2, &[1.0, 0.5, 0.5, 2.0]);
+        assert_eq!(
+            fmt_matrix(&m, "  "),
+            "[[1.000000e0, 5.000000e-1], [5.000000e-1, 2.000000e0]]"
+        );
+    }
+
+    #[test]
+    fn wider_matrices_are_aligned_rows_on_their_own_lines() {
+        let m = DMatrix::from_fn(8, 8, |i, j| if i == j { 1.0 } else { -0.25 });
+        let text = fmt_matrix(&m, "    ");
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines[0], "8×8");
+        assert_eq!(lines.len(), 9);
+        assert!(lines[1].starts_with("      "), "{text}");
+        let widths: Vec<usize> = lines[1..].iter().map(|l| l.chars().count()).collect();
+        assert!(widths.iter().all(|w| *w == widths[0]), "{text}");
+    }
+
+    #[test]
+    fn a_22_by_22_covariance_is_summarised() {
+        let m = DMatrix::from_fn(22, 22, |i, j| if i == j { 2.0 } else { 0.01 });
+        let text = fmt_matrix(&m, "  ");
+        assert!(text.starts_with("22×22, summarised"), "{text}");
+        assert!(text.contains("condition number"), "{text}");
+        assert!(text.lines().all(|l| l.chars().count() < 100), "{text}");
+        // 22 diagonal entries, 6 a line.
+        assert_eq!(text.lines().count(), 1 + 1 + 4 + 1 + 1, "{text}");
+    }
 }

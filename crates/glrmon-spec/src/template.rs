@@ -1,0 +1,224 @@
+//! The commented configuration template of `glrmon config init`: one channel with a
+//! small model, a sensor bias and an actuator bias fault, and every optional section
+//! and key present but commented out with its default (or, where there is none, an
+//! example value).
+
+/// The template, for a channel named `channel`. It parses and validates as it is
+/// (tested); uncomment a line to change a default.
+///
+/// ```
+/// let text = glrmon_spec::template::config_template("tank");
+/// let cfg = glrmon_spec::parse(&text).unwrap();
+/// assert_eq!(cfg.channels[0].fault_names, ["level_bias", "valve_bias"]);
+/// ```
+#[must_use]
+pub fn config_template(channel: &str) -> String {
+    let name = toml::Value::String(channel.to_owned()).to_string();
+    let key = toml::Value::String(format!("plant/{channel}")).to_string();
+    TEMPLATE
+        .replace("\"@NAME@\"", &name)
+        .replace("\"@KEY@\"", &key)
+}
+
+const TEMPLATE: &str = r#"# glrmon configuration. Reference of every key: docs/CONFIG.md; JSON Schema for
+# editors: `glrmon config schema > glrmon.schema.json`. Check it: `glrmon validate --config FILE`.
+# Commented lines show each optional key with its default (or an example where none).
+#
+# The model (Zhang & Basseville 2014, eq. (1)), n states, l inputs, p outputs:
+#   X_{k+1} = F X_k + G U_k + W_k + Psi_k(r) theta      cov(W) = Q
+#   Y_k     = H X_k + J U_k + V_k + Phi_k(r) theta      cov(V) = R
+# Matrices are written row by row: [[1.0, 0.0]] is 1x2; a number s means s*I.
+
+# [zenoh]                            # Zenoh session (glrmon run, watch, status)
+# config = "zenoh.json5"             # a Zenoh JSON5 file; default: none
+# mode = "peer"                      # peer | client | router
+# connect = []                       # e.g. ["tcp/127.0.0.1:7447"]
+# listen = []                        # e.g. ["tcp/0.0.0.0:7447"]
+# multicast_scouting = false
+
+# [daemon]                           # glrmon run
+# workers = 4                        # default: available cores
+# worker_queue = 4096                # payloads per worker queue
+# worker_queue_mb = 64.0             # MiB per worker queue
+# intake_mb = 256.0                  # MiB of all worker queues
+# output_queue = 16384               # records
+# stat_every = 10                    # one stat record in this many samples; 0: none
+# max_payload_bytes = 1048576
+# shutdown_timeout = 5.0             # seconds
+# instance = "plant-a"               # default: <host>-<pid>
+# shard = "0/2"                      # default: every channel
+# metrics = "127.0.0.1:9464"         # Prometheus /metrics; default: none
+
+# [recording]                        # MCAP recording of glrmon run
+# enabled = false
+# directory = "recordings"
+# prefix = "glrmon"
+# inputs = true
+# stat_every = 1
+# max_file_mb = 1024.0
+# max_file_seconds = 3600.0
+# max_total_mb = 10240.0             # default: no cap
+# flush_seconds = 1.0
+# chunk_kb = 1024
+# compression = "zstd"               # zstd | none
+# queue = 65536
+#
+# [recording.capture]                # inputs only around alarms; default: off
+# before_seconds = 10.0
+# after_seconds = 10.0
+
+[[channels]]
+name = "@NAME@"
+# key = "@KEY@"                      # Zenoh key of the samples
+# period = 0.1                       # seconds, informative
+# signals = 0                        # scheduling signals p0...; default: highest used + 1
+
+[channels.model]                     # n = 2 states, l = 1 input, p = 2 outputs
+F = [[0.9, 0.1], [0.0, 0.8]]
+G = [[0.0], [1.0]]
+H = [[1.0, 0.0], [0.0, 1.0]]
+# J = [[0.0], [0.0]]                 # default: zero
+Q = 0.01                             # 0.01 * I
+R = 0.04
+# E = [[1.0], [0.0]]                 # unknown input (n x q, q < p); default: none
+# S = [[0.0, 0.0], [0.0, 0.0]]       # cov(W, V) (n x p); default: none
+# x0 = [0.0, 0.0]                    # default: zeros
+# P0 = 1.0                           # default: I
+# An LPV matrix: F = { base = [[0.9, 0.1], [0.0, 0.8]], p0 = [[0.0, 0.0], [0.0, 0.1]] }
+
+# [channels.scaling]                 # model value = (raw - offset) / scale
+# u_offset = [0.0]
+# u_scale = [1.0]
+# y_offset = [0.0, 0.0]
+# y_scale = [1.0, 1.0]
+
+# [channels.columns]                 # CSV column names; default u0, y0, y1, ...
+# u = ["valve"]
+# y = ["level", "flow"]
+# p = []
+
+[[channels.faults]]
+name = "level_bias"
+kind = "sensor_bias"                 # Phi = e_0
+output = 0
+# onset = "step"                     # step | impulse | ramp | known
+
+[[channels.faults]]
+name = "valve_bias"
+kind = "actuator_bias"               # Psi = G e_0
+input = 0
+
+# Other faults:
+# [[channels.faults]]
+# name = "valve_gain"
+# kind = "actuator_gain"             # also sensor_drift (output = j, a ramp)
+# input = 0
+#
+# [[channels.faults]]                # explicit signature columns
+# name = "leak"
+# psi = [0.0, "-0.1*u0[-1]"]         # state column: n numbers or expressions
+# phi = [0.0, 0.0]                   # output column: p entries
+# onset = "step"
+#
+# [[channels.faults]]
+# kind = "all_sensors"               # one sensor_bias per output (all_actuators: per input)
+
+# [channels.glr]
+# window = 100                       # w
+# min_lag = 1                        # s
+# threshold = 20.0                   # explicit lambda; default: from false_alarm
+# false_alarm = 1e-4                 # per sample
+# threshold_mode = "bonferroni"      # bonferroni | chi2
+# detector = "glr"                   # glr | chi2
+# hysteresis = 0.1
+# clear_samples = 1
+# isolation_delay = 2                # default: n
+# isolation_alpha = 0.01
+# rank_tolerance = 1e-9
+# max_gap = 100
+# max_reorder = 16
+# warm_up = "window"                 # or a number of samples; default: none
+#
+# [[channels.glr.groups]]
+# name = "valve"
+# faults = ["valve_bias"]
+#
+# [channels.glr.calibrated]          # written by `glrmon calibrate --write`
+# threshold = 18.2
+# mtbfa = 100000.0                   # or sample_far = 1e-4
+# sample_far = 1e-4
+# samples = 1000000
+# episodes = 9
+# exceedances = 120
+# interval = [17.5, 19.0]
+# source = "recordings/fault-free.mcap"
+# isolation = { level_bias = 6.1, valve_bias = 5.9 }
+
+# [channels.simulation]              # glrmon simulate; expressions of k
+# inputs = ["sin(0.05*k)"]           # default: 0
+# signals = []
+# unknown_input = []                 # one per column of E
+#
+# [channels.simulation.controller]   # PI loop; default: open loop
+# output = 0
+# input = 0
+# setpoint = 1.0
+# kp = 0.5
+# ki = 0.05
+
+# [channels.diagnosis]               # sparse diagnosis (Zhang 2021) at alarms
+# enabled = false
+# residual = "kalman"                # kalman | kitanidis (default with E)
+# span = 200                         # default: r-hat to the alarm
+# history = 200                      # default: 2 * window
+# alpha = 0.01
+#
+# [channels.diagnosis.lasso]
+# path_points = 100
+# ratio = 1e-4
+
+# [channels.consistency]             # model-consistency test
+# enabled = true
+# window = 500
+# alpha = 1e-6
+"#;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_template_validates_and_quotes_the_name() {
+        let cfg = crate::parse(&config_template("pump \"3\"")).unwrap_err();
+        // A name with a space is refused by validation, not by TOML.
+        assert!(cfg.to_string().contains("name"), "{cfg}");
+        let cfg = crate::parse(&config_template("pump3")).unwrap();
+        assert_eq!(cfg.channels[0].name, "pump3");
+        assert_eq!(cfg.channels[0].key, "plant/pump3");
+        assert!(cfg.warnings.is_empty(), "{:?}", cfg.warnings);
+    }
+
+    /// Every key of the JSON Schema is in the template, set or commented out.
+    #[test]
+    fn the_template_shows_every_key_of_the_schema() {
+        let schema: serde_json::Value = serde_json::from_str(&crate::json_schema()).unwrap();
+        let text = config_template("tank");
+        let mut missing = Vec::new();
+        let mut defs: Vec<&serde_json::Value> = vec![&schema];
+        defs.extend(schema["definitions"].as_object().unwrap().values());
+        for def in defs {
+            if let Some(props) = def.get("properties").and_then(|p| p.as_object()) {
+                for key in props.keys() {
+                    let as_key = format!("{key} =");
+                    let as_table = format!(".{key}]");
+                    let top = format!("[{key}]");
+                    if !(text.contains(&as_key) || text.contains(&as_table) || text.contains(&top))
+                    {
+                        missing.push(key.clone());
+                    }
+                }
+            }
+        }
+        assert!(missing.is_empty(), "not in the template: {missing:?}");
+    }
+}
