@@ -214,7 +214,9 @@ mod tests {
         let b: Vec<&str> = lines[2].split_whitespace().collect();
         assert_eq!(
             b,
-            ["b", "-", "0", "0", "0", "0", "0", "0", "?", "0", "(down)", "5s"],
+            [
+                "b", "-", "0", "0", "0", "0", "0", "0", "?", "0", "(down)", "5s"
+            ],
             "sessions unknown (an earlier release's status), no connection: {t}"
         );
         assert_eq!(
