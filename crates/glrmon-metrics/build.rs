@@ -43,10 +43,12 @@ fn main() {
             if loose.exists() {
                 println!("cargo:rerun-if-changed={}", loose.display());
             }
-            println!(
-                "cargo:rerun-if-changed={}",
-                common.join("packed-refs").display()
-            );
+            // Only files that exist: cargo reruns a build script on every build while
+            // one of its watched paths is missing.
+            let packed = common.join("packed-refs");
+            if packed.exists() {
+                println!("cargo:rerun-if-changed={}", packed.display());
+            }
         }
         Some(hash)
     });
