@@ -558,8 +558,9 @@ fn recv_until(
 }
 
 /// systemd's Type=notify protocol, on a real datagram socket as systemd makes one:
-/// READY=1 once the readiness line is out, RELOADING=1 (with MONOTONIC_USEC) and READY=1
-/// again around a SIGHUP reload, STOPPING=1 at SIGTERM, then exit 0.
+/// READY=1 once the readiness line is out, WATCHDOG=1 pings when WATCHDOG_USEC is set,
+/// RELOADING=1 (with MONOTONIC_USEC) and READY=1 again around a SIGHUP reload,
+/// STOPPING=1 at SIGTERM, then exit 0.
 #[cfg(unix)]
 #[test]
 fn notify_socket_gets_ready_reloading_and_stopping() {
@@ -585,7 +586,9 @@ fn notify_socket_gets_ready_reloading_and_stopping() {
         Command::new(env!("CARGO_BIN_EXE_glrmon"))
             .args(["run", "--config"])
             .arg(&cfg)
-            .env("NOTIFY_SOCKET", &path),
+            .env("NOTIFY_SOCKET", &path)
+            // WatchdogSec=0.4: WATCHDOG=1 every 0.2 s while every worker runs.
+            .env("WATCHDOG_USEC", "400000"),
     );
     let stdout = child.stdout.take().unwrap();
     let mut daemon = Daemon {
@@ -617,7 +620,7 @@ fn notify_socket_gets_ready_reloading_and_stopping() {
             daemon.line
         );
     }
-    assert_eq!(got.len(), 1, "{got:?}");
+    recv_until(&sock, &mut got, "WATCHDOG=1");
     daemon.signal("-HUP");
     let reloading = recv_until(&sock, &mut got, "RELOADING=1");
     assert!(
@@ -643,10 +646,30 @@ fn notify_socket_gets_ready_reloading_and_stopping() {
         std::thread::sleep(Duration::from_millis(10));
     };
     assert_eq!(code, Some(0));
-    let firsts: Vec<&str> = got.iter().filter_map(|m| m.lines().next()).collect();
+    // Nothing after STOPPING=1 (the watchdog stops with it) but what was already sent.
+    sock.set_nonblocking(true).unwrap();
+    let mut buf = [0u8; 4096];
+    while let Ok(n) = sock.recv(&mut buf) {
+        got.push(String::from_utf8_lossy(&buf[..n]).into_owned());
+    }
+    let firsts: Vec<&str> = got
+        .iter()
+        .filter_map(|m| m.lines().next())
+        .filter(|l| *l != "WATCHDOG=1")
+        .collect();
     assert_eq!(
         firsts,
         ["READY=1", "RELOADING=1", "READY=1", "STOPPING=1"],
+        "{got:?}"
+    );
+    let stopping = got
+        .iter()
+        .position(|m| m.starts_with("STOPPING=1"))
+        .unwrap();
+    assert!(
+        got[stopping + 1..]
+            .iter()
+            .all(|m| m.starts_with("WATCHDOG=1")),
         "{got:?}"
     );
     eprintln!("notify messages: {got:?}");
