@@ -515,19 +515,20 @@ async fn two_sharded_instances_behind_a_router_survive_its_restart() {
     assert_eq!(code, 200, "{body}");
     for (ch, v) in owners.iter().filter(|(_, v)| v[0].0 == "mesh-a") {
         let line = format!(
-            "glrmon_alarms_total{{instance=\"mesh-a\",channel=\"{ch}\"}} {}",
+            "glrmon_alarms_total{{glrmon_instance=\"mesh-a\",channel=\"{ch}\"}} {}",
             v[0].2
         );
         assert!(body.contains(&line), "{line} not in\n{body}");
-        let line = format!("glrmon_samples_total{{instance=\"mesh-a\",channel=\"{ch}\"}} 400");
+        let line =
+            format!("glrmon_samples_total{{glrmon_instance=\"mesh-a\",channel=\"{ch}\"}} 400");
         assert!(body.contains(&line), "{line} not in\n{body}");
     }
     assert!(
-        body.contains("glrmon_processing_seconds_count{instance=\"mesh-a\"}"),
+        body.contains("glrmon_processing_seconds_count{glrmon_instance=\"mesh-a\"}"),
         "{body}"
     );
     assert!(
-        body.contains("glrmon_zenoh_connected{instance=\"mesh-a\"} 1"),
+        body.contains("glrmon_zenoh_connected{glrmon_instance=\"mesh-a\"} 1"),
         "{body}"
     );
     assert_eq!(http_get(&metrics, "/healthz").0, 200);

@@ -3,6 +3,12 @@
 //! daemon (`glrmon run --metrics ADDR` or `[daemon] metrics`). A minimal HTTP/1.1
 //! responder: one GET per connection, no keep-alive, bounded request size and time;
 //! it reads only the daemon's counters ([`MetricsSource`]), never the data path.
+//!
+//! The instance is the label `glrmon_instance`, not `instance`: Prometheus sets
+//! `instance` on every scraped sample itself (the target's address) and would rename
+//! ours `exported_instance`.
+
+mod process;
 
 use std::fmt::Write as _;
 use std::sync::Arc;
@@ -16,13 +22,20 @@ use glrmon_zenoh::Connectivity;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpListener;
 
+/// The version of this build (the workspace's `version`).
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// The short git commit this build was made from, or "unknown" outside a git checkout
+/// (build.rs: `GLRMON_GIT_HASH` from the environment, else `git rev-parse --short HEAD`).
+pub const GIT_HASH: &str = env!("GLRMON_GIT_HASH");
+
 /// Reads one counter of a channel's status.
 type ChannelCounter = fn(&ChannelStatus) -> u64;
 
 /// What the endpoints report.
 #[derive(Debug)]
 pub struct MetricsSource {
-    /// The instance's name (the `instance` label).
+    /// The instance's name (the `glrmon_instance` label).
     pub instance: String,
     /// Channel names, by index.
     pub channels: Vec<String>,
@@ -32,7 +45,7 @@ pub struct MetricsSource {
     pub runtime: Arc<RuntimeMetrics>,
     /// Worker threads started: fewer alive means unhealthy.
     pub workers: u64,
-    /// Whether the Zenoh session reaches a router or peer.
+    /// The Zenoh session's sessions with other nodes, and whether it listens.
     pub connectivity: Arc<Connectivity>,
     /// The recorder's counters, when recording.
     pub recorder: Option<Arc<RecorderStats>>,
@@ -48,11 +61,12 @@ impl MetricsSource {
         self.runtime.workers_alive.load(Ordering::Relaxed) == self.workers
     }
 
-    /// Ready: healthy, intake open, and connected to a router or peer.
-    fn ready(&self) -> bool {
-        self.healthy()
-            && self.ready.load(Ordering::Relaxed)
-            && self.connectivity.connected.load(Ordering::Relaxed)
+    /// Ready: healthy, intake open, and reachable by publishers: listening, or with a
+    /// session open with a router, peer or client
+    /// ([`glrmon_zenoh::Connectivity::reachable`]).
+    #[must_use]
+    pub fn is_ready(&self) -> bool {
+        self.healthy() && self.ready.load(Ordering::Relaxed) && self.connectivity.reachable()
     }
 
     /// The Prometheus exposition.
@@ -98,7 +112,7 @@ impl MetricsSource {
             let n = family(&mut o, name, kind, help);
             for c in &channels {
                 lines.push(format!(
-                    "{n}{{instance={inst},channel={}}} {}",
+                    "{n}{{glrmon_instance={inst},channel={}}} {}",
                     label(&c.channel),
                     get(c)
                 ));
@@ -117,7 +131,7 @@ impl MetricsSource {
             for (code, count) in &c.errors {
                 let _ = writeln!(
                     o,
-                    "{n}{{instance={inst},channel={},code={}}} {count}",
+                    "{n}{{glrmon_instance={inst},channel={},code={}}} {count}",
                     label(&c.channel),
                     label(code)
                 );
@@ -127,7 +141,7 @@ impl MetricsSource {
         let mut gauge = |name: &str, help: &str, kind: &str, v: String| {
             let _ = writeln!(
                 o,
-                "# HELP {name} {help}\n# TYPE {name} {kind}\n{name}{{instance={inst}}} {v}"
+                "# HELP {name} {help}\n# TYPE {name} {kind}\n{name}{{glrmon_instance={inst}}} {v}"
             );
         };
         gauge(
@@ -149,8 +163,14 @@ impl MetricsSource {
             r.workers_alive.load(Ordering::Relaxed).to_string(),
         );
         gauge(
+            "glrmon_ready",
+            "1 while /readyz answers 200: workers running, intake open, and listening or connected.",
+            "gauge",
+            u8::from(self.is_ready()).to_string(),
+        );
+        gauge(
             "glrmon_zenoh_connected",
-            "1 while a router or peer is connected.",
+            "1 while at least one Zenoh session with a router, peer or client is open.",
             "gauge",
             u8::from(self.connectivity.connected.load(Ordering::Relaxed)).to_string(),
         );
@@ -189,6 +209,27 @@ impl MetricsSource {
                 rec.errors.load(Ordering::Relaxed).to_string(),
             );
         }
+        let sessions = self.connectivity.sessions();
+        let _ = writeln!(
+            o,
+            "# HELP glrmon_zenoh_sessions Open Zenoh sessions with other nodes, by the other node's kind.\n# TYPE glrmon_zenoh_sessions gauge"
+        );
+        for (kind, n) in [
+            ("router", sessions.routers),
+            ("peer", sessions.peers),
+            ("client", sessions.clients),
+        ] {
+            let _ = writeln!(
+                o,
+                "glrmon_zenoh_sessions{{glrmon_instance={inst},kind=\"{kind}\"}} {n}"
+            );
+        }
+        let _ = writeln!(
+            o,
+            "# HELP glrmon_build_info The version and git commit of this build.\n# TYPE glrmon_build_info gauge\nglrmon_build_info{{version={},git={}}} 1",
+            label(VERSION),
+            label(GIT_HASH)
+        );
         histogram(
             &mut o,
             "glrmon_processing_seconds",
@@ -203,6 +244,7 @@ impl MetricsSource {
             &inst,
             &r.delivery,
         );
+        process::render(&mut o);
         o
     }
 }
@@ -217,12 +259,12 @@ fn histogram(o: &mut String, name: &str, help: &str, inst: &str, h: &LatencyHist
             .map_or_else(|| "+Inf".to_owned(), |b| format!("{b}"));
         let _ = writeln!(
             o,
-            "{name}_bucket{{instance={inst},le=\"{le}\"}} {cumulative}"
+            "{name}_bucket{{glrmon_instance={inst},le=\"{le}\"}} {cumulative}"
         );
     }
     let sum = h.sum_ns.load(Ordering::Relaxed) as f64 * 1e-9;
-    let _ = writeln!(o, "{name}_sum{{instance={inst}}} {sum}");
-    let _ = writeln!(o, "{name}_count{{instance={inst}}} {cumulative}");
+    let _ = writeln!(o, "{name}_sum{{glrmon_instance={inst}}} {sum}");
+    let _ = writeln!(o, "{name}_count{{glrmon_instance={inst}}} {cumulative}");
 }
 
 /// A label value, quoted and escaped (Prometheus text format).
@@ -355,14 +397,16 @@ fn respond(head: &str, s: &MetricsSource) -> (&'static str, &'static str, String
             text,
             "a worker thread has stopped\n".into(),
         ),
-        "/readyz" if s.ready() => ("200 OK", text, "ready\n".into()),
+        "/readyz" if s.is_ready() => ("200 OK", text, "ready\n".into()),
         "/readyz" => (
             "503 Service Unavailable",
             text,
-            if s.ready.load(Ordering::Relaxed) {
-                "not connected to any Zenoh router or peer\n".into()
-            } else {
+            if !s.healthy() {
+                "a worker thread has stopped\n".into()
+            } else if !s.ready.load(Ordering::Relaxed) {
                 "starting\n".into()
+            } else {
+                "not listening, and not connected to any Zenoh router, peer or client\n".into()
             },
         ),
         _ => (
@@ -400,14 +444,27 @@ mod tests {
             ready: Arc::new(AtomicBool::new(false)),
         };
         let body = source.render();
+        assert!(
+            !body.contains("{instance="),
+            "Prometheus would rename the label exported_instance:\n{body}"
+        );
+        assert!(
+            body.lines()
+                .any(|l| l.starts_with("glrmon_build_info{version=\"")
+                    && l.ends_with("\"} 1")
+                    && l.contains(&format!(",git={}}}", label(GIT_HASH)))),
+            "{body}"
+        );
         for line in [
-            r#"glrmon_samples_total{instance="i\"1",channel="a"} 0"#,
-            r#"glrmon_samples_total{instance="i\"1",channel="b\\c"} 400"#,
-            r#"glrmon_dropped_payloads_total{instance="i\"1",channel="b\\c"} 3"#,
-            r#"glrmon_alarms_total{instance="i\"1",channel="b\\c"} 2"#,
-            r#"glrmon_alarm_active{instance="i\"1",channel="a"} 0"#,
-            r#"glrmon_alarm_active{instance="i\"1",channel="b\\c"} 1"#,
-            r#"glrmon_rejected_total{instance="i\"1",channel="b\\c",code="gap"} 5"#,
+            r#"glrmon_samples_total{glrmon_instance="i\"1",channel="a"} 0"#,
+            r#"glrmon_samples_total{glrmon_instance="i\"1",channel="b\\c"} 400"#,
+            r#"glrmon_dropped_payloads_total{glrmon_instance="i\"1",channel="b\\c"} 3"#,
+            r#"glrmon_alarms_total{glrmon_instance="i\"1",channel="b\\c"} 2"#,
+            r#"glrmon_alarm_active{glrmon_instance="i\"1",channel="a"} 0"#,
+            r#"glrmon_alarm_active{glrmon_instance="i\"1",channel="b\\c"} 1"#,
+            r#"glrmon_rejected_total{glrmon_instance="i\"1",channel="b\\c",code="gap"} 5"#,
+            r#"glrmon_zenoh_sessions{glrmon_instance="i\"1",kind="client"} 0"#,
+            r#"glrmon_ready{glrmon_instance="i\"1"} 0"#,
             "# TYPE glrmon_alarm_active gauge",
             "# TYPE glrmon_rejected_total counter",
         ] {

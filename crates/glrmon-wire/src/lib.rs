@@ -21,7 +21,7 @@ pub use record::{
     RECORD_KINDS, Record, Stat, decode_record, encode_json,
 };
 pub use sample::{DecodeLimits, Sample, decode_samples, encode_sample, encode_samples};
-pub use status::{ChannelStatus, InstanceStatus, StatusError};
+pub use status::{ChannelStatus, InstanceStatus, StatusError, ZenohSessions};
 
 #[cfg(test)]
 mod tests {

@@ -7,13 +7,16 @@
 //! {"instance":"a","uptime":3725.2,"shard":"0/2","connected":true,"reconnections":1,
 //!  "overlaps":0,"samples_per_second":1500.0,
 //!  "channels":[{"channel":"c1","samples":10,"alarms":2,"alarm_active":true,
-//!               "dropped":3,"last_k":9,"errors":{"non_finite":4}}]}
+//!               "dropped":3,"last_k":9,"errors":{"non_finite":4}}],
+//!  "sessions":{"routers":0,"peers":0,"clients":2}}
 //! ```
 //!
 //! Decoding is strict, as for samples: every field must be present (`null` where the
 //! value is absent), of its type, and no other field may appear, so that a reader never
 //! shows a zero for a counter it failed to read. The writer and the reader ship in the
-//! same binary; a new field is a change of this format.
+//! same binary; a new field is a change of this format. The one exception is
+//! `sessions`, added last: a status without it (from an instance of an earlier release,
+//! during a rolling upgrade) reads as `None`, shown as unknown, never as zeros.
 
 use std::collections::BTreeMap;
 
@@ -35,7 +38,8 @@ pub struct InstanceStatus {
     /// monitors all of them.
     #[serde(deserialize_with = "required")]
     pub shard: Option<String>,
-    /// Whether at least one Zenoh router or peer is connected.
+    /// Whether at least one Zenoh session with another node (router, peer or client) is
+    /// open.
     pub connected: bool,
     /// Times the session got a connection back after losing its last one.
     pub reconnections: u64,
@@ -45,6 +49,32 @@ pub struct InstanceStatus {
     pub samples_per_second: f64,
     /// Every monitored channel, in configuration order.
     pub channels: Vec<ChannelStatus>,
+    /// The Zenoh sessions open with other nodes, by kind; `None` when the writer did not
+    /// say (an instance of an earlier release, whose status has no such field).
+    #[serde(default)]
+    pub sessions: Option<ZenohSessions>,
+}
+
+/// The Zenoh sessions an instance has open with other nodes, by the other node's kind
+/// (its mode): a daemon in peer mode that listens sees the publishers, `glrmon watch`
+/// and `glrmon status` connected to it in client mode as clients.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ZenohSessions {
+    /// Sessions with routers.
+    pub routers: u64,
+    /// Sessions with peers.
+    pub peers: u64,
+    /// Sessions with clients.
+    pub clients: u64,
+}
+
+impl ZenohSessions {
+    /// Sessions of every kind.
+    #[must_use]
+    pub const fn total(&self) -> u64 {
+        self.routers + self.peers + self.clients
+    }
 }
 
 /// The counters of one monitored channel.
@@ -215,6 +245,11 @@ mod tests {
                     errors: BTreeMap::new(),
                 },
             ],
+            sessions: Some(ZenohSessions {
+                routers: 1,
+                peers: 0,
+                clients: 2,
+            }),
         }
     }
 
@@ -243,6 +278,10 @@ mod tests {
             "{json}"
         );
         assert!(json.contains(r#""last_k":null,"errors":{}}"#), "{json}");
+        assert!(
+            json.ends_with(r#"}],"sessions":{"routers":1,"peers":0,"clients":2}}"#),
+            "{json}"
+        );
     }
 
     #[test]
@@ -268,6 +307,7 @@ mod tests {
     fn reads_the_hand_written_format() {
         let old = r#"{"instance":"a\"b","uptime":3725.200,"shard":"0/2","connected":true,"reconnections":1,"overlaps":0,"samples_per_second":1500.0,"channels":[{"channel":"c1","samples":10,"alarms":2,"alarm_active":true,"dropped":3,"last_k":9,"errors":{"gap":1,"non_finite":4}},{"channel":"c\u0007","samples":0,"alarms":0,"alarm_active":false,"dropped":0,"last_k":null,"errors":{}}]}"#;
         let mut want = sample();
+        want.sessions = None;
         want.instance = "a\"b".into();
         want.channels[1].channel = "c\u{7}".into();
         assert_eq!(decode(old.as_bytes()).unwrap(), want);
@@ -318,6 +358,16 @@ mod tests {
                 json.replacen(r#""alarm_active":true"#, r#""alarm_active":1"#, 1),
                 ErrorCode::WrongType,
                 "bool",
+            ),
+            (
+                json.replacen(r#""clients":2"#, r#""clients":2,"others":1"#, 1),
+                ErrorCode::UnknownField,
+                "others",
+            ),
+            (
+                json.replacen(r#","peers":0"#, "", 1),
+                ErrorCode::MissingField,
+                "peers",
             ),
             (
                 json.replacen("3725.2", "1e999", 1),

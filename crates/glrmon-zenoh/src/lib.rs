@@ -17,13 +17,13 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use glrmon_runtime::{ChannelStats, Intake, Output, Payload, Sink, SinkError};
-use glrmon_wire::{InstanceStatus, Record, status};
+use glrmon_wire::{InstanceStatus, Record, ZenohSessions, status};
 use zenoh::bytes::Encoding;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::query::{QueryTarget, Queryable};
-use zenoh::sample::SampleKind;
+use zenoh::sample::{Locality, SampleKind};
 use zenoh::{Config, Session, Wait};
 
 /// Where a session comes from: a JSON5 file passed through untouched, and/or the
@@ -129,6 +129,65 @@ pub fn build_config(s: &SessionSettings) -> Result<Config, ZenohError> {
         .map_err(cfg_err)?;
     }
     Ok(c)
+}
+
+/// The mode and endpoints a session opens with: those of the configuration file (if
+/// any) with the explicit settings on top, as [`build_config`] hands them to Zenoh.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Endpoints {
+    /// `peer` or `client` (or `router`, from a file).
+    pub mode: String,
+    /// Endpoints listened on (a listener that cannot be bound makes the session fail to
+    /// open, so those of an open session are in use).
+    pub listen: Vec<String>,
+    /// Endpoints connected to.
+    pub connect: Vec<String>,
+}
+
+impl Endpoints {
+    /// What the settings give (the file read again, as [`open`] reads it).
+    ///
+    /// # Errors
+    /// As [`build_config`].
+    pub fn of(s: &SessionSettings) -> Result<Self, ZenohError> {
+        Ok(Self::from_config(&build_config(s)?))
+    }
+
+    /// What a configuration gives. Zenoh's endpoint lists may be one list or one per
+    /// mode (`{router: [...], peer: [...], client: [...]}`): the mode's list is taken.
+    #[must_use]
+    pub fn from_config(c: &Config) -> Self {
+        let json = |key: &str| {
+            c.get_json(key)
+                .ok()
+                .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+                .unwrap_or(serde_json::Value::Null)
+        };
+        let mode = json("mode")
+            .as_str()
+            .map_or_else(|| "peer".to_owned(), str::to_owned);
+        let list = |key: &str| {
+            let v = json(key);
+            let v = if v.is_object() {
+                v.get(mode.as_str()).cloned().unwrap_or_default()
+            } else {
+                v
+            };
+            v.as_array()
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|e| e.as_str().map(str::to_owned))
+                        .collect()
+                })
+                .unwrap_or_default()
+        };
+        let (listen, connect) = (list("listen/endpoints"), list("connect/endpoints"));
+        Self {
+            mode,
+            listen,
+            connect,
+        }
+    }
 }
 
 /// A list of strings as JSON (which JSON5 reads as is), escaped by serde_json.
@@ -345,12 +404,14 @@ impl StatusSource {
     pub fn snapshot(&self) -> InstanceStatus {
         let channels = glrmon_runtime::channel_statuses(&self.channels, &self.stats);
         let total: u64 = channels.iter().map(|c| c.samples).sum();
-        let (connected, reconnections) = self.connectivity.as_ref().map_or((true, 0), |c| {
-            (
-                c.connected.load(Ordering::Relaxed),
-                c.reconnections.load(Ordering::Relaxed),
-            )
-        });
+        let (connected, reconnections, sessions) =
+            self.connectivity.as_ref().map_or((true, 0, None), |c| {
+                (
+                    c.connected.load(Ordering::Relaxed),
+                    c.reconnections.load(Ordering::Relaxed),
+                    Some(c.sessions()),
+                )
+            });
         let round = |v: f64, scale: f64| (v * scale).round() / scale;
         InstanceStatus {
             instance: self.instance.clone(),
@@ -361,6 +422,7 @@ impl StatusSource {
             overlaps: self.overlaps.load(Ordering::Relaxed),
             samples_per_second: round(self.samples_per_second(total), 10.0),
             channels,
+            sessions,
         }
     }
 }
@@ -532,21 +594,97 @@ fn parse_owner(key: &str) -> Option<(&str, &str)> {
     rest.rsplit_once('/')
 }
 
-/// Whether the session has a router or peer to talk to, and how often it got one back.
+/// The Zenoh sessions of this session with other nodes, and whether publishers can
+/// reach it: what readiness, the status and the metrics report.
 #[derive(Debug, Default)]
 pub struct Connectivity {
-    /// At least one router or peer is connected.
+    /// At least one session with another node (router, peer or client) is open.
     pub connected: AtomicBool,
-    /// Times the session went from no connection to a connection after the first.
+    /// Times the session went from no router or peer session to one, after the first.
     pub reconnections: AtomicU64,
-    /// Times it lost its last connection.
+    /// Times it lost its last router or peer session.
     pub losses: AtomicU64,
+    /// Open sessions with routers.
+    pub routers: AtomicU64,
+    /// Open sessions with peers.
+    pub peers: AtomicU64,
+    /// Open sessions with clients (publishers, `glrmon watch` and `glrmon status` in client
+    /// mode connected to a listening daemon).
+    pub clients: AtomicU64,
+    /// The session listens on at least one endpoint (set by its owner, see
+    /// [`Connectivity::reachable`]).
+    pub listening: AtomicBool,
     stop: AtomicBool,
 }
 
-/// Polls the session's routers and peers every `period` on a thread of its own and
-/// calls `on_change(connected, connectivity)` at each change (the first connection
-/// included); stops when the returned handle is dropped.
+impl Connectivity {
+    /// The open sessions by kind now.
+    #[must_use]
+    pub fn sessions(&self) -> ZenohSessions {
+        ZenohSessions {
+            routers: self.routers.load(Ordering::Relaxed),
+            peers: self.peers.load(Ordering::Relaxed),
+            clients: self.clients.load(Ordering::Relaxed),
+        }
+    }
+
+    /// Whether publishers can reach this session: it listens (a publisher can connect to
+    /// it, as to a zenohd whose listener is up), or it has a session with another node.
+    /// A daemon that only connects is reachable only while one of its sessions is open.
+    #[must_use]
+    pub fn reachable(&self) -> bool {
+        self.listening.load(Ordering::Relaxed) || self.connected.load(Ordering::Relaxed)
+    }
+}
+
+/// The kind of node at the other end of one session.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Router,
+    Peer,
+    Client,
+}
+
+/// The session's unicast transports as (other node's id, its kind). Zenoh 1.10's stable
+/// `SessionInfo` lists routers and peers only (`routers_zid`, `peers_zid`), not clients;
+/// the transports, clients included, are in the session's own admin space
+/// (`@/<zid>/session/transport/unicast/<other zid>`, JSON `{"zid", "whatami", …}`), which
+/// every session answers for itself (a session-local queryable; the router admin space,
+/// off by default, is not involved). `None` when the query could not be made.
+fn transports(session: &Session, key: &str) -> Option<Vec<(String, Kind)>> {
+    let replies = session
+        .get(key)
+        .allowed_destination(Locality::SessionLocal)
+        .timeout(Duration::from_secs(1))
+        .wait()
+        .ok()?;
+    let mut out = Vec::new();
+    while let Ok(reply) = replies.recv() {
+        let Ok(sample) = reply.result() else { continue };
+        let Ok(v) = serde_json::from_slice::<serde_json::Value>(&sample.payload().to_bytes())
+        else {
+            continue;
+        };
+        let kind = match v.get("whatami").and_then(serde_json::Value::as_str) {
+            Some("router") => Kind::Router,
+            Some("peer") => Kind::Peer,
+            Some("client") => Kind::Client,
+            _ => continue,
+        };
+        let zid = v
+            .get("zid")
+            .and_then(serde_json::Value::as_str)
+            .map_or_else(|| sample.key_expr().as_str().to_owned(), str::to_owned);
+        out.push((zid, kind));
+    }
+    Some(out)
+}
+
+/// Polls the session's transports (routers, peers and clients) every `period` on a
+/// thread of its own, and calls `on_change(connected, connectivity)` at each change of
+/// "at least one router or peer session open" (the first connection included; clients
+/// are counted but do not make connections, losses or reconnections); stops when the
+/// returned handle is dropped.
 #[derive(Debug)]
 pub struct ConnectivityWatch {
     state: Arc<Connectivity>,
@@ -565,17 +703,41 @@ impl ConnectivityWatch {
     ) -> Result<Self, ZenohError> {
         let state = Arc::new(Connectivity::default());
         let st = Arc::clone(&state);
+        let key = format!("@/{}/session/transport/unicast/*", session.zid());
         let thread = std::thread::Builder::new()
             .name("glrmon-connectivity".into())
             .spawn(move || {
                 let mut ever = false;
                 let mut was = false;
-                let mut routers: Vec<zenoh::session::ZenohId> = Vec::new();
+                let mut routers: Vec<String> = Vec::new();
                 while !st.stop.load(Ordering::Relaxed) {
+                    let mut sessions = transports(&session, &key).unwrap_or_default();
+                    // The stable listing (routers and peers) too, should the admin space
+                    // not answer.
                     let info = session.info();
-                    let mut now_routers: Vec<_> = info.routers_zid().wait().collect();
+                    let r = info.routers_zid().wait().map(|z| (z, Kind::Router));
+                    let p = info.peers_zid().wait().map(|z| (z, Kind::Peer));
+                    for (zid, kind) in r.chain(p) {
+                        let zid = zid.to_string();
+                        if !sessions.iter().any(|s| s.0 == zid) {
+                            sessions.push((zid, kind));
+                        }
+                    }
+                    let count = |k: Kind| sessions.iter().filter(|s| s.1 == k).count() as u64;
+                    st.routers.store(count(Kind::Router), Ordering::Relaxed);
+                    st.peers.store(count(Kind::Peer), Ordering::Relaxed);
+                    st.clients.store(count(Kind::Client), Ordering::Relaxed);
+                    let mut now_routers: Vec<String> = sessions
+                        .iter()
+                        .filter(|s| s.1 == Kind::Router)
+                        .map(|s| s.0.clone())
+                        .collect();
                     now_routers.sort_unstable();
-                    let now = !now_routers.is_empty() || info.peers_zid().wait().next().is_some();
+                    st.connected.store(!sessions.is_empty(), Ordering::Relaxed);
+                    // Losses and reconnections are those of the network this session
+                    // joins (routers and peers, which Zenoh reconnects); clients come
+                    // and go on their own and are only counted.
+                    let now = sessions.iter().any(|s| s.1 != Kind::Client);
                     // A router that restarted between two polls comes back with a new
                     // identity: a loss and a reconnection the polls did not see apart.
                     let replaced = was
@@ -585,7 +747,6 @@ impl ConnectivityWatch {
                         && !now_routers.iter().any(|z| routers.contains(z));
                     if replaced {
                         st.losses.fetch_add(1, Ordering::Relaxed);
-                        st.connected.store(false, Ordering::Relaxed);
                         on_change(false, &st);
                         was = false;
                     }
@@ -597,7 +758,6 @@ impl ConnectivityWatch {
                             st.losses.fetch_add(1, Ordering::Relaxed);
                         }
                         ever |= now;
-                        st.connected.store(now, Ordering::Relaxed);
                         on_change(now, &st);
                         was = now;
                     }
@@ -702,6 +862,87 @@ mod tests {
                 .to_string()
                 .contains("router-ish")
         );
+    }
+
+    #[test]
+    fn endpoints_are_read_back_from_the_config() {
+        let s = SessionSettings {
+            connect: vec!["tcp/127.0.0.1:7447".into()],
+            listen: vec!["tcp/127.0.0.1:7448".into()],
+            ..SessionSettings::default()
+        };
+        assert_eq!(
+            Endpoints::of(&s).unwrap(),
+            Endpoints {
+                mode: "peer".into(),
+                listen: vec!["tcp/127.0.0.1:7448".into()],
+                connect: vec!["tcp/127.0.0.1:7447".into()],
+            }
+        );
+        let mut c = Config::default();
+        c.insert_json5("mode", "\"client\"").unwrap();
+        c.insert_json5(
+            "connect/endpoints",
+            "{router: [\"tcp/10.0.0.1:7447\"], client: [\"tcp/10.0.0.2:7447\"]}",
+        )
+        .unwrap();
+        let e = Endpoints::from_config(&c);
+        assert_eq!(e.mode, "client");
+        assert_eq!(e.connect, ["tcp/10.0.0.2:7447"]);
+    }
+
+    /// A listening peer sees a client-mode session as a client (Zenoh's stable
+    /// `SessionInfo` lists routers and peers only), and counts it gone once it closes.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_client_session_is_counted_as_a_client() {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let daemon = open(&SessionSettings {
+            listen: vec![endpoint.clone()],
+            ..SessionSettings::default()
+        })
+        .await
+        .unwrap();
+        let watch =
+            ConnectivityWatch::start(daemon.clone(), Duration::from_millis(20), |_, _| {}).unwrap();
+        let state = watch.state();
+        state.listening.store(true, Ordering::Relaxed);
+        assert!(state.reachable() && !state.connected.load(Ordering::Relaxed));
+        let client = open(&SessionSettings {
+            mode: Some("client".into()),
+            connect: vec![endpoint],
+            ..SessionSettings::default()
+        })
+        .await
+        .unwrap();
+        let wait = |want: ZenohSessions| {
+            let t = Instant::now();
+            while state.sessions() != want {
+                assert!(
+                    t.elapsed() < Duration::from_secs(10),
+                    "{:?}",
+                    state.sessions()
+                );
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        };
+        wait(ZenohSessions {
+            routers: 0,
+            peers: 0,
+            clients: 1,
+        });
+        assert!(state.connected.load(Ordering::Relaxed));
+        client.close().await.unwrap();
+        wait(ZenohSessions::default());
+        assert!(!state.connected.load(Ordering::Relaxed));
+        // A client leaving is not a loss of the network.
+        assert_eq!(state.losses.load(Ordering::Relaxed), 0);
+        drop(watch);
+        daemon.close().await.unwrap();
     }
 
     #[test]

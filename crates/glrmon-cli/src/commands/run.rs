@@ -1,6 +1,9 @@
 //! `glrmon run`: the daemon. One Zenoh session; a subscriber per channel feeds the
 //! runtime's workers; results go back on Zenoh (and to the log); SIGINT/SIGTERM stop
 //! intake, drain, publish what is pending and close the session within a bounded time.
+//! Under systemd (`Type=notify`, `NOTIFY_SOCKET` set) it reports READY=1 once intake is
+//! open, RELOADING=1 … READY=1 around a SIGHUP reload and STOPPING=1 when the drain
+//! starts, and pings the watchdog while every worker runs (`WatchdogSec=`).
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -156,6 +159,7 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         settings.listen = vec![crate::common::DEFAULT_ENDPOINT.to_owned()];
     }
     let session = open_session(&settings).await?;
+    let endpoints = glrmon_zenoh::Endpoints::of(&settings)?;
     let status_overlaps = Arc::new(std::sync::atomic::AtomicU64::new(0));
     let names: Vec<String> = cfg.channels.iter().map(|c| c.name.clone()).collect();
     let overlaps = Arc::clone(&status_overlaps);
@@ -183,7 +187,7 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
                 .load(std::sync::atomic::Ordering::Relaxed);
             if !connected {
                 tracing::warn!(
-                    "Lost every Zenoh connection (router or peers); retrying. Channels keep their state."
+                    "Lost every Zenoh connection (routers and peers); retrying. Channels keep their state."
                 );
             } else if reconnections > 0 {
                 tracing::info!(reconnections, "Reconnected to the Zenoh network.");
@@ -192,6 +196,12 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
             }
         },
     )?;
+    // A daemon that listens can be reached by publishers as soon as its listener is up
+    // (the session would not have opened otherwise): readiness does not wait for one.
+    connectivity.state().listening.store(
+        !endpoints.listen.is_empty(),
+        std::sync::atomic::Ordering::Relaxed,
+    );
     let monitors = cfg
         .channels
         .iter()
@@ -267,10 +277,20 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     })
     .await?;
     ready.store(true, std::sync::atomic::Ordering::Relaxed);
+    let zenoh_line = format!(
+        "zenoh {} {}, listen {}, connect {}",
+        endpoints.mode,
+        session.zid(),
+        list_or_none(&endpoints.listen),
+        list_or_none(&endpoints.connect)
+    );
     tracing::info!(
         instance = %instance,
         channels = cfg.channels.len(),
+        mode = %endpoints.mode,
         zid = %session.zid(),
+        listen = %list_or_none(&endpoints.listen),
+        connect = %list_or_none(&endpoints.connect),
         "Monitoring started."
     );
     // The signal handlers go in before the readiness line: a SIGHUP (systemctl reload)
@@ -286,11 +306,14 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         )
     };
     // Lets tests and supervisors know intake is open.
-    println!(
-        "glrmon run: instance {instance} monitoring {} channel(s){}",
+    let monitoring = format!(
+        "instance {instance} monitoring {} channel(s){}",
         cfg.channels.len(),
         shard.map_or(String::new(), |s| format!(" (shard {s} of {configured})"))
     );
+    println!("glrmon run: {monitoring}; {zenoh_line}");
+    notify::ready(&monitoring);
+    let watchdog = notify::watchdog(runtime.metrics());
     let timeout = Duration::from_secs_f64(cfg.daemon.shutdown_timeout);
     let mut applied = cfg;
     #[cfg(unix)]
@@ -310,9 +333,11 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
                 () = next(&mut term) => break,
                 () = next(&mut int) => break,
                 () = next(&mut hup) => {
+                    notify::reloading();
                     applied = tokio::task::block_in_place(|| {
                         reload(&args.config, applied, shard, &runtime)
                     });
+                    notify::ready(&monitoring);
                 }
             }
         }
@@ -321,6 +346,8 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     wait_for_signal().await;
     drop(applied);
     let started = Instant::now();
+    notify::stopping();
+    drop(watchdog);
     tracing::info!("Stopping: intake closed, draining.");
     drop(source);
     ready.store(false, std::sync::atomic::Ordering::Relaxed);
@@ -363,6 +390,102 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         Err(anyhow::anyhow!(
             "the drain did not finish within {timeout:?}: pending results were lost"
         ))
+    }
+}
+
+/// Endpoints for the start line: comma-separated, or "none".
+fn list_or_none(v: &[String]) -> String {
+    if v.is_empty() {
+        "none".to_owned()
+    } else {
+        v.join(",")
+    }
+}
+
+/// The systemd notification protocol (sd_notify(3)) through the `sd-notify` crate: each
+/// call does nothing when `NOTIFY_SOCKET` is unset (not started by systemd, or not
+/// `Type=notify`), and a failure to send is logged, never fatal.
+mod notify {
+    use std::sync::Arc;
+
+    use glrmon_runtime::RuntimeMetrics;
+
+    #[cfg(unix)]
+    fn send(what: &str, states: &[sd_notify::NotifyState<'_>]) {
+        if let Err(e) = sd_notify::notify(states) {
+            tracing::warn!(error = %e, "Could not tell systemd {what} (NOTIFY_SOCKET).");
+        }
+    }
+
+    /// READY=1 with a STATUS= line: intake is open (at start, and after a reload).
+    pub(super) fn ready(status: &str) {
+        #[cfg(unix)]
+        send(
+            "READY=1",
+            &[
+                sd_notify::NotifyState::Ready,
+                sd_notify::NotifyState::Status(status),
+            ],
+        );
+        #[cfg(not(unix))]
+        let _ = status;
+    }
+
+    /// RELOADING=1 with MONOTONIC_USEC= (systemd ≥ 253 needs it to match the reload to
+    /// its `ExecReload=`), before a SIGHUP reload; [`ready`] follows it.
+    pub(super) fn reloading() {
+        #[cfg(unix)]
+        {
+            let mut states = vec![sd_notify::NotifyState::Reloading];
+            if let Ok(now) = sd_notify::NotifyState::monotonic_usec_now() {
+                states.push(now);
+            }
+            send("RELOADING=1", &states);
+        }
+    }
+
+    /// STOPPING=1: the drain starts.
+    pub(super) fn stopping() {
+        #[cfg(unix)]
+        send("STOPPING=1", &[sd_notify::NotifyState::Stopping]);
+    }
+
+    /// With `WatchdogSec=` set (WATCHDOG_USEC for this process), WATCHDOG=1 every half
+    /// period while every worker thread runs: a stopped worker (or a hung runtime) lets
+    /// systemd restart the service. `None` without a watchdog; the pings stop when the
+    /// returned task is dropped (at STOPPING=1: systemd does not watch a stopping
+    /// service).
+    pub(super) fn watchdog(metrics: Arc<RuntimeMetrics>) -> Option<WatchdogTask> {
+        #[cfg(unix)]
+        {
+            let period = sd_notify::watchdog_enabled()? / 2;
+            use std::sync::atomic::Ordering;
+            let workers = metrics.workers_alive.load(Ordering::Relaxed);
+            Some(WatchdogTask(tokio::spawn(async move {
+                let mut tick = tokio::time::interval(period);
+                loop {
+                    tick.tick().await;
+                    if metrics.workers_alive.load(Ordering::Relaxed) == workers {
+                        send("WATCHDOG=1", &[sd_notify::NotifyState::Watchdog]);
+                    }
+                }
+            })))
+        }
+        #[cfg(not(unix))]
+        {
+            let _ = metrics;
+            None
+        }
+    }
+
+    /// The watchdog's ping task, aborted when dropped.
+    #[derive(Debug)]
+    pub(super) struct WatchdogTask(tokio::task::JoinHandle<()>);
+
+    impl Drop for WatchdogTask {
+        fn drop(&mut self) {
+            self.0.abort();
+        }
     }
 }
 

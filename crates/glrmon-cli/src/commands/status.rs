@@ -1,6 +1,7 @@
 //! `glrmon status [INSTANCES]`: asks every live instance (the status queryables,
 //! QueryTarget All) and prints one line each: its shard and channels, its recent
-//! throughput, active alarms, rejected and dropped input, reconnections and uptime.
+//! throughput, active alarms, rejected and dropped input, its Zenoh sessions by kind,
+//! reconnections and uptime.
 
 use std::time::Duration;
 
@@ -73,6 +74,7 @@ fn table(replies: &[(String, String)]) -> String {
             "ALARMS",
             "ERRORS",
             "DROPPED",
+            "SESSIONS",
             "RECONNECT",
             "UPTIME",
         ]
@@ -84,6 +86,7 @@ fn table(replies: &[(String, String)]) -> String {
             rows.push([
                 name.clone(),
                 "(unreadable status)".into(),
+                String::new(),
                 String::new(),
                 String::new(),
                 String::new(),
@@ -113,6 +116,7 @@ fn table(replies: &[(String, String)]) -> String {
             alarms.to_string(),
             errors.to_string(),
             dropped.to_string(),
+            sessions(v.sessions),
             format!(
                 "{}{}",
                 v.reconnections,
@@ -121,7 +125,7 @@ fn table(replies: &[(String, String)]) -> String {
             uptime(v.uptime),
         ]);
     }
-    let mut widths = [0usize; 10];
+    let mut widths = [0usize; 11];
     for r in &rows {
         for (w, c) in widths.iter_mut().zip(r) {
             *w = (*w).max(c.chars().count());
@@ -151,6 +155,28 @@ fn table(replies: &[(String, String)]) -> String {
     out
 }
 
+/// "1 router, 2 clients", "none", or "?" when the instance did not say (an earlier
+/// release).
+fn sessions(s: Option<glrmon_wire::ZenohSessions>) -> String {
+    let Some(s) = s else {
+        return "?".to_owned();
+    };
+    let parts: Vec<String> = [
+        (s.routers, "router"),
+        (s.peers, "peer"),
+        (s.clients, "client"),
+    ]
+    .iter()
+    .filter(|(n, _)| *n > 0)
+    .map(|(n, kind)| format!("{n} {kind}{}", if *n == 1 { "" } else { "s" }))
+    .collect();
+    if parts.is_empty() {
+        "none".to_owned()
+    } else {
+        parts.join(", ")
+    }
+}
+
 fn uptime(s: f64) -> String {
     let s = s.max(0.0) as u64;
     match s {
@@ -167,7 +193,7 @@ mod tests {
 
     #[test]
     fn table_sums_channels_and_marks_lost_connections() {
-        let a = r#"{"instance":"a","uptime":3725.2,"shard":"0/2","connected":true,"reconnections":1,"overlaps":0,"samples_per_second":1500.0,"channels":[{"channel":"c1","samples":10,"alarms":2,"alarm_active":true,"dropped":3,"last_k":9,"errors":{"non_finite":4}}]}"#;
+        let a = r#"{"instance":"a","uptime":3725.2,"shard":"0/2","connected":true,"reconnections":1,"overlaps":0,"samples_per_second":1500.0,"channels":[{"channel":"c1","samples":10,"alarms":2,"alarm_active":true,"dropped":3,"last_k":9,"errors":{"non_finite":4}}],"sessions":{"routers":0,"peers":0,"clients":1}}"#;
         let b = r#"{"instance":"b","uptime":5,"shard":null,"connected":false,"reconnections":0,"overlaps":0,"samples_per_second":0.0,"channels":[]}"#;
         let t = table(&[
             ("a".into(), a.into()),
@@ -180,15 +206,40 @@ mod tests {
         let a: Vec<&str> = lines[1].split_whitespace().collect();
         assert_eq!(
             a,
-            ["a", "0/2", "1", "1500", "1", "2", "4", "3", "1", "1h02m"],
+            [
+                "a", "0/2", "1", "1500", "1", "2", "4", "3", "1", "client", "1", "1h02m"
+            ],
             "{t}"
         );
-        assert!(lines[2].contains("0 (down)"), "{t}");
+        let b: Vec<&str> = lines[2].split_whitespace().collect();
+        assert_eq!(
+            b,
+            [
+                "b", "-", "0", "0", "0", "0", "0", "0", "?", "0", "(down)", "5s"
+            ],
+            "sessions unknown (an earlier release's status), no connection: {t}"
+        );
         assert_eq!(
             lines[3].split_whitespace().collect::<Vec<_>>(),
             ["c", "(unreadable", "status)"],
             "a status missing fields is not shown as zeros: {t}"
         );
         assert_eq!(lines[4], "3 instance(s), 1 channel(s), 1500 samples/s");
+    }
+
+    #[test]
+    fn sessions_are_named_by_kind() {
+        use glrmon_wire::ZenohSessions;
+        let s = |routers, peers, clients| {
+            sessions(Some(ZenohSessions {
+                routers,
+                peers,
+                clients,
+            }))
+        };
+        assert_eq!(s(0, 0, 0), "none");
+        assert_eq!(s(1, 0, 2), "1 router, 2 clients");
+        assert_eq!(s(0, 3, 1), "3 peers, 1 client");
+        assert_eq!(sessions(None), "?");
     }
 }
