@@ -2,15 +2,16 @@
 
 use std::sync::OnceLock;
 
-/// `0.1.0 (git 1a2b3c4d5e6f)`, or `(git unknown)` when built outside a git checkout
-/// (from a source tarball).
+/// `0.1.0 (git 1a2b3c4)`, or `(git unknown)` when built outside a git checkout of
+/// glrmon (a source tarball without `GLRMON_GIT_HASH`): the same commit as
+/// `glrmon_build_info` ([`glrmon_metrics::GIT_HASH`]).
 pub(crate) fn long() -> &'static str {
     static LONG: OnceLock<String> = OnceLock::new();
     LONG.get_or_init(|| {
         format!(
             "{} (git {})",
             env!("CARGO_PKG_VERSION"),
-            env!("GLRMON_GIT_COMMIT")
+            glrmon_metrics::GIT_HASH
         )
     })
 }
