@@ -65,8 +65,34 @@ pub enum ZenohError {
 fn session_err(what: &'static str) -> impl Fn(zenoh::Error) -> ZenohError {
     move |e| ZenohError::Session {
         what,
-        message: e.to_string(),
+        message: without_source_locations(&e.to_string()),
     }
+}
+
+/// Zenoh's message without the source locations its errors carry (`… at
+/// /root/.cargo/registry/src/…/unicast.rs:338.`): they tell an operator nothing and
+/// show the build machine's paths.
+fn without_source_locations(message: &str) -> String {
+    let mut out = String::with_capacity(message.len());
+    let mut rest = message;
+    while let Some(i) = rest.find(" at ") {
+        let after = &rest[i + 4..];
+        let end = after.find(|c: char| c.is_whitespace() || c == ']').unwrap_or(after.len());
+        let token = &after[..end];
+        let location = token.trim_end_matches('.');
+        let is_location = location
+            .rsplit_once(".rs:")
+            .is_some_and(|(_, line)| !line.is_empty() && line.bytes().all(|b| b.is_ascii_digit()));
+        if is_location {
+            out.push_str(&rest[..i]);
+            rest = &after[end..];
+        } else {
+            out.push_str(&rest[..i + 4]);
+            rest = after;
+        }
+    }
+    out.push_str(rest);
+    out
 }
 
 /// Builds the Zenoh configuration: the file if given, then the explicit settings on top.
@@ -76,7 +102,7 @@ fn session_err(what: &'static str) -> impl Fn(zenoh::Error) -> ZenohError {
 /// # Errors
 /// [`ZenohError::Config`] for an unreadable file or a rejected value.
 pub fn build_config(s: &SessionSettings) -> Result<Config, ZenohError> {
-    let cfg_err = |e: Box<dyn std::error::Error + Send + Sync>| ZenohError::Config(e.to_string());
+    let cfg_err = |e: Box<dyn std::error::Error + Send + Sync>| ZenohError::Config(without_source_locations(&e.to_string()));
     let mut c = match &s.config_file {
         Some(p) => {
             Config::from_file(p).map_err(|e| ZenohError::Config(format!("{}: {e}", p.display())))?
@@ -829,6 +855,23 @@ pub async fn query_status(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn zenoh_messages_lose_their_source_locations() {
+        let raw = "Can not create a new TCP listener bound to tcp/127.0.0.1:17998: \
+                   [127.0.0.1:17998: Address already in use (os error 98) at \
+                   /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-commons-1.10.2/src/tcp.rs:61.] \
+                   at /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-tcp-1.10.2/src/unicast.rs:338.";
+        assert_eq!(
+            without_source_locations(raw),
+            "Can not create a new TCP listener bound to tcp/127.0.0.1:17998: \
+             [127.0.0.1:17998: Address already in use (os error 98)]"
+        );
+        assert_eq!(
+            without_source_locations("look at the router at tcp/10.0.0.1:7447"),
+            "look at the router at tcp/10.0.0.1:7447"
+        );
+    }
 
     #[test]
     fn config_defaults_are_loopback_safe() {
