@@ -189,7 +189,13 @@ fn read_all(path: &Path) -> (Messages, ReadEnd, usize) {
     let mut schemas: BTreeMap<String, serde_json::Value> = BTreeMap::new();
     while let Some(e) = r.next_event().unwrap() {
         if let Event::Message(m) = e {
-            let (Some(c), Some(k)) = (&m.topic.channel, m.topic.kind) else {
+            // The foxglove.Log topic is every channel's: filed under "*".
+            let channel = m
+                .topic
+                .channel
+                .clone()
+                .or_else(|| (m.topic.kind == Some(TopicKind::Log)).then(|| "*".to_owned()));
+            let (Some(c), Some(k)) = (&channel, m.topic.kind) else {
                 panic!("a message without glrmon metadata: {:?}", m.topic);
             };
             assert_eq!(
@@ -453,6 +459,24 @@ fn live_run_recorded_then_replayed_gives_identical_records() {
             *compared.entry(kind).or_insert(0) += a.len();
         }
     }
+    // Every alarm and error is also a foxglove.Log message, and the replay writes the
+    // same ones, byte for byte.
+    let logs = live
+        .get(&("*".to_owned(), "log"))
+        .cloned()
+        .unwrap_or_default();
+    assert_eq!(
+        logs.len(),
+        count(&live, "unstable", "alarm")
+            + count(&live, "unstable", "error")
+            + count(&live, "ltv3", "alarm")
+            + count(&live, "ltv3", "error")
+    );
+    assert_eq!(
+        Some(&logs),
+        replayed_mcap.get(&("*".to_owned(), "log")),
+        "the replay's foxglove.Log messages differ"
+    );
     // `glrmon diagnose` reads a recording too (its configuration included).
     let diag =
         run_ok(
