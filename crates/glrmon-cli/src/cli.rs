@@ -7,6 +7,7 @@ use crate::commands::{
     calibrate, demo, diagnose, evaluate, identify, recover, replay, run, simulate, status,
     validate, watch,
 };
+use crate::commands::{info, play};
 
 /// Model-based fault detection and isolation (GLR, Zhang & Basseville 2014) on plant data.
 #[derive(Debug, Parser)]
@@ -59,6 +60,10 @@ pub(crate) enum Command {
     /// Ask every running instance for its status and print a table (instance, shard,
     /// channels, samples/s, alarms, errors, drops, reconnections, uptime).
     Status(status::StatusArgs),
+    /// Summarise a recording: size, finished or damaged, time range, messages per topic.
+    Info(info::InfoArgs),
+    /// Publish a recording's input samples again on their Zenoh keys, at recorded pace.
+    Play(play::PlayArgs),
 }
 
 impl Command {
@@ -74,8 +79,10 @@ impl Command {
             | Command::Evaluate(_)
             | Command::Recover(_)
             | Command::Diagnose(_) => true,
+            Command::Info(_) => true,
             Command::Simulate(args) => !args.publishes(),
             Command::Demo(_) | Command::Run(_) | Command::Watch(_) | Command::Status(_) => false,
+            Command::Play(_) => false,
         }
     }
 }

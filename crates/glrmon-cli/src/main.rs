@@ -19,6 +19,7 @@ use crate::commands::{
     calibrate, demo, diagnose, evaluate, identify, recover, replay, run, simulate, status,
     validate, watch,
 };
+use crate::commands::{info, play};
 use crate::common::InvalidInput;
 
 /// mimalloc: samples, records and message buffers are allocated on one thread (the
@@ -51,6 +52,8 @@ fn main() -> ExitCode {
         Command::Run(args) => run::run(args),
         Command::Watch(args) => watch::run(args),
         Command::Status(args) => status::run(args),
+        Command::Info(args) => info::run(args),
+        Command::Play(args) => play::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
