@@ -9,6 +9,7 @@ use crate::commands::{
     calibrate, demo, diagnose, docs, evaluate, identify, recover, replay, run, simulate, status,
     validate, watch,
 };
+use crate::commands::{info, play};
 use crate::log::{ColorChoice, LogFormat};
 
 /// Detect, date, isolate and size additive faults in live plant data: a Kalman
@@ -150,6 +151,10 @@ pub(crate) enum Command {
         after_help = "Examples:\n  glrmon man --out-dir /usr/local/share/man/man1\n  glrmon man --out-dir man && man -l man/glrmon.1"
     )]
     Man(docs::ManArgs),
+    /// Summarise a recording: size, finished or damaged, time range, messages per topic.
+    Info(info::InfoArgs),
+    /// Publish a recording's input samples again on their Zenoh keys, at recorded pace.
+    Play(play::PlayArgs),
 }
 
 impl Command {
@@ -165,10 +170,12 @@ impl Command {
             | Command::Evaluate(_)
             | Command::Recover(_)
             | Command::Diagnose(_)
-            | Command::Config(_) => true,
+            | Command::Config(_)
+            | Command::Info(_) => true,
             Command::Simulate(args) => !args.publishes(),
             Command::Completions(_) | Command::Man(_) => true,
             Command::Demo(_) | Command::Run(_) | Command::Watch(_) | Command::Status(_) => false,
+            Command::Play(_) => false,
         }
     }
 

@@ -21,6 +21,7 @@ use crate::commands::{
     calibrate, demo, diagnose, docs, evaluate, identify, recover, replay, run, simulate, status,
     validate, watch,
 };
+use crate::commands::{info, play};
 use crate::common::InvalidInput;
 
 /// mimalloc: samples, records and message buffers are allocated on one thread (the
@@ -61,6 +62,8 @@ fn main() -> ExitCode {
         Command::Config(args) => config::run(args),
         Command::Completions(args) => docs::completions(args),
         Command::Man(args) => docs::man(args),
+        Command::Info(args) => info::run(args, cli.zone()),
+        Command::Play(args) => play::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

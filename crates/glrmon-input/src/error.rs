@@ -51,6 +51,15 @@ pub enum InputErrorKind {
     /// row and column, and why. Invalid input.
     #[error("{0}")]
     Table(String),
+    /// A channel asked for (`glrmon play --channel`) that the recorded configuration
+    /// does not have. Invalid input.
+    #[error("channel \"{name}\" is not in the recorded configuration (channels: {})", known.join(", "))]
+    UnknownChannel {
+        /// The channel asked for.
+        name: String,
+        /// The recorded configuration's channels.
+        known: Vec<String>,
+    },
 }
 
 impl InputError {
@@ -94,7 +103,8 @@ impl InputError {
             | InputErrorKind::NoRecordedConfig
             | InputErrorKind::RecordedConfig(_)
             | InputErrorKind::Damaged(_)
-            | InputErrorKind::Table(_) => true,
+            | InputErrorKind::Table(_)
+            | InputErrorKind::UnknownChannel { .. } => true,
             InputErrorKind::OpenCsv(_) | InputErrorKind::Read(_) => false,
         }
     }

@@ -3,6 +3,7 @@
 mod csv;
 mod error;
 mod mcap;
+mod play;
 mod readahead;
 mod replay;
 mod samples;
@@ -11,6 +12,7 @@ mod table;
 pub use csv::{CsvReader, HeaderError, RowError, write_header, write_row};
 pub use error::{InputError, InputErrorKind};
 pub use mcap::{McapInput, RecordedInput, is_mcap};
+pub use play::{Playback, PlayedSample, due};
 pub use readahead::{ReadAhead, ReadAheadError};
 pub use replay::{CsvReplayed, McapReplayed, ReplayError, replay_csv, replay_mcap};
 pub use samples::{Samples, recorded_config};

@@ -67,13 +67,13 @@ pub fn replay_csv<R: BufRead + Send + 'static>(
         done.rows += 1;
         match row {
             Ok(sample) => {
-                let log_time = glrmon_record::publish_time(sample.t, 0);
+                let log_time = glrmon_record::sample_time_ns(sample.t, 0);
                 pipeline.sample(&sample, log_time, fanout)?;
                 rows_ahead.recycle(Ok(sample));
             }
             Err((e, t)) => {
                 done.rejected += 1;
-                let log_time = glrmon_record::publish_time(t, 0);
+                let log_time = glrmon_record::sample_time_ns(t, 0);
                 let message = format!("channel \"{}\": {}", pipeline.name(), e.message);
                 pipeline.rejected(e.code, message, e.k, None, log_time, fanout)?;
             }

@@ -4,10 +4,10 @@
 use std::path::{Path, PathBuf};
 
 use glrmon_runtime::{InputItem, InputOutput, Interest, Output, Sink, SinkError};
-use glrmon_wire::Record;
 
+use crate::log::log_message;
 use crate::schema::TopicKind;
-use crate::writer::{FileHeader, FileOptions, McapFile, RecordError, publish_time};
+use crate::writer::{FileHeader, FileOptions, McapFile, RecordError};
 
 /// Writes every input and every result into one MCAP file, on the caller's thread.
 #[derive(Debug)]
@@ -79,31 +79,29 @@ impl Sink for McapFileSink {
         let Some(kind) = TopicKind::of_record(&output.record) else {
             return Ok(());
         };
-        let t = match &output.record {
-            Record::Stat(r) => r.t,
-            Record::Alarm(r) => r.t,
-            Record::Isolation(r) => r.t,
-            Record::AlarmEnd(r) => r.t,
-            _ => None,
-        };
-        let publish = publish_time(t, output.log_time_ns);
-        self.put(
-            output.record.channel(),
-            kind,
-            output.log_time_ns,
-            publish,
-            &output.json,
-        )
+        // One rule on every topic: publish time = log time (docs/WIRE.md).
+        let log_time = output.log_time_ns;
+        let channel = output.record.channel();
+        self.put(channel, kind, log_time, log_time, &output.json)?;
+        match log_message(&output.record, log_time) {
+            Some(json) => self.put(channel, TopicKind::Log, log_time, log_time, &json),
+            None => Ok(()),
+        }
     }
 
     fn write_input(&mut self, input: &InputOutput) -> Result<(), SinkError> {
-        let (kind, t) = match &input.item {
-            InputItem::Sample(s) => (TopicKind::Inputs, s.t),
-            InputItem::Intake(_) => (TopicKind::Intake, None),
+        let kind = match &input.item {
+            InputItem::Sample(_) => TopicKind::Inputs,
+            InputItem::Intake(_) => TopicKind::Intake,
         };
-        let publish = publish_time(t, input.log_time_ns);
         let name = input.name.clone();
-        self.put(&name, kind, input.log_time_ns, publish, &input.json)
+        self.put(
+            &name,
+            kind,
+            input.log_time_ns,
+            input.log_time_ns,
+            &input.json,
+        )
     }
 
     fn flush(&mut self) -> Result<(), SinkError> {

@@ -7,9 +7,11 @@
 //!  McapReader (streaming, damage-tolerant) ──▶ replay / recover / diagnose
 //! ```
 //!
-//! - [`McapFile`]: one file; schemas and topics up front, the configuration in a
-//!   `glrmon` metadata record, messages in zstd chunks closed at least every
-//!   [`RecorderSettings::flush_interval`].
+//! - [`McapFile`]: one file; the configuration in a `glrmon` metadata record up front,
+//!   each topic declared with its first message, messages in zstd chunks closed at
+//!   least every [`RecorderSettings::flush_interval`]; alarms and errors also as
+//!   `foxglove.Log` messages on [`LOG_TOPIC`] ([`log_message`]).
+//! - [`summarize`]: what a recording holds (`glrmon info`).
 //! - [`Recorder`]: the [`glrmon_runtime::Sink`] the daemon and the demo use.
 //! - [`McapReader`]: reads what a crash or a bad disk leaves; [`recover`] rewrites such
 //!   a file as a finished one.
@@ -17,9 +19,11 @@
 
 mod config;
 mod file_sink;
+mod log;
 mod reader;
 mod recorder;
 mod schema;
+mod summary;
 mod writer;
 
 use std::collections::BTreeMap;
@@ -27,13 +31,15 @@ use std::path::Path;
 
 pub use config::{file_header, leftovers};
 pub use file_sink::McapFileSink;
+pub use log::{LOG_ERROR, LOG_WARNING, log_message};
 pub use reader::{Damage, Event, Lost, McapReader, Message, ReadEnd, ReadError, Salvage, Topic};
 pub use recorder::{
     Capture, PARTIAL_SUFFIX, Recorder, RecorderSettings, RecorderStats, finished_name,
 };
-pub use schema::{TopicKind, topic};
+pub use schema::{LOG_TOPIC, TopicKind, topic};
+pub use summary::{RecordingSummary, SummaryError, TopicSummary, iso8601_utc, summarize};
 pub use writer::{
-    FileHeader, FileOptions, METADATA_CONFIG, METADATA_NAME, McapFile, RecordError, publish_time,
+    FileHeader, FileOptions, METADATA_CONFIG, METADATA_NAME, McapFile, RecordError, sample_time_ns,
 };
 
 /// What [`recover`] found and wrote.
@@ -110,9 +116,13 @@ pub fn recover(input: &Path, output: &Path) -> Result<Recovery, RecoverError> {
             Event::Metadata { .. } => {}
             Event::Message(m) => {
                 ensure(&mut out, &header)?;
-                if let (Some(f), Some(channel), Some(kind)) =
-                    (&mut out, &m.topic.channel, m.topic.kind)
-                {
+                // The log topic has no channel of its own.
+                let channel = m
+                    .topic
+                    .channel
+                    .as_deref()
+                    .or((m.topic.kind == Some(TopicKind::Log)).then_some(""));
+                if let (Some(f), Some(channel), Some(kind)) = (&mut out, channel, m.topic.kind) {
                     f.write(channel, kind, m.log_time, m.publish_time, &m.data)?;
                 }
             }

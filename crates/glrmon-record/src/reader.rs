@@ -1319,6 +1319,10 @@ mod tests {
             zstd: true,
         };
         let mut f = McapFile::create(&path, options, &header).unwrap();
+        for channel in ["a", "b"] {
+            f.declare(channel, TopicKind::Inputs).unwrap();
+        }
+        f.flush().unwrap();
         let mut messages = Vec::new();
         for k in 0..3000u64 {
             let json = format!("{{\"k\":{k},\"y\":[{}]}}", k as f64 * 0.25);

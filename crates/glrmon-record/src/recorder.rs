@@ -11,10 +11,10 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use glrmon_runtime::{InputItem, InputOutput, Interest, Output, Sink, SinkError};
-use glrmon_wire::Record;
 
+use crate::log::log_message;
 use crate::schema::TopicKind;
-use crate::writer::{FileHeader, FileOptions, McapFile, RecordError, publish_time};
+use crate::writer::{FileHeader, FileOptions, McapFile, RecordError};
 
 /// Suffix of a file being written; renamed to `.mcap` when finished.
 pub const PARTIAL_SUFFIX: &str = ".mcap.tmp";
@@ -250,33 +250,40 @@ impl Sink for Recorder {
         let Some(kind) = TopicKind::of_record(&output.record) else {
             return Ok(());
         };
-        let t = match &output.record {
-            Record::Stat(r) => r.t,
-            Record::Alarm(r) => r.t,
-            Record::Isolation(r) => r.t,
-            Record::AlarmEnd(r) => r.t,
-            _ => None,
-        };
+        // One rule on every topic: publish time = log time (docs/WIRE.md).
+        let log_time = output.log_time_ns;
+        let channel: Arc<str> = Arc::from(output.record.channel());
         self.send(Msg::Write {
-            channel: Arc::from(output.record.channel()),
+            channel: channel.clone(),
             kind,
-            log_time: output.log_time_ns,
-            publish_time: publish_time(t, output.log_time_ns),
+            log_time,
+            publish_time: log_time,
             json: output.json.clone(),
             alarm: kind == TopicKind::Alarm,
-        })
+        })?;
+        match log_message(&output.record, log_time) {
+            Some(json) => self.send(Msg::Write {
+                channel,
+                kind: TopicKind::Log,
+                log_time,
+                publish_time: log_time,
+                json,
+                alarm: false,
+            }),
+            None => Ok(()),
+        }
     }
 
     fn write_input(&mut self, input: &InputOutput) -> Result<(), SinkError> {
-        let (kind, t) = match &input.item {
-            InputItem::Sample(s) => (TopicKind::Inputs, s.t),
-            InputItem::Intake(_) => (TopicKind::Intake, None),
+        let kind = match &input.item {
+            InputItem::Sample(_) => TopicKind::Inputs,
+            InputItem::Intake(_) => TopicKind::Intake,
         };
         self.send(Msg::Write {
             channel: input.name.clone(),
             kind,
             log_time: input.log_time_ns,
-            publish_time: publish_time(t, input.log_time_ns),
+            publish_time: input.log_time_ns,
             json: input.json.clone(),
             alarm: false,
         })
@@ -524,24 +531,8 @@ fn nanos(d: Duration) -> u64 {
 /// `YYYYMMDDTHHMMSSZ` for a time (UTC).
 fn utc_stamp(t: SystemTime) -> String {
     let secs = t.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
-    let days = i64::try_from(secs / 86_400).unwrap_or(0);
-    let rem = secs % 86_400;
-    // Howard Hinnant's civil_from_days.
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    format!(
-        "{y:04}{m:02}{d:02}T{:02}{:02}{:02}Z",
-        rem / 3600,
-        (rem % 3600) / 60,
-        rem % 60
-    )
+    let (y, m, d, hh, mm, ss) = crate::summary::civil(secs);
+    format!("{y:04}{m:02}{d:02}T{hh:02}{mm:02}{ss:02}Z")
 }
 
 #[cfg(test)]

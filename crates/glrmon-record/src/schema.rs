@@ -30,11 +30,15 @@ pub enum TopicKind {
     Error,
     /// `consistency` records.
     Consistency,
+    /// Alarms and errors as `foxglove.Log` messages, for Foxglove's Log panel: one
+    /// topic for every channel, [`LOG_TOPIC`] (the message's `name` is the channel).
+    /// Output, never input: replay ignores it.
+    Log,
 }
 
 impl TopicKind {
     /// Every kind, in topic order.
-    pub const ALL: [TopicKind; 9] = [
+    pub const ALL: [TopicKind; 10] = [
         TopicKind::Inputs,
         TopicKind::Intake,
         TopicKind::Stat,
@@ -44,6 +48,7 @@ impl TopicKind {
         TopicKind::Diagnosis,
         TopicKind::Error,
         TopicKind::Consistency,
+        TopicKind::Log,
     ];
 
     /// The last part of the topic and the `kind` metadata value.
@@ -59,6 +64,7 @@ impl TopicKind {
             TopicKind::Diagnosis => "diagnosis",
             TopicKind::Error => "error",
             TopicKind::Consistency => "consistency",
+            TopicKind::Log => "log",
         }
     }
 
@@ -97,6 +103,7 @@ impl TopicKind {
             TopicKind::Diagnosis => "glrmon.Diagnosis",
             TopicKind::Error => "glrmon.Error",
             TopicKind::Consistency => "glrmon.Consistency",
+            TopicKind::Log => "foxglove.Log",
         }
     }
 
@@ -113,14 +120,22 @@ impl TopicKind {
             TopicKind::Diagnosis => DIAGNOSIS,
             TopicKind::Error => ERROR,
             TopicKind::Consistency => CONSISTENCY,
+            TopicKind::Log => LOG,
         }
     }
 }
 
-/// The topic of `kind` for `channel`.
+/// The topic of the `foxglove.Log` messages of every channel ([`TopicKind::Log`]).
+pub const LOG_TOPIC: &str = "glrmon/log";
+
+/// The topic of `kind` for `channel` (for [`TopicKind::Log`], [`LOG_TOPIC`] whatever
+/// the channel).
 #[must_use]
 pub fn topic(channel: &str, kind: TopicKind) -> String {
-    format!("glrmon/{channel}/{}", kind.as_str())
+    match kind {
+        TopicKind::Log => LOG_TOPIC.to_owned(),
+        _ => format!("glrmon/{channel}/{}", kind.as_str()),
+    }
 }
 
 const SAMPLE: &str = r#"{
@@ -290,6 +305,31 @@ const ERROR: &str = r#"{
   },
   "required": ["type", "channel", "code", "message", "stage"],
   "additionalProperties": false
+}"#;
+
+/// Foxglove's `foxglove.Log` message (its fields and level numbers), in the keywords
+/// above: `level` is 0 unknown, 1 debug, 2 info, 3 warning, 4 error, 5 fatal.
+const LOG: &str = r#"{
+  "title": "foxglove.Log",
+  "description": "A log message (Foxglove's Log panel): a glrmon alarm (warning) or error record (error).",
+  "type": "object",
+  "properties": {
+    "timestamp": {
+      "type": "object",
+      "description": "The record's log time",
+      "properties": {
+        "sec": {"type": "integer"},
+        "nsec": {"type": "integer"}
+      },
+      "required": ["sec", "nsec"]
+    },
+    "level": {"type": "integer", "enum": [0, 1, 2, 3, 4, 5], "description": "0 unknown, 1 debug, 2 info, 3 warning, 4 error, 5 fatal"},
+    "message": {"type": "string", "description": "What happened"},
+    "name": {"type": "string", "description": "The glrmon channel"},
+    "file": {"type": "string", "description": "The record's topic"},
+    "line": {"type": "integer", "description": "The record's sample index k (0 when it has none)"}
+  },
+  "required": ["timestamp", "level", "message", "name", "file", "line"]
 }"#;
 
 const CONSISTENCY: &str = r#"{

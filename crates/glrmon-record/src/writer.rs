@@ -1,5 +1,6 @@
-//! One MCAP file being written: schemas and topics registered up front, the
-//! configuration in a `glrmon` metadata record, messages in zstd chunks.
+//! One MCAP file being written: the configuration in a `glrmon` metadata record up
+//! front, each topic (and its schema) declared with its first message, messages in zstd
+//! chunks.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
@@ -53,7 +54,8 @@ pub struct FileHeader {
     /// The configuration in force (TOML text): `glrmon replay FILE.mcap` needs no
     /// `--config`.
     pub config: String,
-    /// The channels, in configuration order; their topics are registered up front.
+    /// The channels, in configuration order (a topic is declared only when its first
+    /// message is written).
     pub channels: Vec<String>,
     /// Free-form entries (instance, version, start time…).
     pub extra: BTreeMap<String, String>,
@@ -84,8 +86,10 @@ impl std::fmt::Debug for McapFile {
 }
 
 impl McapFile {
-    /// Creates `path` (truncating it) and writes the header, the `glrmon` metadata and
-    /// every channel's topics, flushed so that even a file killed at once is readable.
+    /// Creates `path` (truncating it) and writes the header and the `glrmon` metadata,
+    /// flushed so that even a file killed at once is readable. Topics are declared
+    /// lazily: a topic and its schema are written with the first message on it, so a
+    /// file has no topic without messages.
     ///
     /// # Errors
     /// [`RecordError`] when the file cannot be created or written.
@@ -123,11 +127,6 @@ impl McapFile {
                 metadata: entries,
             })
             .map_err(|e| mcap_err(path, &e))?;
-        for channel in &header.channels {
-            for kind in TopicKind::ALL {
-                f.topic_id(channel, kind)?;
-            }
-        }
         f.flush()?;
         Ok(f)
     }
@@ -142,6 +141,17 @@ impl McapFile {
     #[must_use]
     pub fn messages(&self) -> u64 {
         self.messages
+    }
+
+    /// Declares `channel`'s topic of `kind` (and its schema) before its first message,
+    /// in the current chunk ([`McapFile::write`] declares a topic it has not seen in a
+    /// chunk of its own); nothing if it is declared already.
+    ///
+    /// # Errors
+    /// [`RecordError`] when writing fails.
+    pub fn declare(&mut self, channel: &str, kind: TopicKind) -> Result<(), RecordError> {
+        let channel = if kind == TopicKind::Log { "" } else { channel };
+        self.topic_id(channel, kind).map(|_| ())
     }
 
     fn topic_id(&mut self, channel: &str, kind: TopicKind) -> Result<u16, RecordError> {
@@ -159,10 +169,11 @@ impl McapFile {
                 id
             }
         };
-        let metadata = BTreeMap::from([
-            ("channel".to_owned(), channel.to_owned()),
-            ("kind".to_owned(), kind.as_str().to_owned()),
-        ]);
+        let mut metadata = BTreeMap::from([("kind".to_owned(), kind.as_str().to_owned())]);
+        // The log topic is every channel's: its messages name the channel.
+        if kind != TopicKind::Log {
+            metadata.insert("channel".to_owned(), channel.to_owned());
+        }
         let id = self
             .writer
             .add_channel(schema, &topic(channel, kind), "json", &metadata)
@@ -171,7 +182,10 @@ impl McapFile {
         Ok(id)
     }
 
-    /// Writes one JSON message on `channel`'s topic of `kind`.
+    /// Writes one JSON message on `channel`'s topic of `kind` (declaring the topic if
+    /// it is its first message; `channel` is ignored for [`TopicKind::Log`], whose
+    /// topic is every channel's). glrmon writes `publish_time` = `log_time` on every
+    /// topic (docs/WIRE.md, "Timestamps in recordings").
     ///
     /// # Errors
     /// [`RecordError`] when writing fails.
@@ -183,9 +197,18 @@ impl McapFile {
         publish_time: u64,
         json: &[u8],
     ) -> Result<(), RecordError> {
+        let channel = if kind == TopicKind::Log { "" } else { channel };
         let channel_id = match self.ids.get(&(channel.to_owned(), kind)) {
             Some(&id) => id,
-            None => self.topic_id(channel, kind)?,
+            None => {
+                // The declaration in a chunk of its own, on disk at once: a crash or a
+                // damaged data chunk later leaves the topic readable, as when every
+                // topic was declared up front.
+                self.flush()?;
+                let id = self.topic_id(channel, kind)?;
+                self.flush()?;
+                id
+            }
         };
         self.writer
             .write_to_known_channel(
@@ -242,10 +265,12 @@ fn mcap_err(path: &Path, e: &mcap::McapError) -> RecordError {
     }
 }
 
-/// MCAP publish time for a sample time `t` in seconds: nanoseconds, or `fallback` when
-/// `t` is absent, negative or too large.
+/// A sample time `t` in seconds as nanoseconds, or `fallback` when `t` is absent,
+/// negative or too large: the log time the offline tools give samples that have no
+/// receive time (a CSV file, `glrmon simulate`), so that their output is the same on
+/// every run.
 #[must_use]
-pub fn publish_time(t: Option<f64>, fallback: u64) -> u64 {
+pub fn sample_time_ns(t: Option<f64>, fallback: u64) -> u64 {
     match t {
         Some(t) if (0.0..1.8e10).contains(&t) => (t * 1e9) as u64,
         _ => fallback,

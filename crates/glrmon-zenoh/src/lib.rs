@@ -77,7 +77,9 @@ fn without_source_locations(message: &str) -> String {
     let mut rest = message;
     while let Some(i) = rest.find(" at ") {
         let after = &rest[i + 4..];
-        let end = after.find(|c: char| c.is_whitespace() || c == ']').unwrap_or(after.len());
+        let end = after
+            .find(|c: char| c.is_whitespace() || c == ']')
+            .unwrap_or(after.len());
         let token = &after[..end];
         let location = token.trim_end_matches('.');
         let is_location = location
@@ -102,7 +104,9 @@ fn without_source_locations(message: &str) -> String {
 /// # Errors
 /// [`ZenohError::Config`] for an unreadable file or a rejected value.
 pub fn build_config(s: &SessionSettings) -> Result<Config, ZenohError> {
-    let cfg_err = |e: Box<dyn std::error::Error + Send + Sync>| ZenohError::Config(without_source_locations(&e.to_string()));
+    let cfg_err = |e: Box<dyn std::error::Error + Send + Sync>| {
+        ZenohError::Config(without_source_locations(&e.to_string()))
+    };
     let mut c = match &s.config_file {
         Some(p) => {
             Config::from_file(p).map_err(|e| ZenohError::Config(format!("{}: {e}", p.display())))?

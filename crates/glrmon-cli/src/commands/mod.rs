@@ -8,6 +8,8 @@ pub(crate) mod diagnose;
 pub(crate) mod docs;
 pub(crate) mod evaluate;
 pub(crate) mod identify;
+pub(crate) mod info;
+pub(crate) mod play;
 pub(crate) mod recover;
 pub(crate) mod replay;
 pub(crate) mod run;

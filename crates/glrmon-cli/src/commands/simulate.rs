@@ -132,7 +132,7 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
             };
             json.clear();
             glrmon_wire::encode_sample(&channel.name, &sample, &mut json)?;
-            let time = glrmon_record::publish_time(t, x.k);
+            let time = glrmon_record::sample_time_ns(t, x.k);
             out.write(
                 &channel.name,
                 glrmon_record::TopicKind::Inputs,
