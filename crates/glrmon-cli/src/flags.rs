@@ -101,38 +101,13 @@ impl Mode {
     }
 }
 
-/// Checks a Zenoh endpoint, `PROTOCOL/ADDRESS[?metadata][#config]`, when the command
-/// line is parsed; an IP transport's address needs a host and a port.
+/// Checks a Zenoh endpoint when the command line is parsed
+/// ([`glrmon_spec::check_endpoint`], then Zenoh's own parser).
 pub(crate) fn endpoint(s: &str) -> Result<String, String> {
-    let hint = |why: &str| {
-        let example = if s.contains('/') {
-            "tcp/127.0.0.1:7447".to_owned()
-        } else {
-            format!("tcp/{s}")
-        };
-        format!("{why}: an endpoint is PROTOCOL/ADDRESS, e.g. {example}")
-    };
-    let Some((protocol, rest)) = s.split_once('/') else {
-        return Err(hint("no protocol"));
-    };
-    if protocol.is_empty()
-        || !protocol
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '-')
-    {
-        return Err(hint(&format!("\"{protocol}\" is not a protocol")));
-    }
-    let address = rest.split(['?', '#']).next().unwrap_or_default();
-    if matches!(protocol, "tcp" | "udp" | "tls" | "quic" | "ws") {
-        let port_ok = address
-            .rsplit_once(':')
-            .is_some_and(|(host, port)| !host.is_empty() && port.parse::<u16>().is_ok());
-        if !port_ok {
-            return Err(hint(&format!("\"{address}\" is not HOST:PORT")));
-        }
-    }
-    s.parse::<zenoh::config::EndPoint>()
-        .map_err(|_| hint("not a Zenoh endpoint"))?;
+    glrmon_spec::check_endpoint(s)?;
+    s.parse::<zenoh::config::EndPoint>().map_err(|_| {
+        format!("\"{s}\" is not a Zenoh endpoint: PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447")
+    })?;
     Ok(s.to_owned())
 }
 

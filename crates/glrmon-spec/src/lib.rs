@@ -866,6 +866,16 @@ pub fn parse(text: &str) -> Result<Config, SpecErrors> {
             locate::not_one_of(mode, &["peer", "client", "router"]),
         );
     }
+    for (field, endpoints) in [
+        ("zenoh.connect", &file.zenoh.connect),
+        ("zenoh.listen", &file.zenoh.listen),
+    ] {
+        for (i, e) in endpoints.iter().enumerate() {
+            if let Err(why) = check_endpoint(e) {
+                v.error(format!("{field}[{i}]"), why);
+            }
+        }
+    }
     let d = &file.daemon;
     if d.workers == Some(0)
         || d.worker_queue == 0
@@ -2757,4 +2767,53 @@ mod shard_tests {
             assert!(e.contains(bad), "{e}");
         }
     }
+}
+
+/// Checks the syntax of a Zenoh endpoint, `PROTOCOL/ADDRESS[?metadata][#config]`: a
+/// protocol name, and for the IP transports (tcp, udp, tls, quic, ws) an address with a
+/// host and a port. The error says why and shows the likely fix (`127.0.0.1:7447` →
+/// `tcp/127.0.0.1:7447`). Zenoh itself checks the rest when the session opens.
+///
+/// # Errors
+/// A message for the user when the endpoint is malformed.
+///
+/// # Examples
+///
+/// ```
+/// assert!(glrmon_spec::check_endpoint("tcp/127.0.0.1:7447").is_ok());
+/// let e = glrmon_spec::check_endpoint("127.0.0.1:7447").unwrap_err();
+/// assert!(e.contains("tcp/127.0.0.1:7447"));
+/// ```
+pub fn check_endpoint(s: &str) -> Result<(), String> {
+    let hint = |why: &str| {
+        let example = if s.contains('/') {
+            "tcp/127.0.0.1:7447".to_owned()
+        } else {
+            format!("tcp/{s}")
+        };
+        format!("\"{s}\": {why}: an endpoint is PROTOCOL/ADDRESS, e.g. {example}")
+    };
+    let Some((protocol, rest)) = s.split_once('/') else {
+        return Err(hint("no protocol"));
+    };
+    if protocol.is_empty()
+        || !protocol
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-')
+    {
+        return Err(hint(&format!("\"{protocol}\" is not a protocol")));
+    }
+    let address = rest.split(['?', '#']).next().unwrap_or_default();
+    if address.is_empty() {
+        return Err(hint("no address"));
+    }
+    if matches!(protocol, "tcp" | "udp" | "tls" | "quic" | "ws") {
+        let port_ok = address
+            .rsplit_once(':')
+            .is_some_and(|(host, port)| !host.is_empty() && port.parse::<u16>().is_ok());
+        if !port_ok {
+            return Err(hint(&format!("\"{address}\" is not HOST:PORT")));
+        }
+    }
+    Ok(())
 }

@@ -559,3 +559,24 @@ fn all_sensors_and_all_actuators_expand_to_one_fault_per_signal() {
         "duplicate fault name \"y0_bias\"",
     );
 }
+
+/// `[zenoh]` endpoints are checked with the file, as `--listen`/`--connect` are on the
+/// command line: `validate` refuses `127.0.0.1:7447` (no protocol) with the fix, instead
+/// of `run` failing on Zenoh's JSON5 error.
+#[test]
+fn malformed_zenoh_endpoints_name_their_field_and_the_fix() {
+    let text = format!(
+        "[zenoh]\nlisten = [\"tcp/127.0.0.1:7447\", \"127.0.0.1:7448\"]\nconnect = [\"tcp/router\"]\n{BASE}"
+    );
+    let e = errors(&text);
+    assert_eq!(e.len(), 2, "{e:?}");
+    assert!(
+        e[0].starts_with("zenoh.connect[0]: \"tcp/router\": \"router\" is not HOST:PORT"),
+        "{e:?}"
+    );
+    assert!(
+        e[1].starts_with("zenoh.listen[1]: \"127.0.0.1:7448\": no protocol")
+            && e[1].ends_with("e.g. tcp/127.0.0.1:7448"),
+        "{e:?}"
+    );
+}
