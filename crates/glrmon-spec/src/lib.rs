@@ -2734,41 +2734,6 @@ fn validate_name(name: &str) -> Result<(), String> {
     Ok(())
 }
 
-#[cfg(test)]
-mod shard_tests {
-    use super::*;
-
-    #[test]
-    fn shards_partition_the_channels_and_parse_strictly() {
-        let names: Vec<String> = (0..1000).map(|i| format!("pump{i:03}")).collect();
-        for count in [1_u32, 2, 3, 7] {
-            let shards: Vec<Shard> = (0..count).map(|index| Shard { index, count }).collect();
-            let mut sizes = vec![0usize; count as usize];
-            for n in &names {
-                let owners: Vec<&Shard> = shards.iter().filter(|s| s.owns(n)).collect();
-                assert_eq!(owners.len(), 1, "{n} in {count} shards");
-                sizes[owners[0].index as usize] += 1;
-            }
-            // A fair split: every shard within 25 % of 1000/N.
-            let fair = 1000.0 / f64::from(count);
-            assert!(
-                sizes
-                    .iter()
-                    .all(|s| (*s as f64 - fair).abs() <= 0.25 * fair),
-                "{sizes:?}"
-            );
-        }
-        // Fixed values: the assignment must never change between releases.
-        assert_eq!(shard_hash(""), 0xcbf2_9ce4_8422_2325);
-        assert_eq!(shard_hash("a"), 0xaf63_dc4c_8601_ec8c);
-        assert_eq!("1/2".parse::<Shard>(), Ok(Shard { index: 1, count: 2 }));
-        for bad in ["2/2", "1", "x/2", "0/0", "-1/2"] {
-            let e = bad.parse::<Shard>().unwrap_err();
-            assert!(e.contains(bad), "{e}");
-        }
-    }
-}
-
 /// Checks the syntax of a Zenoh endpoint, `PROTOCOL/ADDRESS[?metadata][#config]`: a
 /// protocol name, and for the IP transports (tcp, udp, tls, quic, ws) an address with a
 /// host and a port. The error says why and shows the likely fix (`127.0.0.1:7447` →
@@ -2816,4 +2781,39 @@ pub fn check_endpoint(s: &str) -> Result<(), String> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod shard_tests {
+    use super::*;
+
+    #[test]
+    fn shards_partition_the_channels_and_parse_strictly() {
+        let names: Vec<String> = (0..1000).map(|i| format!("pump{i:03}")).collect();
+        for count in [1_u32, 2, 3, 7] {
+            let shards: Vec<Shard> = (0..count).map(|index| Shard { index, count }).collect();
+            let mut sizes = vec![0usize; count as usize];
+            for n in &names {
+                let owners: Vec<&Shard> = shards.iter().filter(|s| s.owns(n)).collect();
+                assert_eq!(owners.len(), 1, "{n} in {count} shards");
+                sizes[owners[0].index as usize] += 1;
+            }
+            // A fair split: every shard within 25 % of 1000/N.
+            let fair = 1000.0 / f64::from(count);
+            assert!(
+                sizes
+                    .iter()
+                    .all(|s| (*s as f64 - fair).abs() <= 0.25 * fair),
+                "{sizes:?}"
+            );
+        }
+        // Fixed values: the assignment must never change between releases.
+        assert_eq!(shard_hash(""), 0xcbf2_9ce4_8422_2325);
+        assert_eq!(shard_hash("a"), 0xaf63_dc4c_8601_ec8c);
+        assert_eq!("1/2".parse::<Shard>(), Ok(Shard { index: 1, count: 2 }));
+        for bad in ["2/2", "1", "x/2", "0/0", "-1/2"] {
+            let e = bad.parse::<Shard>().unwrap_err();
+            assert!(e.contains(bad), "{e}");
+        }
+    }
 }
