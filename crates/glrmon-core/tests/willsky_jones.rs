@@ -355,9 +355,9 @@ fn app_a_identity_on_a_stable_ltv_plant_holds_only_with_f_k_in_a7_a8() {
 ///
 /// The identity ρ_k(r) = H_kΓ_k(r) (A.25) still holds in exact arithmetic; in floating
 /// point, (A.8) subtracts two matrices of norm ~1.2ʲ to get one that decays, so it holds
-/// to 10⁻¹⁰ over the first samples only (asserted for j ≤ 8; measured 1.4·10⁻¹³ at
-/// j = 8, 4·10⁻⁶ at j = 20), from j = 40 on ρ has no correct digit (deviation > 5 %,
-/// measured ≥ 25 %), and beyond j = 200 the deviation exceeds 10²⁰. That is the paper's
+/// to 10⁻¹⁰ over the first samples only (asserted for j ≤ 8; measured ≤ 2.5·10⁻¹³ at
+/// j = 8, 2-4·10⁻⁶ at j = 20), from j = 40 on ρ has no correct digit (deviation > 5 %,
+/// measured ≥ 8 %), and beyond j = 200 the deviation exceeds 10²⁰ (measured 2·10³⁴). That is the paper's
 /// point: (A.6)-(A.8) cannot be used on an unstable plant.
 #[test]
 fn app_a_fig2_alpha_diverges_on_s61_plant_while_gamma_stays_bounded() {
