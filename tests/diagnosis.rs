@@ -1,6 +1,6 @@
 //! Sparse fault diagnosis (Zhang 2021) end to end: `glrmon simulate` and
 //! `glrmon diagnose` on the paper's Example 1 (config/examples/paper2021-example1.toml),
-//! and its Table I rate at q = 5 through the library (the code of the `table1` example).
+//! and its Table I rates for every q through the library (the code of the `table1` example).
 
 use std::process::Command;
 
@@ -229,28 +229,86 @@ fn replay_emits_the_diagnosis_right_after_the_alarm() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Zhang 2021, Table I at q = 5 (the paper: 99.5 % over 1000 trials): at least 95 % of
-/// 200 seeded trials recover the exact support. `cargo run --release -p glrmon-cli
-/// --example table1` runs the whole table.
+/// glrmon's own exact-support rates (%) on Example 1, q = 5…25, 1000 trials per q with
+/// the seeds [`table_1_exact_support_rate_every_q`] draws its first trials from:
+/// `cargo run -p glrmon-cli --example table1 -- --trials 1000` (seed 2021).
+const GLRMON_1000: [f64; 21] = [
+    99.8, 98.2, 97.4, 94.3, 90.8, 83.4, 80.0, 70.6, 62.9, 54.2, 48.3, 42.3, 35.7, 29.4, 27.5, 22.4,
+    20.6, 13.9, 14.5, 11.1, 10.3,
+];
+
+/// Zhang 2021, Table I for every q = 5…25 (1000 trials each in the paper), 300 seeded
+/// trials per q through the library (the code of the `table1` example; ~40 s in a
+/// test build). s.e. is the standard error of the difference between our rate and the
+/// paper's if both had the paper's rate p: √(p(1 − p)(1/300 + 1/1000))
+/// ([`table1::difference_se`]).
+///
+/// - q = 5, 6, 7: the measured rate is within ±3 s.e. of the paper's.
+/// - q ≥ 8: glrmon is above the paper, increasingly with q (1000 trials: 94.3 vs 90.0 %
+///   at q = 8, 90.8 vs 81.7 % at q = 9, 48.3 vs 29.5 % at q = 15, 10.3 vs 2.2 % at
+///   q = 25; 3.6 s.e. and more of the 1000-trial difference), so we assert at least
+///   the paper's rate − 3 s.e., and, so that a change of glrmon's could still fail,
+///   within ±3 standard errors of glrmon's own 1000-trial rate ([`GLRMON_1000`];
+///   s.e. with 1/300 + 1/1000 as above, conservative since our 300 trials are the
+///   first 300 of those 1000).
+///
+/// Why glrmon is above the paper was looked for, not found. Not the λ rule: on 200
+/// trials per q (q = 5, 7, …, 25), measuring the plateau's width and middle in λ
+/// instead of ln λ, or not excluding the dense run, changes the rate by at most 3
+/// points either way (q = 9: 92.5 % for all three rules; q = 15: 45.0, 44.0, 43.5 %),
+/// and the path holds the exact support at some λ in only a few more trials (q = 9:
+/// 97.5 %; q = 15: 57 %): no reading of "the middle of the range" can come down to
+/// 81.7 % or 29.5 % from above while staying a plateau rule. Not the least-squares
+/// refit: it runs on the support the Lasso chose and changes only the magnitudes. What
+/// the paper does not state and may differ: its Lasso solver and λ grid ("numerically
+/// exploring different values of λ"; e.g. MATLAB's `lasso` standardises the columns
+/// and fits an intercept by default), and how Φ_k's entries are drawn beyond "uniform
+/// within [−17.3, 17.3]" (we draw them afresh at every k).
 #[test]
-fn table_1_exact_support_rate_at_q5() {
+fn table_1_exact_support_rate_every_q() {
     let channel = table1::example1_channel(
         &table1::example1_path(),
         glrmon_spec::ResidualKind::Kitanidis,
     )
     .unwrap();
-    let trials = 200;
-    let mut ok = 0;
-    for t in 0..trials {
-        let (truth, found) =
-            table1::trial(&channel, 5, table1::trial_seed(2021, 5, t), false).unwrap();
-        ok += u64::from(truth == found);
+    let trials = 300u64;
+    let start = std::time::Instant::now();
+    let mut failures = Vec::new();
+    for (i, &(q, paper)) in table1::PAPER.iter().enumerate() {
+        let mut ok = 0;
+        for t in 0..trials {
+            let (truth, found) =
+                table1::trial(&channel, q, table1::trial_seed(2021, q, t), false).unwrap();
+            ok += u64::from(truth == found);
+        }
+        let rate = ok as f64 / trials as f64;
+        let p = paper / 100.0;
+        let se = table1::difference_se(p, trials);
+        let own = GLRMON_1000[i] / 100.0;
+        let own_se = (own * (1.0 - own) * (1.0 / trials as f64 + 1.0 / 1000.0)).sqrt();
+        let (lo, hi) = table1::wilson(ok, trials);
+        let verdict = if q <= 7 {
+            (rate - p).abs() <= 3.0 * se
+        } else {
+            rate >= p - 3.0 * se && (rate - own).abs() <= 3.0 * own_se
+        };
+        println!(
+            "Table I, q = {q:2}: {ok:3}/{trials} = {:5.1} % (95 % CI [{:5.1}, {:5.1}]), paper \
+             {paper:4.1} % ± 3 s.e. = ±{:.1}, (rate − paper)/s.e. = {:+.1}{}",
+            100.0 * rate,
+            100.0 * lo,
+            100.0 * hi,
+            300.0 * se,
+            (rate - p) / se,
+            if verdict { "" } else { "  <- FAILS" }
+        );
+        if !verdict {
+            failures.push(q);
+        }
     }
-    let (lo, hi) = table1::wilson(ok, trials);
-    println!(
-        "Table I, q = 5: {ok}/{trials} exact supports, 95 % CI [{:.1}, {:.1}] %",
-        100.0 * lo,
-        100.0 * hi
+    println!("Table I: {:.1} s", start.elapsed().as_secs_f64());
+    assert!(
+        failures.is_empty(),
+        "Table I out of band at q = {failures:?}"
     );
-    assert!(ok >= 190, "{ok}/{trials}");
 }

@@ -133,7 +133,8 @@ fn m(rows: usize, cols: usize, v: &[f64]) -> DMatrix<f64> {
 }
 
 /// The unstable plant of Zhang & Basseville 2014, §6.1 (eqs. (51)-(52)): F =
-/// [[0.5, 1], [0, 1.2]] (eigenvalue 1.28 > 1), G = [0, 1]ᵀ, H = [1, 0], Q = 0.0025 I,
+/// [[0.5, 1], [0, 1.2]] (eigenvalues 0.5 and 1.2 > 1; the paper's text says 1.2808,
+/// which this printed F does not have), G = [0, 1]ᵀ, H = [1, 0], Q = 0.0025 I,
 /// R = 0.0025, closed by the PI controller u_k = 0.209 e_k + I_k, I_{k+1} = I_k +
 /// 0.0011 e_k, e_k = 1 − y_k; impulse faults on each state (Ψ̃ = e₁, e₂); w = 100, s = 1.
 #[must_use]
