@@ -1,10 +1,9 @@
 //! End-to-end tests of the real `glrmon` binary.
 
-use std::process::Command;
+#[path = "support.rs"]
+mod support;
 
-fn glrmon() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_glrmon"))
-}
+use support::{Scratch, glrmon};
 
 /// `glrmon demo` (what `make demo` runs): the faulty channel raises exactly one alarm,
 /// isolating the injected fault, the clean channels none; the JSONL output holds one
@@ -172,24 +171,6 @@ fn a_closed_pipe_ends_an_offline_command_quietly() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert_eq!(out.status.signal(), Some(13), "{:?}: {stderr}", out.status);
-}
-
-/// A scratch directory removed at the end of the test.
-struct Scratch(std::path::PathBuf);
-
-impl Scratch {
-    fn new(name: &str) -> Self {
-        let dir = std::env::temp_dir().join(format!("glrmon-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        Scratch(dir)
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 const EXAMPLE: &str = concat!(

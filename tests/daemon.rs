@@ -1,6 +1,9 @@
 //! End-to-end tests of `glrmon run` (the real binary) on real Zenoh sessions over
 //! loopback: explicit tcp/127.0.0.1 endpoints, multicast scouting off, no mocks.
 
+#[path = "support.rs"]
+mod support;
+
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
@@ -9,13 +12,9 @@ use std::time::{Duration, Instant};
 
 use glrmon_wire::{Record, Sample, decode_record, encode_sample};
 use glrmon_zenoh::SessionSettings;
+use support::free_port;
 use zenoh::Wait as _;
 use zenoh::query::QueryTarget;
-
-fn free_port() -> u16 {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    l.local_addr().unwrap().port()
-}
 
 /// A running `glrmon run`, killed if the test ends early.
 struct Daemon {

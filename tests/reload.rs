@@ -304,36 +304,7 @@ async fn sighup_with_hostile_configs_is_refused_and_the_daemon_goes_on() {
         daemon.stderr.lock().unwrap()
     );
     // Still monitoring: samples go through.
-    let session = glrmon_zenoh::open(&SessionSettings {
-        mode: Some("client".into()),
-        connect: vec![endpoint.clone()],
-        multicast_scouting: Some(false),
-        ..SessionSettings::default()
-    })
-    .await
-    .unwrap();
-    let publisher = session
-        .declare_publisher("plant/dc_motor")
-        .congestion_control(zenoh::qos::CongestionControl::Block)
-        .await
-        .unwrap();
-    let t = Instant::now();
-    while !publisher.matching_status().await.unwrap().matching() {
-        assert!(t.elapsed() < Duration::from_secs(10));
-        tokio::time::sleep(Duration::from_millis(10)).await;
-    }
-    for k in 0..50_u64 {
-        let s = Sample {
-            k: Some(k),
-            t: None,
-            u: vec![1.0],
-            y: vec![0.0, 0.0],
-            p: Vec::new(),
-        };
-        let mut b = Vec::new();
-        encode_sample("dc_motor", &s, &mut b).unwrap();
-        publisher.put(b).wait().unwrap();
-    }
+    let session = support::publish_dc_motor(&endpoint, 50).await;
     assert_eq!(wait_samples(&session, 50).await.0, 50);
     daemon.signal("-TERM");
     let t = Instant::now();

@@ -3,44 +3,14 @@
 //! every readable message, names the lost time range and exits 1; `glrmon replay`
 //! replays the chunks after the damage and exits 1.
 
+#[path = "support.rs"]
+mod support;
+
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
 use glrmon_record::{Event, McapReader};
-
-fn glrmon() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_glrmon"))
-}
-
-fn run_ok(cmd: &mut Command) -> Output {
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{cmd:?}: {}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-/// A scratch directory, removed at the end.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new(tag: &str) -> Self {
-        let dir = std::env::temp_dir().join(format!("glrmon-salvage-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        Self(dir)
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
+use support::{Scratch, glrmon, run_ok};
 
 /// Byte offsets and lengths of the chunk records of an MCAP file's data section.
 fn chunks(bytes: &[u8]) -> Vec<(usize, usize)> {

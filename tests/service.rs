@@ -14,9 +14,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use glrmon_wire::{Sample, encode_sample};
 use glrmon_zenoh::SessionSettings;
-use zenoh::Wait as _;
 
 /// A running `glrmon run`, killed if the test ends early; its directory removed.
 struct Daemon {
@@ -322,36 +320,7 @@ async fn a_listening_daemon_is_ready_and_counts_client_publishers() {
     assert_eq!(value(&series, "glrmon_zenoh_connected", &inst), Some(0.0));
     assert_eq!(value(&series, "glrmon_ready", &inst), Some(1.0));
 
-    let session = glrmon_zenoh::open(&SessionSettings {
-        mode: Some("client".into()),
-        connect: vec![endpoint.clone()],
-        multicast_scouting: Some(false),
-        ..SessionSettings::default()
-    })
-    .await
-    .unwrap();
-    let publisher = session
-        .declare_publisher("plant/dc_motor")
-        .congestion_control(zenoh::qos::CongestionControl::Block)
-        .await
-        .unwrap();
-    let t = Instant::now();
-    while !publisher.matching_status().await.unwrap().matching() {
-        assert!(t.elapsed() < Duration::from_secs(10));
-        tokio::time::sleep(Duration::from_millis(10)).await;
-    }
-    for k in 0..100_u64 {
-        let s = Sample {
-            k: Some(k),
-            t: None,
-            u: vec![1.0],
-            y: vec![0.0, 0.0],
-            p: Vec::new(),
-        };
-        let mut b = Vec::new();
-        encode_sample("dc_motor", &s, &mut b).unwrap();
-        publisher.put(b).wait().unwrap();
-    }
+    let session = support::publish_dc_motor(&endpoint, 100).await;
     let (_, text) = tokio::task::spawn_blocking(move || {
         wait_get(mport, "/metrics", |_, body| {
             body.contains(
@@ -467,7 +436,6 @@ async fn a_listening_daemon_is_ready_and_counts_client_publishers() {
     let sessions = st.sessions.unwrap();
     assert_eq!((sessions.routers, sessions.peers), (0, 0), "{json}");
     assert!((1..=2).contains(&sessions.clients), "{json}");
-    drop(publisher);
     let _ = session.close().await;
     // A client leaving is not a lost network: no reconnection is counted.
     let (_, text) = tokio::task::spawn_blocking(move || {

@@ -1,9 +1,88 @@
-//! Helpers shared by the daemon tests that watch `glrmon run`'s log (mesh.rs,
-//! reload.rs): included with `#[path]`, not a test of its own.
+//! Helpers shared by the end-to-end tests (the real binary, scratch directories, free
+//! ports, daemons whose log is watched, a client publishing samples): included with
+//! `#[path]`, not a test of its own. Each test uses some of them.
+#![allow(dead_code)]
 
 use std::io::Read;
-use std::process::{Child, Command, Stdio};
+use std::path::PathBuf;
+use std::process::{Child, Command, Output, Stdio};
 use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// The binary under test.
+pub(crate) fn glrmon() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_glrmon"))
+}
+
+/// Runs `cmd` and returns its output, failing the test with both streams when it fails.
+pub(crate) fn run_ok(cmd: &mut Command) -> Output {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{cmd:?}: {}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// A scratch directory `glrmon-<tag>-<pid>` in the temporary directory, removed at the
+/// end of the test.
+pub(crate) struct Scratch(pub(crate) PathBuf);
+
+impl Scratch {
+    pub(crate) fn new(tag: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("glrmon-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        Self(dir)
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Publishes `n` samples (k = 0…n−1, u = [1], y = [0, 0]) of the `dc_motor` channel on
+/// `plant/dc_motor` from a client session connected to `endpoint`, once a subscriber
+/// matches (10 s at most). The session stays open for the caller (a client the daemon
+/// counts, a subscriber of its results).
+pub(crate) async fn publish_dc_motor(endpoint: &str, n: u64) -> zenoh::Session {
+    use zenoh::Wait as _;
+    let session = glrmon_zenoh::open(&glrmon_zenoh::SessionSettings {
+        mode: Some("client".into()),
+        connect: vec![endpoint.to_owned()],
+        multicast_scouting: Some(false),
+        ..glrmon_zenoh::SessionSettings::default()
+    })
+    .await
+    .unwrap();
+    let publisher = session
+        .declare_publisher("plant/dc_motor")
+        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .await
+        .unwrap();
+    let t = Instant::now();
+    while !publisher.matching_status().await.unwrap().matching() {
+        assert!(t.elapsed() < Duration::from_secs(10));
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    for k in 0..n {
+        let s = glrmon_wire::Sample {
+            k: Some(k),
+            t: None,
+            u: vec![1.0],
+            y: vec![0.0, 0.0],
+            p: Vec::new(),
+        };
+        let mut b = Vec::new();
+        glrmon_wire::encode_sample("dc_motor", &s, &mut b).unwrap();
+        publisher.put(b).wait().unwrap();
+    }
+    session
+}
 
 /// A free TCP port on loopback.
 pub(crate) fn free_port() -> u16 {
