@@ -104,6 +104,18 @@ impl ErrorCode {
             ErrorCode::SequenceReset => "sequence_reset",
         }
     }
+
+    /// Whether the payload or sample the record is about was refused. A `gap` (samples
+    /// missing before this one), a `sequence_reset` (the filter restarts at this sample)
+    /// and a `numerical` restart report on the stream while the sample itself is
+    /// processed.
+    #[must_use]
+    pub fn rejects_input(self) -> bool {
+        !matches!(
+            self,
+            ErrorCode::Gap | ErrorCode::SequenceReset | ErrorCode::Numerical
+        )
+    }
 }
 
 impl fmt::Display for ErrorCode {
@@ -390,6 +402,18 @@ pub struct ChannelNameError {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A `sequence_reset`, a `gap` and a `numerical` restart do not refuse the sample
+    /// (the daemon's log must not say "Rejected input" for them); every other code does.
+    #[test]
+    fn only_stream_events_keep_their_sample() {
+        let kept: Vec<&str> = ErrorCode::ALL
+            .iter()
+            .filter(|c| !c.rejects_input())
+            .map(|c| c.as_str())
+            .collect();
+        assert_eq!(kept, ["gap", "numerical", "sequence_reset"]);
+    }
 
     #[test]
     fn every_code_serializes_as_its_label_and_back() {

@@ -89,7 +89,12 @@ impl Sink for LogSink {
                     .entry(key)
                     .or_insert((now - Duration::from_secs(2), 0));
                 if now.duration_since(entry.0) >= Duration::from_secs(1) {
-                    tracing::warn!(channel = %e.channel, code = e.code.as_str(), suppressed = entry.1, "Rejected input: {}.", e.message);
+                    let what = if e.code.rejects_input() {
+                        "Rejected input"
+                    } else {
+                        "Input stream"
+                    };
+                    tracing::warn!(channel = %e.channel, code = e.code.as_str(), suppressed = entry.1, "{what}: {}.", e.message);
                     *entry = (now, 0);
                 } else {
                     entry.1 += 1;
