@@ -792,3 +792,54 @@ fn evaluate_dc_motor_reports_detection_delay_and_confusion() {
     eprintln!("speed-sensor drift 0.01: median delay GLR {glr} samples, χ² test {chi2} samples");
     assert!(glr < chi2, "GLR {glr} vs χ² {chi2}");
 }
+
+/// A channel with `[channels.columns]` names: `simulate` writes the named header, so
+/// that `replay` of its own output works (it wrote `u0,y0` and replay refused the file,
+/// "column FI101 is missing from the header").
+#[test]
+fn simulate_writes_the_channels_column_names_and_replay_reads_them() {
+    let dir = TempDir::new("columns");
+    let cfg = dir.file("tank.toml");
+    std::fs::write(
+        &cfg,
+        r#"
+[[channels]]
+name = "tank"
+model = { F = [[0.9]], G = [[1.0]], H = [[1.0]], J = [[0.0]], Q = [[0.01]], R = [[0.01]] }
+faults = [{ name = "level_bias", kind = "sensor_bias", output = 0 }]
+[channels.columns]
+u = ["FI101"]
+y = ["LI201"]
+"#,
+    )
+    .unwrap();
+    let csv = dir.file("run.csv");
+    ok(&glrmon(&[
+        "simulate",
+        "--config",
+        &cfg,
+        "--samples",
+        "300",
+        "--fault",
+        "level_bias:1",
+        "--onset",
+        "150",
+        "--output",
+        &csv,
+    ]));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert!(text.starts_with("k,FI101,LI201\n"), "{}", &text[..40]);
+    let out = dir.file("out.jsonl");
+    ok(&glrmon(&[
+        "replay", "--config", &cfg, &csv, "--quiet", "--output", &out,
+    ]));
+    let alarms: Vec<Alarm> = records(&out)
+        .into_iter()
+        .filter_map(|r| match r {
+            Record::Alarm(a) => Some(a),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(alarms.len(), 1, "{alarms:?}");
+    assert!((150..=160).contains(&alarms[0].onset), "{alarms:?}");
+}

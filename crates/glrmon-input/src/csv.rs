@@ -378,6 +378,28 @@ pub fn write_header(out: &mut impl Write, dims: Dims, with_t: bool) -> std::io::
     writeln!(out, "{}", cols.join(","))
 }
 
+/// Writes the header for a channel with its `[channels.columns]` names: `k`, `t` when a
+/// period is known, then the columns read into u, y and p, so that
+/// [`CsvReader::with_columns`] reads the file back (with numbered names this is
+/// [`write_header`]).
+///
+/// # Errors
+/// The writer's error.
+pub fn write_header_named(
+    out: &mut impl Write,
+    columns: &glrmon_spec::Columns,
+    with_t: bool,
+) -> std::io::Result<()> {
+    let mut cols = vec!["k"];
+    if with_t {
+        cols.push("t");
+    }
+    cols.extend(columns.u.iter().map(String::as_str));
+    cols.extend(columns.y.iter().map(String::as_str));
+    cols.extend(columns.p.iter().map(String::as_str));
+    writeln!(out, "{}", cols.join(","))
+}
+
 /// Writes one row under a [`write_header`] header; floats in their shortest exactly
 /// round-tripping form, so that reading the file back gives the same bits.
 ///

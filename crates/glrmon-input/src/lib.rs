@@ -9,7 +9,7 @@ mod replay;
 mod samples;
 mod table;
 
-pub use csv::{CsvReader, HeaderError, RowError, write_header, write_row};
+pub use csv::{CsvReader, HeaderError, RowError, write_header, write_header_named, write_row};
 pub use error::{InputError, InputErrorKind};
 pub use mcap::{McapInput, RecordedInput, is_mcap};
 pub use play::{Playback, PlayedSample, due};

@@ -104,7 +104,7 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
             let file = std::fs::File::create(path)
                 .with_context(|| format!("creating {}", path.display()))?;
             let mut out = std::io::BufWriter::new(file);
-            glrmon_input::write_header(&mut out, channel.dims, channel.period.is_some())?;
+            glrmon_input::write_header_named(&mut out, &channel.columns, channel.period.is_some())?;
             Some(out)
         }
         _ => None,
