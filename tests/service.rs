@@ -605,8 +605,22 @@ fn notify_socket_gets_ready_reloading_and_stopping() {
         "{reloading}"
     );
     recv_until(&sock, &mut got, "READY=1");
-    let log = daemon.stderr.lock().unwrap().clone();
-    assert!(log.contains("Configuration reloaded"), "{log}");
+    // The log line is read from the daemon's stderr by a thread of this test: it may
+    // arrive after the notification (the CI run saw it so).
+    let t = Instant::now();
+    while !daemon
+        .stderr
+        .lock()
+        .unwrap()
+        .contains("Configuration reloaded")
+    {
+        assert!(
+            t.elapsed() < Duration::from_secs(10),
+            "{}",
+            daemon.stderr.lock().unwrap()
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
     daemon.signal("-TERM");
     recv_until(&sock, &mut got, "STOPPING=1");
     let t = Instant::now();
