@@ -87,7 +87,7 @@ fn write_template(args: &InitArgs) -> anyhow::Result<()> {
     file.write_all(text.as_bytes())
         .with_context(|| format!("cannot write {}", path.display()))?;
     eprintln!(
-        "wrote {}: check it with `glrmon validate {}`",
+        "wrote {}: check it with `glrmon validate --config {}`",
         path.display(),
         path.display()
     );
