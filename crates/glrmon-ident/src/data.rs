@@ -248,6 +248,55 @@ pub fn preprocess(
     })
 }
 
+/// The shape checks of an identification method over `experiments`: at least one, with
+/// outputs; every experiment with the first one's inputs and outputs, as many input as
+/// output rows, and at least `needed` samples for the method's `horizon`. Returns the
+/// numbers of inputs and outputs (l, p).
+pub(crate) fn check_shapes(
+    experiments: &[Experiment],
+    horizon: usize,
+    needed: usize,
+) -> Result<(usize, usize), IdentError> {
+    let first = experiments.first().ok_or(IdentError::NoExperiment)?;
+    let (l, p) = (first.inputs.ncols(), first.outputs.ncols());
+    if p == 0 {
+        return Err(IdentError::NoOutput);
+    }
+    for (e, exp) in experiments.iter().enumerate() {
+        for (signal, got, expected) in [
+            (Signal::Input, exp.inputs.ncols(), l),
+            (Signal::Output, exp.outputs.ncols(), p),
+        ] {
+            if got != expected {
+                return Err(IdentError::ColumnMismatch {
+                    experiment: e,
+                    signal,
+                    got,
+                    expected,
+                });
+            }
+        }
+        let n = exp.samples();
+        if exp.inputs.nrows() != n {
+            return Err(IdentError::RowMismatch {
+                experiment: e,
+                input_rows: exp.inputs.nrows(),
+                output_rows: n,
+            });
+        }
+        if n < needed {
+            return Err(IdentError::ExperimentTooShort {
+                experiment: e,
+                samples: n,
+                part: "",
+                horizon,
+                needed,
+            });
+        }
+    }
+    Ok((l, p))
+}
+
 fn check_experiment(e: usize, exp: &Experiment, l: usize, p: usize) -> Result<(), IdentError> {
     if exp.inputs.nrows() != exp.outputs.nrows() {
         return Err(IdentError::RowMismatch {

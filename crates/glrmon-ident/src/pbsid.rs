@@ -111,45 +111,8 @@ impl Pbsid {
                 why: format!("the PBSID future window must be in 1..={past}, got {future}"),
             });
         }
-        let first = experiments.first().ok_or(IdentError::NoExperiment)?;
-        let (l, p) = (first.inputs.ncols(), first.outputs.ncols());
-        if p == 0 {
-            return Err(IdentError::NoOutput);
-        }
-        let mut rows = 0;
-        for (e, exp) in experiments.iter().enumerate() {
-            for (signal, got, expected) in [
-                (crate::Signal::Input, exp.inputs.ncols(), l),
-                (crate::Signal::Output, exp.outputs.ncols(), p),
-            ] {
-                if got != expected {
-                    return Err(IdentError::ColumnMismatch {
-                        experiment: e,
-                        signal,
-                        got,
-                        expected,
-                    });
-                }
-            }
-            let n = exp.samples();
-            if exp.inputs.nrows() != n {
-                return Err(IdentError::RowMismatch {
-                    experiment: e,
-                    input_rows: exp.inputs.nrows(),
-                    output_rows: n,
-                });
-            }
-            if n < min_samples(past) {
-                return Err(IdentError::ExperimentTooShort {
-                    experiment: e,
-                    samples: n,
-                    part: "",
-                    horizon: past,
-                    needed: min_samples(past),
-                });
-            }
-            rows += n - past;
-        }
+        let (l, p) = crate::data::check_shapes(experiments, past, min_samples(past))?;
+        let rows: usize = experiments.iter().map(|e| e.samples() - past).sum();
         let q = past * (l + p);
         // The collinearity check regresses on a constant per experiment too.
         let width = experiments.len() + q + l + p;

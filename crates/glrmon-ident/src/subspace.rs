@@ -107,47 +107,10 @@ impl Subspace {
                 why: format!("must be at least 2 (shift invariance needs Γ_(i−1)), got {horizon}"),
             });
         }
-        let first = experiments.first().ok_or(IdentError::NoExperiment)?;
-        let (l, p) = (first.inputs.ncols(), first.outputs.ncols());
-        if p == 0 {
-            return Err(IdentError::NoOutput);
-        }
         let i = horizon;
+        let (l, p) = crate::data::check_shapes(experiments, i, min_samples(i))?;
         let layout = Layout::new(i, l, p);
-        let mut columns = 0;
-        for (e, exp) in experiments.iter().enumerate() {
-            for (signal, got, expected) in [
-                (crate::Signal::Input, exp.inputs.ncols(), l),
-                (crate::Signal::Output, exp.outputs.ncols(), p),
-            ] {
-                if got != expected {
-                    return Err(IdentError::ColumnMismatch {
-                        experiment: e,
-                        signal,
-                        got,
-                        expected,
-                    });
-                }
-            }
-            let n = exp.samples();
-            if exp.inputs.nrows() != n {
-                return Err(IdentError::RowMismatch {
-                    experiment: e,
-                    input_rows: exp.inputs.nrows(),
-                    output_rows: n,
-                });
-            }
-            if n < min_samples(i) {
-                return Err(IdentError::ExperimentTooShort {
-                    experiment: e,
-                    samples: n,
-                    part: "",
-                    horizon: i,
-                    needed: min_samples(i),
-                });
-            }
-            columns += n + 1 - 2 * i;
-        }
+        let columns: usize = experiments.iter().map(|e| e.samples() + 1 - 2 * i).sum();
         if columns < layout.rows {
             return Err(IdentError::TooFewSamples {
                 columns,
