@@ -1,35 +1,7 @@
 //! One broken configuration per error kind: each fails with the expected path and reason.
 
-/// A valid two-state channel; tests replace one line of it.
-const BASE: &str = r#"
-[[channels]]
-name = "pump3"
-
-[channels.model]
-F = [[0.5, 1.0], [0.0, 0.8]]
-G = [[0.0], [1.0]]
-H = [[1.0, 0.0]]
-Q = 0.01
-R = 0.04
-
-[[channels.faults]]
-name = "bias"
-kind = "actuator_bias"
-input = 0
-
-[[channels.faults]]
-name = "custom"
-psi = ["0.5*u0", 1.0]
-
-[channels.glr]
-window = 50
-min_lag = 1
-"#;
-
-fn with(replace: &str, by: &str) -> String {
-    assert!(BASE.contains(replace), "fixture lacks {replace}");
-    BASE.replacen(replace, by, 1)
-}
+mod common;
+use common::{BASE, with};
 
 fn errors(text: &str) -> Vec<String> {
     match glrmon_spec::parse(text) {
