@@ -201,17 +201,7 @@ async fn sighup_applies_thresholds_and_refuses_what_needs_a_restart() {
 
     daemon.signal("-TERM");
     let mut daemon = daemon;
-    let t = Instant::now();
-    let code = loop {
-        if let Some(s) = daemon.child.try_wait().unwrap() {
-            break s.code();
-        }
-        assert!(
-            t.elapsed() < Duration::from_secs(10),
-            "no exit after SIGTERM"
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    };
+    let code = support::exit_code_within(&mut daemon.child, Duration::from_secs(10));
     assert_eq!(code, Some(0));
     let _ = session.close().await;
     let _ = std::fs::remove_dir_all(&dir);
@@ -307,17 +297,7 @@ async fn sighup_with_hostile_configs_is_refused_and_the_daemon_goes_on() {
     let session = support::publish_dc_motor(&endpoint, 50).await;
     assert_eq!(wait_samples(&session, 50).await.0, 50);
     daemon.signal("-TERM");
-    let t = Instant::now();
-    let code = loop {
-        if let Some(s) = daemon.child.try_wait().unwrap() {
-            break s.code();
-        }
-        assert!(
-            t.elapsed() < Duration::from_secs(10),
-            "no exit after SIGTERM"
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    };
+    let code = support::exit_code_within(&mut daemon.child, Duration::from_secs(10));
     assert_eq!(code, Some(0));
     let _ = session.close().await;
     let _ = std::fs::remove_dir_all(&dir);

@@ -623,17 +623,7 @@ fn notify_socket_gets_ready_reloading_and_stopping() {
     }
     daemon.signal("-TERM");
     recv_until(&sock, &mut got, "STOPPING=1");
-    let t = Instant::now();
-    let code = loop {
-        if let Some(s) = daemon.child.try_wait().unwrap() {
-            break s.code();
-        }
-        assert!(
-            t.elapsed() < Duration::from_secs(15),
-            "no exit after SIGTERM"
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    };
+    let code = support::exit_code_within(&mut daemon.child, Duration::from_secs(15));
     assert_eq!(code, Some(0));
     // Nothing after STOPPING=1 (the watchdog stops with it) but what was already sent.
     sock.set_nonblocking(true).unwrap();

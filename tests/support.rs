@@ -26,6 +26,18 @@ pub(crate) fn run_ok(cmd: &mut Command) -> Output {
     out
 }
 
+/// The exit code of `child`, which must exit within `limit` (after a SIGTERM, say).
+pub(crate) fn exit_code_within(child: &mut Child, limit: Duration) -> Option<i32> {
+    let t = Instant::now();
+    loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            return s.code();
+        }
+        assert!(t.elapsed() < limit, "no exit within {limit:?}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
 /// A scratch directory `glrmon-<tag>-<pid>` in the temporary directory, removed at the
 /// end of the test.
 pub(crate) struct Scratch(pub(crate) PathBuf);
