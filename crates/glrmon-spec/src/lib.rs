@@ -35,7 +35,7 @@ use std::path::Path;
 
 use glrmon_core::calibration::Target;
 use glrmon_core::kitanidis::unknown_input_rank;
-use glrmon_core::sparse::LassoSettings;
+use glrmon_core::sparse::{LassoSettings, PlateauScale};
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{
     AlarmSettings, Column, DEFAULT_RANK_TOLERANCE, Detector, Dims, Fault, FaultDictionary, Lpv,
@@ -1997,9 +1997,22 @@ impl Validator {
             );
         }
         let defaults = LassoSettings::default();
+        let plateau_scale = match d.lasso.plateau_scale.as_deref() {
+            None => defaults.plateau_scale,
+            Some("log") => PlateauScale::Log,
+            Some("linear") => PlateauScale::Linear,
+            Some(other) => {
+                self.error(
+                    dpath("lasso.plateau_scale"),
+                    locate::not_one_of(other, &["log", "linear"]),
+                );
+                defaults.plateau_scale
+            }
+        };
         let lasso = LassoSettings {
             path_points: d.lasso.path_points.unwrap_or(defaults.path_points),
             ratio: d.lasso.ratio.unwrap_or(defaults.ratio),
+            plateau_scale,
             ..defaults
         };
         if lasso.path_points < 2 {

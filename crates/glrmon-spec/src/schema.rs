@@ -738,6 +738,13 @@ pub struct LassoSpec {
     pub path_points: Option<usize>,
     /// λ_min/λ_max, in (0, 1). Default 1e-4.
     pub ratio: Option<f64>,
+    /// How "the widest range of λ with the same number of faults" and its middle are
+    /// measured (Zhang 2021, §IV): `log` (in ln λ, the default: a fault several times
+    /// smaller than another is not missed) or `linear` (in λ: the paper's Table II,
+    /// fewer spurious faults under strong noise but a smaller fault beside a larger one
+    /// is often left out). See `glrmon_core::sparse::PlateauScale`.
+    #[schemars(extend("enum" = ["log", "linear"]))]
+    pub plateau_scale: Option<String>,
 }
 
 /// `[channels.consistency]`: the block χ² test of εᵀΣ⁻¹ε that warns when the model no

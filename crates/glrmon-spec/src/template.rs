@@ -176,6 +176,7 @@ input = 0
 # [channels.diagnosis.lasso]
 # path_points = 100
 # ratio = 1e-4
+# plateau_scale = "log"              # log | linear (the paper's Table II; may miss a small fault)
 
 # [channels.consistency]             # model-consistency test
 # enabled = true

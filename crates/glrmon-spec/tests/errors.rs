@@ -344,6 +344,19 @@ fn diagnosis_table_is_strict_and_checked() {
     assert_eq!(d.residual, glrmon_spec::ResidualKind::Kalman);
     assert_eq!((d.span, d.history), (Some(30), 60));
     assert_eq!((d.lasso.path_points, d.lasso.ratio), (50, 1e-3));
+    assert_eq!(
+        d.lasso.plateau_scale,
+        glrmon_core::sparse::PlateauScale::Log
+    );
+    let cfg = glrmon_spec::parse(&diag("lasso = { plateau_scale = \"linear\" }")).unwrap();
+    assert_eq!(
+        cfg.channels[0].diagnosis.lasso.plateau_scale,
+        glrmon_core::sparse::PlateauScale::Linear
+    );
+    assert_error(
+        &diag("lasso = { plateau_scale = \"lin\" }"),
+        "diagnosis.lasso.plateau_scale",
+    );
 }
 
 #[test]

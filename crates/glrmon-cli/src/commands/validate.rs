@@ -368,8 +368,13 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
         );
         let _ = writeln!(
             s,
-            "  sparse diagnosis at alarms: {:?} residual, span {span}, history {} samples, no-fault test at α = {}, λ path of {} points down to {:e}·λ_max",
-            diag.residual, diag.history, diag.alpha, diag.lasso.path_points, diag.lasso.ratio
+            "  sparse diagnosis at alarms: {:?} residual, span {span}, history {} samples, no-fault test at α = {}, λ path of {} points down to {:e}·λ_max, widest plateau in {} λ",
+            diag.residual,
+            diag.history,
+            diag.alpha,
+            diag.lasso.path_points,
+            diag.lasso.ratio,
+            diag.lasso.plateau_scale.as_str()
         );
     } else {
         let _ = writeln!(s, "  sparse diagnosis at alarms: off");
