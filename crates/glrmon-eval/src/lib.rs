@@ -311,6 +311,7 @@ pub fn summarize(r: &FaultResult, onset: u64, columns: &[String]) -> FaultEvalua
         false_alarms: r.runs.iter().map(|x| x.false_alarms).sum(),
         runs_with_false_alarms: r.runs.iter().filter(|x| x.false_alarms > 0).count() as u64,
         isolated,
+        minmax: Vec::new(),
     }
 }
 
