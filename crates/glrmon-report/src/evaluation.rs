@@ -74,6 +74,7 @@ table.setup th{width:190px}";
 ///             error_rate: Some(0.0),
 ///         }],
 ///     }],
+///     minmax_histograms: true,
 /// };
 /// let mut html = Vec::new();
 /// eval.write_html(&mut html)?;
@@ -107,6 +108,10 @@ pub struct Evaluation {
     pub outcomes: Vec<String>,
     /// One entry per injected fault, in the order evaluated.
     pub faults: Vec<FaultEvaluation>,
+    /// Whether to draw the Fig. 8 histograms: one figure per injected fault and
+    /// isolation test, so their number grows as faults × tests. Without them the page
+    /// still has the table of type-I and type-II rates when there are tests.
+    pub minmax_histograms: bool,
 }
 
 /// What the runs of one injected fault gave.
@@ -462,6 +467,10 @@ impl Evaluation {
             }
         }
         s.push_str("</table>\n");
+        if !self.minmax_histograms {
+            s.push_str("</section>\n");
+            return s;
+        }
         for f in self.faults.iter().filter(|f| !f.minmax.is_empty()) {
             let _ = writeln!(
                 s,
@@ -723,6 +732,10 @@ mod tests {
     }
 
     fn page(faults: Vec<FaultEvaluation>) -> String {
+        page_with(faults, true)
+    }
+
+    fn page_with(faults: Vec<FaultEvaluation>, minmax_histograms: bool) -> String {
         let eval = Evaluation {
             title: "evaluation of <motor>".into(),
             config: "dc-motor.toml".into(),
@@ -737,6 +750,7 @@ mod tests {
                 .map(str::to_owned)
                 .to_vec(),
             faults,
+            minmax_histograms,
         };
         let mut out = Vec::new();
         eval.write_html(&mut out).unwrap();
@@ -805,6 +819,21 @@ mod tests {
         // The second fault has no tests: no heading of its own in the section.
         assert_eq!(section.matches("<h3>").count(), 1);
         assert!(!html.contains("NaN"));
+        // Not asked for: the rates only.
+        let mut first = fault("drift<&>", 20);
+        first.minmax = vec![MinmaxEvaluation {
+            test: "bias".into(),
+            faults: vec!["bias".into()],
+            error: DecisionError::TypeI,
+            statistics: vec![1.0, 9.0],
+            threshold: 6.6349,
+            dof: 1,
+            error_rate: Some(0.5),
+        }];
+        let html = page_with(vec![first], false);
+        assert_eq!(html.matches("<svg").count(), 2);
+        let section = html.split("<section id=\"minmax\">").nth(1).unwrap();
+        assert!(section.contains("<td class=\"num\">50.0 %</td><td class=\"num\">–</td>"));
     }
 
     #[test]
