@@ -4,8 +4,9 @@ pub mod calibrate;
 pub mod identify;
 pub mod noise;
 
+use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_monitor::Monitor;
-use glrmon_report::FaultEvaluation;
+use glrmon_report::{DecisionError, FaultEvaluation, MinmaxEvaluation};
 use glrmon_sim::{Injection, SimSample};
 use glrmon_spec::Channel;
 use glrmon_wire::{Record, Sample};
@@ -19,7 +20,7 @@ use serde::Serialize;
 /// isolation are that alarm's last ones: from its `isolation` update,
 /// `isolation_delay` samples later, if its episode lasted that long, else from the
 /// alarm itself (`isolated_at` tells which).
-#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Run {
     /// k of the first alarm at or after the onset: its crossing of the threshold.
     pub crossing: Option<u64>,
@@ -31,6 +32,27 @@ pub struct Run {
     pub isolated_at: Option<u64>,
     /// Alarms raised before the onset.
     pub false_alarms: u64,
+    /// Each isolation test's minmax statistic at that isolation, in the order of the
+    /// channel's tests; in the JSON only as [`FaultResult::minmax`], per test.
+    #[serde(skip)]
+    pub minmax: Vec<MinmaxOutcome>,
+}
+
+/// One isolation test at a run's isolation: its minmax statistic l_a (Zhang & Basseville
+/// 2014, eq. (41)), the threshold it was compared with and the decision.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MinmaxOutcome {
+    /// The test (a fault, or an isolation group).
+    pub test: String,
+    /// l_a at the isolation's onset estimate r̂.
+    pub statistic: f64,
+    /// The threshold in force: calibrated, or the χ²(dof) upper α quantile.
+    pub threshold: f64,
+    /// Degrees of freedom of l_a's centred χ² under θ_a = 0: the numerical rank of the
+    /// test's Fisher information F*_a, as the monitor took it for the threshold.
+    pub dof: u32,
+    /// Whether the test declared θ_a ≠ 0 (l_a above the threshold).
+    pub fired: bool,
 }
 
 /// Results for one injected fault (an element of `results` in `glrmon evaluate --json`).
@@ -42,6 +64,67 @@ pub struct FaultResult {
     pub magnitude: f64,
     /// One entry per run, in seed order.
     pub runs: Vec<Run>,
+    /// Per isolation test, its minmax statistics over the runs and its error rate
+    /// (Zhang & Basseville 2014, Fig. 8 and eq. (42)).
+    pub minmax: Vec<MinmaxTest>,
+}
+
+/// One isolation test over the runs of one injected fault (an element of `minmax` in
+/// `glrmon evaluate --json`): the data of a Zhang & Basseville 2014 Fig. 8 histogram
+/// and the empirical error rate of eq. (42).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MinmaxTest {
+    /// The test (a fault, or an isolation group).
+    pub test: String,
+    /// The faults it focuses on (θ_a).
+    pub faults: Vec<String>,
+    /// The threshold of the runs (the most common one should they differ, as the rank
+    /// of F*_a can); without runs, the one the monitor would start from.
+    pub threshold: f64,
+    /// Degrees of freedom of the centred χ² of l_a under θ_a = 0, chosen as `threshold`.
+    pub dof: u32,
+    /// l_a of each run that isolated (`isolated_at` set), in seed order; `null` in the
+    /// JSON for a statistic that is not finite.
+    pub statistics: Vec<f64>,
+    /// Runs in which the test fired.
+    pub fired: u64,
+    /// The fraction of `statistics` that made the test's error.
+    #[serde(flatten)]
+    pub error_rate: ErrorRate,
+}
+
+/// The error an isolation test can make for an injected fault, and its empirical rate
+/// over the runs that isolated (`None`, `null` in the JSON, without any): the JSON key
+/// names the type (Zhang & Basseville 2014, eq. (42)).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub enum ErrorRate {
+    /// The test's faults exclude the injected one (θ_a = 0): the fraction of runs in
+    /// which it fired.
+    #[serde(rename = "type_i_rate")]
+    TypeI(Option<f64>),
+    /// The test's faults include the injected one (θ_a ≠ 0): the fraction of runs in
+    /// which it did not fire.
+    #[serde(rename = "type_ii_rate")]
+    TypeII(Option<f64>),
+}
+
+impl ErrorRate {
+    /// The type of error.
+    #[must_use]
+    pub fn kind(self) -> DecisionError {
+        match self {
+            Self::TypeI(_) => DecisionError::TypeI,
+            Self::TypeII(_) => DecisionError::TypeII,
+        }
+    }
+
+    /// The rate, `None` without runs.
+    #[must_use]
+    pub fn rate(self) -> Option<f64> {
+        match self {
+            Self::TypeI(r) | Self::TypeII(r) => r,
+        }
+    }
 }
 
 /// How a Monte-Carlo evaluation runs: `runs` seeds from `seed` per injected fault, the
@@ -152,10 +235,12 @@ pub fn evaluate(
                 .flat_map(|h| h.join().unwrap_or_else(|_| vec![Err(EvalError::Panicked)]))
                 .collect()
         });
+        let runs: Vec<Run> = outcomes.into_iter().collect::<Result<_, _>>()?;
         results.push(FaultResult {
             fault: fault.clone(),
             magnitude: *magnitude,
-            runs: outcomes.into_iter().collect::<Result<_, _>>()?,
+            minmax: minmax_tests(channel, fault, &runs),
+            runs,
         });
     }
     Ok(results)
@@ -176,6 +261,7 @@ pub fn one_run(
 ) -> Result<Run, EvalError> {
     let mut sim = simulator(channel, seed, fault, magnitude, onset)?;
     let mut mon = Monitor::from_channel(channel)?;
+    let tests = isolation_tests(channel);
     // Detection, onset and isolation come from the alarm and isolation records.
     mon.set_stat_records(false);
     let mut x = SimSample {
@@ -202,11 +288,13 @@ pub fn one_run(
                     run.onset_estimate = Some(a.onset);
                     run.isolated = isolated(&a.isolation);
                     run.isolated_at = Some(a.k);
+                    run.minmax = minmax_outcomes(&mon, &tests, a.onset, &a.isolation);
                 }
                 Record::Isolation(u) if run.crossing == Some(u.alarm_k) => {
                     run.onset_estimate = Some(u.onset);
                     run.isolated = isolated(&u.isolation);
                     run.isolated_at = Some(u.k);
+                    run.minmax = minmax_outcomes(&mon, &tests, u.onset, &u.isolation);
                 }
                 _ => {}
             }
@@ -242,6 +330,122 @@ fn isolated(tests: &[glrmon_wire::IsolationResult]) -> Vec<String> {
         .filter(|i| i.isolated)
         .map(|i| i.fault.clone())
         .collect()
+}
+
+/// The channel's isolation tests as its monitor runs them: its groups, else one test per
+/// fault against all others; `(name, fault indices)`.
+fn isolation_tests(channel: &Channel) -> Vec<(String, Vec<usize>)> {
+    if channel.groups.is_empty() {
+        channel
+            .fault_names
+            .iter()
+            .enumerate()
+            .map(|(j, n)| (n.clone(), vec![j]))
+            .collect()
+    } else {
+        channel.groups.clone()
+    }
+}
+
+/// The minmax outcomes of an isolation the monitor just made at onset estimate `onset`:
+/// statistic, threshold and decision from its record, the degrees of freedom from the
+/// detector, still at the sample of that isolation (the record does not carry them).
+fn minmax_outcomes(
+    mon: &Monitor,
+    tests: &[(String, Vec<usize>)],
+    onset: u64,
+    isolation: &[glrmon_wire::IsolationResult],
+) -> Vec<MinmaxOutcome> {
+    let fisher = mon.detector().fisher_statistics(onset);
+    isolation
+        .iter()
+        .map(|r| {
+            let faults = tests
+                .iter()
+                .find(|(name, _)| *name == r.fault)
+                .map(|t| &t.1);
+            let dof = match (&fisher, faults) {
+                (Some(fisher), Some(faults)) => {
+                    fisher.minmax(faults).map_or(faults.len(), |m| m.dof.max(1))
+                }
+                (None, Some(faults)) => faults.len(),
+                (_, None) => 1,
+            };
+            MinmaxOutcome {
+                test: r.fault.clone(),
+                statistic: r.minmax,
+                threshold: r.threshold,
+                dof: u32::try_from(dof).unwrap_or(u32::MAX),
+                fired: r.isolated,
+            }
+        })
+        .collect()
+}
+
+/// Each isolation test's statistics over `runs` of the injected `fault`, with the
+/// type-II rate (the test's faults include `fault`: runs in which it did not fire) or
+/// the type-I rate (they do not: runs in which it fired), as Zhang & Basseville 2014
+/// report them for Fig. 8 (eq. (42)).
+#[must_use]
+pub fn minmax_tests(channel: &Channel, fault: &str, runs: &[Run]) -> Vec<MinmaxTest> {
+    let injected = channel.fault_names.iter().position(|f| f == fault);
+    isolation_tests(channel)
+        .into_iter()
+        .map(|(test, faults)| {
+            let outcomes: Vec<&MinmaxOutcome> = runs
+                .iter()
+                .filter_map(|r| r.minmax.iter().find(|o| o.test == test))
+                .collect();
+            let (threshold, dof) = most_common(outcomes.iter().map(|o| (o.threshold, o.dof)))
+                .unwrap_or_else(|| {
+                    let dof = faults.len().max(1);
+                    let calibrated = channel
+                        .isolation_thresholds
+                        .iter()
+                        .find(|(name, _)| *name == test)
+                        .map(|t| t.1);
+                    let threshold = calibrated.unwrap_or_else(|| {
+                        chi2_upper_quantile(dof as f64, channel.isolation_alpha).unwrap_or(f64::NAN)
+                    });
+                    (threshold, u32::try_from(dof).unwrap_or(u32::MAX))
+                });
+            let n = outcomes.len() as u64;
+            let fired = outcomes.iter().filter(|o| o.fired).count() as u64;
+            let fraction = |k: u64| (n > 0).then(|| k as f64 / n as f64);
+            let error_rate = if injected.is_some_and(|j| faults.contains(&j)) {
+                ErrorRate::TypeII(fraction(n - fired))
+            } else {
+                ErrorRate::TypeI(fraction(fired))
+            };
+            MinmaxTest {
+                faults: faults
+                    .iter()
+                    .filter_map(|j| channel.fault_names.get(*j).cloned())
+                    .collect(),
+                test,
+                threshold,
+                dof,
+                statistics: outcomes.iter().map(|o| o.statistic).collect(),
+                fired,
+                error_rate,
+            }
+        })
+        .collect()
+}
+
+/// The (threshold, dof) pair most runs had; the first of equally common ones.
+fn most_common(pairs: impl Iterator<Item = (f64, u32)>) -> Option<(f64, u32)> {
+    let mut counts: Vec<((f64, u32), usize)> = Vec::new();
+    for p in pairs {
+        match counts
+            .iter_mut()
+            .find(|(q, _)| q.0.to_bits() == p.0.to_bits() && q.1 == p.1)
+        {
+            Some((_, c)) => *c += 1,
+            None => counts.push((p, 1)),
+        }
+    }
+    counts.iter().rev().max_by_key(|(_, c)| *c).map(|(p, _)| *p)
 }
 
 /// Columns of the confusion matrix: the dictionary's faults, any other isolated name
@@ -311,11 +515,25 @@ pub fn summarize(r: &FaultResult, onset: u64, columns: &[String]) -> FaultEvalua
         false_alarms: r.runs.iter().map(|x| x.false_alarms).sum(),
         runs_with_false_alarms: r.runs.iter().filter(|x| x.false_alarms > 0).count() as u64,
         isolated,
+        minmax: r
+            .minmax
+            .iter()
+            .map(|t| MinmaxEvaluation {
+                test: t.test.clone(),
+                faults: t.faults.clone(),
+                error: t.error_rate.kind(),
+                statistics: t.statistics.clone(),
+                threshold: t.threshold,
+                dof: t.dof,
+                error_rate: t.error_rate.rate(),
+            })
+            .collect(),
     }
 }
 
 /// The median (mean of the middle two for an even count); `None` when empty.
-fn median(mut v: Vec<f64>) -> Option<f64> {
+#[must_use]
+pub fn median(mut v: Vec<f64>) -> Option<f64> {
     if v.is_empty() {
         return None;
     }
@@ -352,7 +570,9 @@ fn isolated_label(r: &Run) -> String {
 /// The `--json` file: the channel, the onset, the channel's fault dictionary and every
 /// run of every injected fault, `{"channel", "onset", "faults", "results": [{"fault",
 /// "magnitude", "runs": [{"crossing", "onset_estimate", "isolated", "isolated_at",
-/// "false_alarms"}]}]}`.
+/// "false_alarms"}], "minmax": [{"test", "faults", "threshold", "dof", "statistics",
+/// "fired", "type_i_rate" or "type_ii_rate"}]}]}` (`minmax`: [`MinmaxTest`], Zhang &
+/// Basseville 2014, Fig. 8).
 #[derive(Debug, Serialize)]
 pub struct EvaluationRuns<'a> {
     /// The channel.
@@ -375,7 +595,8 @@ pub fn json(
     results: &[FaultResult],
     onset: u64,
 ) -> serde_json::Result<String> {
-    // Every magnitude is finite (checked when parsed), so no float becomes `null`.
+    // Every magnitude is finite (checked when parsed); a minmax statistic that is not
+    // finite (a numerical failure) becomes `null`.
     let mut out = serde_json::to_string(&EvaluationRuns {
         channel,
         onset,
@@ -402,9 +623,19 @@ mod tests {
                     isolated: vec!["a\"b".into(), "c\\d".into()],
                     isolated_at: Some(14),
                     false_alarms: 0,
+                    minmax: Vec::new(),
                 },
                 Run::default(),
             ],
+            minmax: vec![MinmaxTest {
+                test: "a\"b".into(),
+                faults: vec!["a\"b".into()],
+                threshold: 6.5,
+                dof: 1,
+                statistics: vec![7.25, f64::NAN],
+                fired: 1,
+                error_rate: ErrorRate::TypeII(Some(0.5)),
+            }],
         }];
         let text = json("m\u{1}é", &["a\"b".into()], &results, 10).unwrap();
         assert_eq!(
@@ -412,12 +643,52 @@ mod tests {
             concat!(
                 r#"{"channel":"m\u0001é","onset":10,"faults":["a\"b"],"results":[{"fault":"a\"b","magnitude":0.5,"runs":["#,
                 r#"{"crossing":12,"onset_estimate":10,"isolated":["a\"b","c\\d"],"isolated_at":14,"false_alarms":0},"#,
-                r#"{"crossing":null,"onset_estimate":null,"isolated":[],"isolated_at":null,"false_alarms":0}]}]}"#,
+                r#"{"crossing":null,"onset_estimate":null,"isolated":[],"isolated_at":null,"false_alarms":0}],"#,
+                r#""minmax":[{"test":"a\"b","faults":["a\"b"],"threshold":6.5,"dof":1,"statistics":[7.25,null],"fired":1,"type_ii_rate":0.5}]}]}"#,
                 "\n"
             )
         );
         let v: serde_json::Value = serde_json::from_str(&text).unwrap();
         assert_eq!(v["results"][0]["runs"][0]["isolated"][1], "c\\d");
+    }
+
+    /// The minmax outcomes of a run are the tests of its counted isolation, with the dof
+    /// the monitor took its threshold from: threshold = χ²(dof) upper α quantile, and
+    /// fired = l_a > threshold (Zhang & Basseville 2014, eq. (41)).
+    #[test]
+    fn minmax_outcomes_carry_the_monitors_dof_and_decision() {
+        let cfg = glrmon_spec::parse(include_str!(
+            "../../../config/examples/paper2014-gas-pipeline.toml"
+        ))
+        .unwrap();
+        let channel = &cfg.channels[0];
+        let mut seen = 0;
+        for seed in 1..4 {
+            let run = one_run(channel, seed, "g0_leak", -2e-5, 300, 500).unwrap();
+            if run.isolated_at.is_none() {
+                assert!(run.minmax.is_empty());
+                continue;
+            }
+            let names: Vec<&str> = run.minmax.iter().map(|o| o.test.as_str()).collect();
+            assert_eq!(names, ["inlet_leak", "outlet"]);
+            for o in &run.minmax {
+                let h = chi2_upper_quantile(f64::from(o.dof), channel.isolation_alpha).unwrap();
+                assert!(
+                    (o.threshold - h).abs() <= 1e-12 * h,
+                    "{o:?}: χ² quantile {h}"
+                );
+                assert_eq!(o.fired, o.statistic > o.threshold, "{o:?}");
+                seen += 1;
+            }
+        }
+        assert!(seen > 0);
+        let runs: Vec<Run> = (1..4)
+            .map(|seed| one_run(channel, seed, "g0_leak", -2e-5, 300, 500).unwrap())
+            .collect();
+        let tests = minmax_tests(channel, "g0_leak", &runs);
+        assert!(matches!(tests[0].error_rate, ErrorRate::TypeII(_)));
+        assert!(matches!(tests[1].error_rate, ErrorRate::TypeI(_)));
+        assert_eq!(tests[0].faults, ["g0_leak", "gp_leak"]);
     }
 
     /// Issue 19: the run's detection is the crossing itself: the first sample at or

@@ -1,12 +1,14 @@
 //! The page of a Monte-Carlo fault-injection evaluation (`glrmon evaluate --report`):
 //! the setup, a summary table, the isolation confusion matrix and, per injected fault,
 //! the histograms of the detection delay and of the onset-estimate error (Zhang &
-//! Basseville 2014, Fig. 7).
+//! Basseville 2014, Fig. 7) and of each isolation test's minmax statistic against its
+//! centred χ² density and threshold (Fig. 8).
 
 use std::fmt::Write as _;
 use std::io::{self, Write};
 
 use crate::Histogram;
+use crate::chi2::chi2_pdf;
 use crate::escape::escape;
 use crate::html::CSS;
 use crate::svg::{Axis, Figure, ONSET, PALETTE, RED, Swatch, fmt_num};
@@ -19,6 +21,11 @@ const HIST_WIDTH: f64 = 515.0;
 /// Smallest x range of a histogram, in samples, so that a few narrow bins are not
 /// stretched over the whole figure.
 const MIN_SPAN: f64 = 12.0;
+/// Bins of a histogram of minmax statistics (Fig. 8), from 0 to the largest statistic
+/// or a little past the threshold.
+const MINMAX_BINS: usize = 40;
+/// Points of the χ² density curve across a Fig. 8 histogram.
+const DENSITY_POINTS: usize = 240;
 
 const EVAL_CSS: &str = ".hists{display:flex;flex-wrap:wrap;gap:0 10px}.hists figure{flex:1 1 480px;margin:8px 0 14px}\
 table.confusion td.num{min-width:64px}td.hit{font-weight:bold}span.pct{color:#555;font-size:11px}\
@@ -32,7 +39,7 @@ table.setup th{width:190px}";
 /// # Examples
 ///
 /// ```
-/// use glrmon_report::{Evaluation, FaultEvaluation};
+/// use glrmon_report::{DecisionError, Evaluation, FaultEvaluation, MinmaxEvaluation};
 ///
 /// let eval = Evaluation {
 ///     title: "glrmon evaluate: pump3".into(),
@@ -57,12 +64,23 @@ table.setup th{width:190px}";
 ///         false_alarms: 0,
 ///         runs_with_false_alarms: 0,
 ///         isolated: vec![3, 0, 0, 0],
+///         minmax: vec![MinmaxEvaluation {
+///             test: "leak".into(),
+///             faults: vec!["leak".into()],
+///             error: DecisionError::TypeII,
+///             statistics: vec![14.2, 30.5, 9.1],
+///             threshold: 6.6349,
+///             dof: 1,
+///             error_rate: Some(0.0),
+///         }],
 ///     }],
+///     minmax_histograms: true,
 /// };
 /// let mut html = Vec::new();
 /// eval.write_html(&mut html)?;
 /// let html = String::from_utf8(html).unwrap();
-/// assert_eq!(html.matches("<svg").count(), 2); // delay and onset-error histograms
+/// // Delay and onset-error histograms, and the minmax statistic of the one test (Fig. 8).
+/// assert_eq!(html.matches("<svg").count(), 3);
 /// # Ok::<(), std::io::Error>(())
 /// ```
 #[derive(Debug, Clone, PartialEq)]
@@ -90,6 +108,10 @@ pub struct Evaluation {
     pub outcomes: Vec<String>,
     /// One entry per injected fault, in the order evaluated.
     pub faults: Vec<FaultEvaluation>,
+    /// Whether to draw the Fig. 8 histograms: one figure per injected fault and
+    /// isolation test, so their number grows as faults × tests. Without them the page
+    /// still has the table of type-I and type-II rates when there are tests.
+    pub minmax_histograms: bool,
 }
 
 /// What the runs of one injected fault gave.
@@ -118,6 +140,51 @@ pub struct FaultEvaluation {
     pub runs_with_false_alarms: u64,
     /// The row of the confusion matrix: runs per column of [`Evaluation::outcomes`].
     pub isolated: Vec<u64>,
+    /// Each isolation test's minmax statistic over the runs (Zhang & Basseville 2014,
+    /// Fig. 8), in the order of the channel's tests; empty draws no Fig. 8 figure.
+    pub minmax: Vec<MinmaxEvaluation>,
+}
+
+/// Which wrong decision an isolation test can make on the runs of an injected fault
+/// (Zhang & Basseville 2014, eq. (42)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DecisionError {
+    /// The test's faults exclude the injected one (θ_a = 0): firing is the error.
+    TypeI,
+    /// The test's faults include the injected one (θ_a ≠ 0): not firing is the error.
+    TypeII,
+}
+
+impl DecisionError {
+    /// "type I" or "type II".
+    #[must_use]
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::TypeI => "type I",
+            Self::TypeII => "type II",
+        }
+    }
+}
+
+/// One isolation test's minmax statistic l_a (Zhang & Basseville 2014, eq. (41)) over
+/// the runs of one injected fault, at each run's isolation after its alarm: a Fig. 8
+/// histogram.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MinmaxEvaluation {
+    /// The test's name (a fault, or an isolation group).
+    pub test: String,
+    /// The faults the test focuses on (θ_a).
+    pub faults: Vec<String>,
+    /// The wrong decision this test can make for the injected fault.
+    pub error: DecisionError,
+    /// l_a of each run that isolated, in seed order.
+    pub statistics: Vec<f64>,
+    /// The threshold l_a is compared with.
+    pub threshold: f64,
+    /// Degrees of freedom of the centred χ² that l_a follows when θ_a = 0.
+    pub dof: u32,
+    /// The fraction of `statistics` that made `error` (eq. (42)); `None` without runs.
+    pub error_rate: Option<f64>,
 }
 
 impl Evaluation {
@@ -139,6 +206,9 @@ impl Evaluation {
         let mut fig_id = 0;
         for (i, f) in self.faults.iter().enumerate() {
             out.write_all(self.fault_section(i, f, &mut fig_id).as_bytes())?;
+        }
+        if self.faults.iter().any(|f| !f.minmax.is_empty()) {
+            out.write_all(self.minmax_section(&mut fig_id).as_bytes())?;
         }
         out.write_all(b"</body></html>\n")?;
         out.flush()
@@ -366,6 +436,170 @@ impl Evaluation {
     }
 }
 
+impl Evaluation {
+    /// Zhang & Basseville 2014, Fig. 8: per injected fault, a histogram of each isolation
+    /// test's minmax statistic, with a table of the type-I and type-II error rates of
+    /// eq. (42) first.
+    fn minmax_section(&self, fig_id: &mut usize) -> String {
+        let mut s = String::from(
+            "<section id=\"minmax\">\n<h2>Minmax isolation statistics (Fig. 8)</h2>\n<p class=\"note\">At the isolation counted in the confusion matrix (the alarm's update, else the alarm), each isolation test a compares its minmax statistic l<sub>a</sub> (Zhang &amp; Basseville 2014, eq. (41)) with its threshold. A test of the injected fault that does not fire is a type-II error; a test of other faults that fires is a type-I error (eq. (42)). Rates are over the runs that isolated.</p>\n<table class=\"minmax\"><tr><th>injected fault</th><th>test</th><th>faults of the test</th><th>runs</th><th>threshold</th><th>dof</th><th>type I</th><th>type II</th></tr>\n",
+        );
+        for f in &self.faults {
+            for t in &f.minmax {
+                let rate = t
+                    .error_rate
+                    .map_or("–".to_owned(), |r| format!("{:.1} %", 100.0 * r));
+                let (type_i, type_ii) = match t.error {
+                    DecisionError::TypeI => (rate, "–".to_owned()),
+                    DecisionError::TypeII => ("–".to_owned(), rate),
+                };
+                let _ = writeln!(
+                    s,
+                    "<tr><td><code>{}</code> θ = {}</td><td><code>{}</code></td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{type_i}</td><td class=\"num\">{type_ii}</td></tr>",
+                    escape(&f.fault),
+                    fmt_num(f.magnitude),
+                    escape(&t.test),
+                    codes(&t.faults),
+                    t.statistics.len(),
+                    fmt_num(t.threshold),
+                    t.dof,
+                );
+            }
+        }
+        s.push_str("</table>\n");
+        if !self.minmax_histograms {
+            s.push_str("</section>\n");
+            return s;
+        }
+        for f in self.faults.iter().filter(|f| !f.minmax.is_empty()) {
+            let _ = writeln!(
+                s,
+                "<h3>Injected fault <code>{}</code>, θ = {}</h3>\n<div class=\"hists\">",
+                escape(&f.fault),
+                fmt_num(f.magnitude)
+            );
+            for t in &f.minmax {
+                s.push_str(&minmax_figure(f, t, fig_id));
+            }
+            s.push_str("</div>\n");
+        }
+        s.push_str("</section>\n");
+        s
+    }
+}
+
+/// One Fig. 8 histogram: l_a from 0, the centred χ²(dof) density scaled to counts per
+/// bin (runs × bin width × density, dashed) and the threshold (a vertical line).
+fn minmax_figure(f: &FaultEvaluation, t: &MinmaxEvaluation, fig_id: &mut usize) -> String {
+    let largest = t
+        .statistics
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    let threshold = (t.threshold.is_finite() && t.threshold > 0.0).then_some(t.threshold);
+    let end = largest.max(threshold.map_or(0.0, |h| 1.25 * h));
+    let end = if end > 0.0 { end } else { 1.0 };
+    let hist = Histogram::within(&t.statistics, 0.0, end, MINMAX_BINS);
+    let runs = hist.total() as f64;
+    let dof = t.dof.max(1);
+    let density: Vec<(f64, f64)> = (0..=DENSITY_POINTS)
+        .map(|i| {
+            let x = end * i as f64 / DENSITY_POINTS as f64;
+            (x, runs * hist.width * chi2_pdf(x, dof))
+        })
+        .filter(|(_, y)| y.is_finite())
+        .collect();
+    // The curve may rise above the bars (ν = 1 is unbounded at 0): the y range covers it
+    // from the middle of the first bin on, and the plot clips what is above.
+    let peak = density
+        .iter()
+        .filter(|(x, _)| *x >= hist.width / 2.0)
+        .map(|(_, y)| *y)
+        .fold(hist.max_count() as f64, f64::max);
+    let y_hi = if peak > 0.0 { peak * 1.14 } else { 1.0 };
+    let x = Axis::linear(0.0, end * 1.02, "minmax statistic l_a");
+    let y = Axis::linear(0.0, y_hi, "runs").integer();
+    let color = match t.error {
+        DecisionError::TypeII => PALETTE[0],
+        DecisionError::TypeI => PALETTE[1],
+    };
+    let mut fig = Figure::with_width(
+        &format!("Test {} (minmax)", t.test),
+        x,
+        y,
+        210.0,
+        HIST_WIDTH,
+    );
+    fig.stack_legend();
+    fig.set_class("minmax-histogram");
+    bars(&mut fig, &hist, color);
+    if density.len() > 1 {
+        let mut d = String::new();
+        for (i, (x, y)) in density.iter().enumerate() {
+            let _ = write!(
+                d,
+                "{}{:.1},{:.1}",
+                if i == 0 { "M" } else { "L" },
+                fig.xp(*x),
+                fig.yp(*y)
+            );
+        }
+        fig.raw(&format!(
+            r##"<path class="chi2-density" d="{d}" fill="none" stroke="#333" stroke-width="1.4" stroke-dasharray="6 4"/>"##
+        ));
+    }
+    if let Some(h) = threshold {
+        fig.vline(h, RED, 1.6, None, "threshold");
+    }
+    fig.legend(
+        &format!("l_a over the runs of {} ({})", f.fault, hist.total()),
+        color,
+        Swatch::Bar,
+    );
+    fig.legend(
+        &format!("χ²({dof}) density × runs × bin width"),
+        "#333",
+        Swatch::Dashed,
+    );
+    if let Some(h) = threshold {
+        fig.legend(&format!("threshold {}", fmt_num(h)), RED, Swatch::Line);
+    }
+    let rate = t.error_rate.map_or("– (no runs)".to_owned(), |r| {
+        format!("{:.1} %", 100.0 * r)
+    });
+    let what = match t.error {
+        DecisionError::TypeI => "decided θ<sub>a</sub> ≠ 0 while θ<sub>a</sub> = 0",
+        DecisionError::TypeII => "decided θ<sub>a</sub> = 0 while θ<sub>a</sub> ≠ 0",
+    };
+    let mut caption = format!(
+        "Minmax statistic l<sub>a</sub> of test <code>{}</code> (faults {}) at the isolation after each alarm, injected fault <code>{}</code>: {} error rate {rate} ({what}; Zhang &amp; Basseville 2014, eq. (42), Fig. 8). Bins are {} wide.",
+        escape(&t.test),
+        codes(&t.faults),
+        escape(&f.fault),
+        t.error.label(),
+        fmt_num(hist.width),
+    );
+    if hist.skipped > 0 {
+        let _ = write!(
+            caption,
+            " {} statistic{} not finite, left out.",
+            hist.skipped,
+            if hist.skipped == 1 { "" } else { "s" }
+        );
+    }
+    figure(&fig, fig_id, &caption)
+}
+
+/// Names as a comma-separated list of escaped `<code>`s.
+fn codes(names: &[String]) -> String {
+    names
+        .iter()
+        .map(|n| format!("<code>{}</code>", escape(n)))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// `n` of `total` as a percentage with one decimal.
 fn percent(n: u64, total: u64) -> String {
     if total == 0 {
@@ -429,6 +663,14 @@ fn histogram_figure(
     let y = Axis::linear(0.0, y_hi, "runs").integer();
     let mut fig = Figure::with_width(title, x, y, 210.0, HIST_WIDTH);
     fig.stack_legend();
+    bars(&mut fig, hist, color);
+    fig
+}
+
+/// A bar per bin of `hist`, the count above each bar when every count fits its bar,
+/// "no runs to show" without bins.
+fn bars(fig: &mut Figure, hist: &Histogram, color: &str) {
+    let max = hist.max_count();
     let base = fig.yp(0.0);
     let bar_px = fig.xp(hist.start + hist.width) - fig.xp(hist.start);
     // All counts or none: labels on only the wider bars would read as a selection.
@@ -464,7 +706,6 @@ fn histogram_figure(
             fig.yp(0.5)
         ));
     }
-    fig
 }
 
 #[cfg(test)]
@@ -486,10 +727,15 @@ mod tests {
             false_alarms: 1,
             runs_with_false_alarms: 1,
             isolated: vec![hits, detected - hits, 0, 0, 20 - detected],
+            minmax: Vec::new(),
         }
     }
 
     fn page(faults: Vec<FaultEvaluation>) -> String {
+        page_with(faults, true)
+    }
+
+    fn page_with(faults: Vec<FaultEvaluation>, minmax_histograms: bool) -> String {
         let eval = Evaluation {
             title: "evaluation of <motor>".into(),
             config: "dc-motor.toml".into(),
@@ -504,6 +750,7 @@ mod tests {
                 .map(str::to_owned)
                 .to_vec(),
             faults,
+            minmax_histograms,
         };
         let mut out = Vec::new();
         eval.write_html(&mut out).unwrap();
@@ -532,6 +779,66 @@ mod tests {
         let delay_svg = second.split("</svg>").next().unwrap();
         assert_eq!(delay_svg.matches("class=\"bar\"").count(), 9);
         assert!(!html.contains("<script"));
+    }
+
+    /// Fig. 8: a histogram per (injected fault, test) with the scaled χ² density, the
+    /// threshold and the type-I or type-II rate in its caption and in the table.
+    #[test]
+    fn minmax_histograms_with_density_threshold_and_rates() {
+        let mut first = fault("drift<&>", 20);
+        let null: Vec<f64> = (0..20).map(|i| f64::from(i) * 0.4).collect();
+        first.minmax = vec![
+            MinmaxEvaluation {
+                test: "drift<&>".into(),
+                faults: vec!["drift<&>".into()],
+                error: DecisionError::TypeII,
+                statistics: (0..20).map(|i| 20.0 + f64::from(i)).collect(),
+                threshold: 6.6349,
+                dof: 1,
+                error_rate: Some(0.0),
+            },
+            MinmaxEvaluation {
+                test: "bias".into(),
+                faults: vec!["bias".into()],
+                error: DecisionError::TypeI,
+                statistics: null,
+                threshold: 6.6349,
+                dof: 1,
+                error_rate: Some(0.15),
+            },
+        ];
+        let html = page(vec![first, fault("bias", 0)]);
+        assert_eq!(html.matches("class=\"fig minmax-histogram\"").count(), 2);
+        assert_eq!(html.matches("<svg").count(), 6);
+        assert_eq!(html.matches("class=\"chi2-density\" d=\"M").count(), 2);
+        assert_eq!(html.matches("class=\"threshold\"").count(), 2);
+        let section = html.split("<section id=\"minmax\">").nth(1).unwrap();
+        assert!(section.contains("type II error rate 0.0 %"));
+        assert!(section.contains("type I error rate 15.0 %"));
+        assert!(section.contains("<code>drift&lt;&amp;&gt;</code>"));
+        // The second fault has no tests: no heading of its own in the section.
+        assert_eq!(section.matches("<h3>").count(), 1);
+        assert!(!html.contains("NaN"));
+        // Not asked for: the rates only.
+        let mut first = fault("drift<&>", 20);
+        first.minmax = vec![MinmaxEvaluation {
+            test: "bias".into(),
+            faults: vec!["bias".into()],
+            error: DecisionError::TypeI,
+            statistics: vec![1.0, 9.0],
+            threshold: 6.6349,
+            dof: 1,
+            error_rate: Some(0.5),
+        }];
+        let html = page_with(vec![first], false);
+        assert_eq!(html.matches("<svg").count(), 2);
+        let section = html.split("<section id=\"minmax\">").nth(1).unwrap();
+        assert!(section.contains("<td class=\"num\">50.0 %</td><td class=\"num\">–</td>"));
+    }
+
+    #[test]
+    fn no_minmax_no_section() {
+        assert!(!page(vec![fault("bias", 3)]).contains("id=\"minmax\""));
     }
 
     #[test]

@@ -68,6 +68,43 @@ impl Histogram {
         }
     }
 
+    /// `bins` (at least 1) equal bins over `[start, end]`, for values whose axis has a
+    /// natural origin (the minmax statistics of Fig. 8 from 0). Values outside it, like
+    /// those that are not finite, are left out and counted in [`Histogram::skipped`].
+    /// No bins when the range is empty or not finite.
+    ///
+    /// ```
+    /// use glrmon_report::Histogram;
+    ///
+    /// let h = Histogram::within(&[0.5, 1.5, 1.7, 4.0, 5.0], 0.0, 4.0, 4);
+    /// assert_eq!(h.counts, [1, 2, 0, 1]);
+    /// assert_eq!(h.skipped, 1);
+    /// ```
+    #[must_use]
+    pub fn within(values: &[f64], start: f64, end: f64, bins: usize) -> Self {
+        if !(start.is_finite() && end.is_finite() && end > start) {
+            return Histogram::empty(values.len() as u64);
+        }
+        let bins = bins.max(1);
+        let width = (end - start) / bins as f64;
+        let mut counts = vec![0; bins];
+        let mut skipped = 0;
+        for v in values {
+            if v.is_finite() && (start..=end).contains(v) {
+                let i = (((v - start) / width).floor() as usize).min(bins - 1);
+                counts[i] += 1;
+            } else {
+                skipped += 1;
+            }
+        }
+        Histogram {
+            start,
+            width,
+            counts,
+            skipped,
+        }
+    }
+
     /// Bins of whole-number width centred on integers (edges at n − 0.5), so each
     /// integer falls in exactly one bin: width 1 while the range spans at most
     /// `max_bins` integers, else the smallest integer width that keeps `max_bins`.

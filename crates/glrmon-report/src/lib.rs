@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 
 mod channel;
+mod chi2;
 pub mod clock;
 mod decimate;
 mod escape;
@@ -10,7 +11,7 @@ mod html;
 mod sink;
 mod svg;
 
-pub use evaluation::{Evaluation, FaultEvaluation};
+pub use evaluation::{DecisionError, Evaluation, FaultEvaluation, MinmaxEvaluation};
 pub use histogram::Histogram;
 pub use sink::ReportSink;
 

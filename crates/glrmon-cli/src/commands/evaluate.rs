@@ -4,8 +4,10 @@
 //! threshold), the error of the onset estimate r̂ and which faults the isolation tests
 //! named (a confusion matrix), both at the alarm's isolation update (else at the
 //! alarm), false alarms before the onset — what a user tunes w, s and the
-//! thresholds with (Zhang & Basseville 2014, §6: Figures 7-8 are such histograms).
-//! `--report` hands the summaries to `glrmon-report`, which draws those histograms.
+//! thresholds with (Zhang & Basseville 2014, §6: Figures 7-8 are such histograms); and
+//! at that isolation each test's minmax statistic with its type-I or type-II error rate
+//! (eq. (41), (42), Fig. 8). `--report` hands the summaries to `glrmon-report`, which
+//! draws those histograms (Fig. 8's with `--minmax-histograms`).
 
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -14,7 +16,7 @@ use std::path::PathBuf;
 use anyhow::Context as _;
 use clap::Args;
 use glrmon_eval::{EvalError, Protocol, outcome_columns, summarize};
-use glrmon_report::{Evaluation, FaultEvaluation};
+use glrmon_report::{DecisionError, Evaluation, FaultEvaluation};
 
 use crate::common::pick;
 use crate::common::{InvalidInput, load_config};
@@ -62,9 +64,16 @@ pub(crate) struct EvaluateArgs {
     pub(crate) stray: Vec<String>,
     /// Also write a self-contained HTML report here: per injected fault, histograms of
     /// the detection delay and of the onset error r̂ − r, the summary and the confusion
-    /// matrix.
+    /// matrix, and the type-I/II rates of the isolation tests (Zhang & Basseville 2014,
+    /// eq. (42)).
     #[arg(long, value_name = "OUT.html")]
     report: Option<PathBuf>,
+    /// With `--report`: also draw, per injected fault and isolation test, the histogram
+    /// of its minmax statistic with the χ² density and the threshold (Zhang & Basseville
+    /// 2014, Fig. 8); faults × tests figures, so off by default (the report always has
+    /// the table of type-I/II rates).
+    #[arg(long, requires = "report")]
+    minmax_histograms: bool,
 }
 
 pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
@@ -142,6 +151,7 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
             seed: args.seed,
             outcomes: columns,
             faults: summaries,
+            minmax_histograms: args.minmax_histograms,
         };
         let write = || -> std::io::Result<()> {
             let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
@@ -206,6 +216,57 @@ fn text(
             let _ = write!(s, " {n:>width$}");
         }
         s.push('\n');
+    }
+    s.push_str(&minmax_table(results));
+    s
+}
+
+/// Zhang & Basseville 2014, Fig. 8 in numbers: per injected fault and isolation test,
+/// the runs that isolated, the median minmax statistic l_a (eq. (41)), the threshold and
+/// the type-I or type-II error rate (eq. (42)).
+fn minmax_table(results: &[FaultEvaluation]) -> String {
+    let mut s = String::new();
+    if results.iter().all(|r| r.minmax.is_empty()) {
+        return s;
+    }
+    let width = results
+        .iter()
+        .flat_map(|r| r.minmax.iter().map(|t| t.test.chars().count()))
+        .max()
+        .unwrap_or(4)
+        .max(4);
+    let _ = writeln!(
+        s,
+        "\nminmax isolation (Fig. 8): l_a at that isolation (type I: fired though not injected; type II: injected, not fired)"
+    );
+    let _ = writeln!(
+        s,
+        "{:<24} {:<width$} {:>6} {:>10} {:>15} {:>8} {:>8}",
+        "fault", "test", "runs", "l_a p50", "threshold (dof)", "type I", "type II"
+    );
+    for r in results {
+        for t in &r.minmax {
+            let median = glrmon_eval::median(t.statistics.clone())
+                .map_or("–".to_owned(), |m| format!("{m:.2}"));
+            let rate = t
+                .error_rate
+                .map_or("–".to_owned(), |r| format!("{:.1}%", 100.0 * r));
+            let (type_i, type_ii) = match t.error {
+                DecisionError::TypeI => (rate, "–".to_owned()),
+                DecisionError::TypeII => ("–".to_owned(), rate),
+            };
+            let _ = writeln!(
+                s,
+                "{:<24} {:<width$} {:>6} {:>10} {:>15} {:>8} {:>8}",
+                r.fault,
+                t.test,
+                t.statistics.len(),
+                median,
+                format!("{:.4} ({})", t.threshold, t.dof),
+                type_i,
+                type_ii
+            );
+        }
     }
     s
 }
