@@ -4,7 +4,7 @@ CARGO ?= cargo
 
 .DEFAULT_GOAL := help
 
-.PHONY: help deps deps-zenohd build install uninstall check-install test fmt fmt-check lint unit doc check-deps check-config fuzz-build fuzz fuzz-all msrv demo bench bench-e2e bench-replay tank-table
+.PHONY: help deps deps-zenohd build install uninstall check-install test fmt fmt-check lint unit doc check-deps check-config fuzz-build fuzz fuzz-all msrv demo bench bench-e2e bench-replay tank-table reproduce
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z0-9_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-11s %s\n", $$1, $$2}'
@@ -141,6 +141,9 @@ check-install: ## install (debug build) into a scratch prefix and check the layo
 
 demo: ## the main job on built-in simulated channels with an injected fault
 	$(CARGO) run --release -q -p glrmon-cli -- demo
+
+reproduce: ## regenerate the command blocks of docs/REPRODUCTION.md: Zhang 2021 Tables I and II, the 2014 gas-pipeline Monte Carlo (~12 min on 2 cores)
+	bash scripts/reproduce.sh
 
 tank-table: ## the quadruple-tank identify → calibrate → monitor table of docs/IDENTIFY.md (50 runs per fault)
 	cargo run --release -q -p glrmon-eval --example quadruple_tank_table

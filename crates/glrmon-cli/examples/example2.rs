@@ -33,10 +33,10 @@ use glrmon_spec::Channel;
 use nalgebra::DVector;
 
 /// The leaks the paper simulates (1-based delays, its θ_10 and θ_15).
-const LEAKS: [usize; 2] = [10, 15];
+pub(crate) const LEAKS: [usize; 2] = [10, 15];
 
 /// N, the data length of the paper's Example 2.
-const SAMPLES: usize = 500;
+pub(crate) const SAMPLES: usize = 500;
 
 #[derive(Debug, Parser)]
 #[command(about = "Zhang 2021, Example 2: 2 leaks among 30 delayed-input candidates")]
@@ -56,12 +56,16 @@ struct Args {
 }
 
 /// The shipped Example 2 configuration.
-fn example2_path() -> PathBuf {
+pub(crate) fn example2_path() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/examples/paper2021-example2.toml")
 }
 
 /// One run's diagnosis and the SNR of the leaks' contribution (dB).
-fn run(channel: &Channel, theta: f64, seed: u64) -> Result<(SpanDiagnosis, f64), String> {
+pub(crate) fn run(
+    channel: &Channel,
+    theta: f64,
+    seed: u64,
+) -> Result<(SpanDiagnosis, f64), String> {
     let m = channel.fault_names.len();
     let mut magnitude = DVector::zeros(m);
     for leak in LEAKS {

@@ -476,7 +476,7 @@ fn run(args: &Args) -> Result<(), String> {
             args.seed
         );
         println!(
-            "      r   SNR 1 (paper)   SNR 2 (paper) dB    success    rate   paper  (rate − paper)/s.e."
+            "      r   SNR 1 (paper)   SNR 2 (paper) dB    success    rate   paper  (rate − paper)/s.e.  ≥ paper − 2σ"
         );
         for &r in &args.noise {
             let channel = configure(example1_channel_with_noise(&path, residual, r)?);
@@ -492,15 +492,22 @@ fn run(args: &Args) -> Result<(), String> {
             let (rate, z) = match paper {
                 Some(row) => {
                     let p = row.3 / 100.0;
+                    // σ: the binomial s.d. of the paper's own 1000-trial rate.
+                    let sigma = (p * (1.0 - p) / PAPER_TRIALS as f64).sqrt();
+                    let verdict = if tally.rate() >= p - 2.0 * sigma {
+                        "yes"
+                    } else {
+                        "NO"
+                    };
                     (
                         format!("{:5.1} %", row.3),
                         format!(
-                            "{:+6.1}",
+                            "{:+6.1}                {verdict:>3}",
                             (tally.rate() - p) / difference_se(p, args.trials)
                         ),
                     )
                 }
-                None => ("    –  ".into(), "     –".into()),
+                None => ("    –  ".into(), "     –                  –".into()),
             };
             println!(
                 "  {r:5}   {:5.2} ({})   {:5.2} ({})   {:5}/{:<5} {:5.1} %  {rate}  {z}{}",

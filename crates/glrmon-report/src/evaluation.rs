@@ -8,10 +8,10 @@ use std::fmt::Write as _;
 use std::io::{self, Write};
 
 use crate::Histogram;
-use crate::chi2::chi2_pdf;
 use crate::escape::escape;
 use crate::html::CSS;
 use crate::svg::{Axis, Figure, ONSET, PALETTE, RED, Swatch, fmt_num};
+use glrmon_core::threshold::chi2_pdf;
 
 /// Most bins per histogram: one per sample while delays and errors span at most this
 /// many samples, wider bins beyond.
@@ -506,7 +506,7 @@ fn minmax_figure(f: &FaultEvaluation, t: &MinmaxEvaluation, fig_id: &mut usize) 
     let density: Vec<(f64, f64)> = (0..=DENSITY_POINTS)
         .map(|i| {
             let x = end * i as f64 / DENSITY_POINTS as f64;
-            (x, runs * hist.width * chi2_pdf(x, dof))
+            (x, runs * hist.width * chi2_pdf(f64::from(dof), x))
         })
         .filter(|(_, y)| y.is_finite())
         .collect();

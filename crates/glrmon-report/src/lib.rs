@@ -1,7 +1,6 @@
 #![doc = include_str!("../README.md")]
 
 mod channel;
-mod chi2;
 pub mod clock;
 mod decimate;
 mod escape;
