@@ -57,7 +57,7 @@ fn isolation_fields(isolation: &[IsolationResult], faults: &[String], magnitude:
     let mut mag = String::new();
     for (n, &i) in listed.iter().enumerate() {
         let sep = if n == 0 { "" } else { ", " };
-        let _ = write!(mag, "{sep}{} {:.3}", faults[i], magnitude[i]);
+        let _ = write!(mag, "{sep}{} {}", faults[i], self::magnitude(magnitude[i]));
     }
     let mut minmax = String::new();
     for (n, t) in tests.iter().enumerate() {
@@ -190,8 +190,35 @@ fn time(t: Option<f64>) -> String {
     }
 }
 
+/// A fault magnitude with 4 significant digits: fixed-point from 10⁻³ to 10⁵, else in
+/// scientific notation (a leak of 1e-4 per unit of flow must not print as 0.0001 or
+/// 0.0000).
+pub(crate) fn magnitude(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 || !v.is_finite() {
+        format!("{v}")
+    } else if (1e-3..1e5).contains(&a) {
+        // Digits after the point for 4 significant ones: 3 − ⌊log₁₀|v|⌋, in 0…6.
+        let decimals = (3 - a.log10().floor() as i32).clamp(0, 6) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn magnitudes_keep_four_significant_digits() {
+        assert_eq!(super::magnitude(1.0), "1.000");
+        assert_eq!(super::magnitude(-0.98765), "-0.9877");
+        assert_eq!(super::magnitude(0.0012345), "0.001234");
+        assert_eq!(super::magnitude(1.0234e-4), "1.023e-4");
+        assert_eq!(super::magnitude(-43980.0), "-43980");
+        assert_eq!(super::magnitude(2.5e7), "2.500e7");
+        assert_eq!(super::magnitude(0.0), "0");
+    }
+
     use super::*;
 
     #[test]
@@ -217,7 +244,7 @@ mod tests {
         let text = line(&Record::Alarm(a.clone())).unwrap();
         assert_eq!(
             text,
-            "ALARM pump3 k=201 onset=201 glr=1805.1 (threshold 27.6) isolated=[x0_jump] magnitude=[x0_jump 3.981, x1_jump 0.005] minmax=[x0_jump 1213.1/6.6] update_k=203 t=2.010"
+            "ALARM pump3 k=201 onset=201 glr=1805.1 (threshold 27.6) isolated=[x0_jump] magnitude=[x0_jump 3.981, x1_jump 0.005000] minmax=[x0_jump 1213.1/6.6] update_k=203 t=2.010"
         );
         let text = line(&Record::Alarm(Alarm {
             update_k: None,
@@ -284,7 +311,7 @@ mod tests {
         assert_eq!(
             text,
             "ALARM plant k=900 onset=880 glr=300.0 (threshold 40.0) isolated=[y3_bias] \
-             magnitude=[y3_bias 3.000, y30_bias 30.000, y29_bias 29.000, y28_bias 28.000, y27_bias 27.000] \
+             magnitude=[y3_bias 3.000, y30_bias 30.00, y29_bias 29.00, y28_bias 28.00, y27_bias 27.00] \
              minmax=[y3_bias 3.0/6.6, y30_bias 30.0/6.6, y29_bias 29.0/6.6, y28_bias 28.0/6.6, y27_bias 27.0/6.6] \
              (+26 more faults: --json lists all) t=2026-12-02T06:09:06.296Z"
         );

@@ -185,22 +185,6 @@ pub(crate) fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A fault magnitude with 4 significant digits: fixed-point from 10⁻³ to 10⁵, else in
-/// scientific notation (a leak of 1e-4 per unit of flow must not print as 0.0001 or
-/// 0.0000).
-fn magnitude(v: f64) -> String {
-    let a = v.abs();
-    if v == 0.0 || !v.is_finite() {
-        format!("{v}")
-    } else if (1e-3..1e5).contains(&a) {
-        // Digits after the point for 4 significant ones: 3 − ⌊log₁₀|v|⌋, in 0…6.
-        let decimals = (3 - a.log10().floor() as i32).clamp(0, 6) as usize;
-        format!("{v:.decimals$}")
-    } else {
-        format!("{v:.3e}")
-    }
-}
-
 /// The human-readable report.
 fn text(d: &SpanDiagnosis, faults: usize) -> String {
     let r = &d.record;
@@ -239,7 +223,7 @@ fn text(d: &SpanDiagnosis, faults: usize) -> String {
     for name in &r.support {
         if let Some(v) = r.estimate.get(name) {
             let sep = if est.is_empty() { "" } else { ", " };
-            let _ = write!(est, "{sep}{name} = {}", magnitude(*v));
+            let _ = write!(est, "{sep}{name} = {}", crate::print::magnitude(*v));
         }
     }
     if !r.support.is_empty() {
@@ -252,7 +236,7 @@ fn text(d: &SpanDiagnosis, faults: usize) -> String {
             .support
             .get(i)
             .map_or_else(|| format!("#{j}"), Clone::clone);
-        let _ = write!(lasso, "{sep}{name} = {}", magnitude(v));
+        let _ = write!(lasso, "{sep}{name} = {}", crate::print::magnitude(v));
     }
     if !r.support.is_empty() {
         let _ = writeln!(s, "  lasso:     {lasso}  (θ̂(λ), shrunk by the penalty)");
@@ -304,20 +288,4 @@ fn text(d: &SpanDiagnosis, faults: usize) -> String {
         }
     );
     s
-}
-
-#[cfg(test)]
-mod tests {
-    use super::magnitude;
-
-    #[test]
-    fn magnitudes_keep_four_significant_digits() {
-        assert_eq!(magnitude(1.0), "1.000");
-        assert_eq!(magnitude(-0.98765), "-0.9877");
-        assert_eq!(magnitude(0.0012345), "0.001234");
-        assert_eq!(magnitude(1.0234e-4), "1.023e-4");
-        assert_eq!(magnitude(-43980.0), "-43980");
-        assert_eq!(magnitude(2.5e7), "2.500e7");
-        assert_eq!(magnitude(0.0), "0");
-    }
 }

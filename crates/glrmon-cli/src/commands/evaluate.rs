@@ -190,7 +190,7 @@ fn text(
         let _ = writeln!(
             s,
             "{:<24} {:>8.1}% {:>6} {:>9} {:>15} {:>16} {:>12}",
-            format!("{} ({})", r.fault, r.magnitude),
+            format!("{} ({})", r.fault, crate::print::magnitude(r.magnitude)),
             100.0 * r.detected as f64 / r.runs.max(1) as f64,
             r.runs,
             q(1),
