@@ -231,21 +231,22 @@ fn read_library(file: &mut std::fs::File) -> Option<String> {
 }
 
 /// Calendar date and time (UTC) of `secs` seconds since the Unix epoch: (year, month,
-/// day, hour, minute, second).
+/// day, hour, minute, second). Beyond jiff's range (year 9999) the last second it holds.
 pub(crate) fn civil(secs: u64) -> (i64, i64, i64, u64, u64, u64) {
-    let days = i64::try_from(secs / 86_400).unwrap_or(0);
-    let rem = secs % 86_400;
-    // Howard Hinnant's civil_from_days.
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    (y, m, d, rem / 3600, (rem % 3600) / 60, rem % 60)
+    let ts = i64::try_from(secs)
+        .ok()
+        .and_then(|s| jiff::Timestamp::from_second(s).ok())
+        .unwrap_or(jiff::Timestamp::MAX);
+    let t = ts.to_zoned(jiff::tz::TimeZone::UTC).datetime();
+    let small = |v: i8| u64::try_from(v).unwrap_or(0);
+    (
+        i64::from(t.year()),
+        i64::from(t.month()),
+        i64::from(t.day()),
+        small(t.hour()),
+        small(t.minute()),
+        small(t.second()),
+    )
 }
 
 /// ISO-8601 UTC time of `ns` nanoseconds since the Unix epoch, to the nanosecond:
@@ -278,6 +279,15 @@ mod tests {
 
     fn scratch(tag: &str) -> PathBuf {
         std::env::temp_dir().join(format!("glrmon-summary-{tag}-{}.mcap", std::process::id()))
+    }
+
+    #[test]
+    fn iso8601_utc_covers_the_whole_u64_range() {
+        assert_eq!(iso8601_utc(u64::MAX), "2554-07-21T23:34:33.709551615Z");
+        assert_eq!(
+            iso8601_utc(1_796_191_746_296_000_000),
+            "2026-12-02T06:09:06.296000000Z"
+        );
     }
 
     fn header(channels: &[&str]) -> FileHeader {
