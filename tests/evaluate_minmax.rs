@@ -5,9 +5,9 @@
 //! (eq. (42)) in its JSON, its table and its report (Fig. 8: a histogram per injected
 //! fault and test, with the χ² density and the threshold).
 //!
-//! The stand-in model tests the two inlet leaks together (group `inlet_leak`, two
-//! degrees of freedom) against the outlet bias (`outlet`, one): for an inlet leak,
-//! `inlet_leak` can make a type-II error and `outlet` a type-I error.
+//! As in the paper each fault has its own test with one degree of freedom (`g0_leak`,
+//! `gp_leak`, `outlet_leak`): for an injected inlet leak its own test can make a type-II
+//! error and the two others a type-I error.
 
 #[path = "support.rs"]
 mod support;
@@ -18,8 +18,7 @@ use serde_json::Value;
 use support::{Scratch, glrmon, run_ok};
 
 const RUNS: usize = 40;
-/// χ²(2) and χ²(1) upper 1 % quantiles: the thresholds at `isolation_alpha = 0.01`.
-const THRESHOLD_2: f64 = 9.210_340_371_976_18;
+/// The χ²(1) upper 1 % quantile: the threshold at `isolation_alpha = 0.01`.
 const THRESHOLD_1: f64 = 6.634_896_601_021_21;
 
 fn config(name: &str) -> PathBuf {
@@ -115,12 +114,15 @@ fn json_has_each_runs_minmax_statistic_and_the_rates_they_give() {
         );
         let tests = r["minmax"].as_array().unwrap();
         let names: Vec<&str> = tests.iter().map(|t| t["test"].as_str().unwrap()).collect();
-        assert_eq!(names, ["inlet_leak", "outlet"], "{fault}");
-        for (t, (dof, h, rate_key)) in tests.iter().zip([
-            (2, THRESHOLD_2, "type_ii_rate"),
-            (1, THRESHOLD_1, "type_i_rate"),
-        ]) {
+        assert_eq!(names, ["g0_leak", "gp_leak", "outlet_leak"], "{fault}");
+        for t in tests {
             let test = t["test"].as_str().unwrap();
+            let (dof, h) = (1, THRESHOLD_1);
+            let rate_key = if test == fault {
+                "type_ii_rate"
+            } else {
+                "type_i_rate"
+            };
             let stats = t["statistics"].as_array().unwrap();
             assert_eq!(stats.len(), isolating.len(), "{fault}/{test}");
             assert!(stats.iter().all(|s| s.as_f64().is_some_and(|s| s >= 0.0)));
@@ -167,7 +169,7 @@ fn text_prints_the_fig8_table_with_the_json_rates() {
         .skip(2)
         .map(|l| l.split_whitespace().collect())
         .collect();
-    assert_eq!(rows.len(), 4, "{table}");
+    assert_eq!(rows.len(), 6, "{table}");
     for r in v["results"].as_array().unwrap() {
         for t in r["minmax"].as_array().unwrap() {
             let (fault, test) = (r["fault"].as_str().unwrap(), t["test"].as_str().unwrap());
@@ -203,15 +205,14 @@ fn report_draws_fig8_with_chi2_density_threshold_and_rates() {
         .nth(1)
         .expect("a Fig. 8 section");
     assert!(section.contains("Minmax isolation statistics (Fig. 8)"));
-    assert_eq!(section.matches("class=\"fig minmax-histogram\"").count(), 4);
+    assert_eq!(section.matches("class=\"fig minmax-histogram\"").count(), 6);
     assert_eq!(
         section
             .matches("<path class=\"chi2-density\" d=\"M")
             .count(),
-        4
+        6
     );
-    assert_eq!(section.matches("<line class=\"threshold\"").count(), 4);
-    assert!(section.contains("χ²(2) density"));
+    assert_eq!(section.matches("<line class=\"threshold\"").count(), 6);
     assert!(section.contains("χ²(1) density"));
     for r in v["results"].as_array().unwrap() {
         for t in r["minmax"].as_array().unwrap() {
