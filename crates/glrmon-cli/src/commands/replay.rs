@@ -110,6 +110,13 @@ fn output_sinks(
     Ok((sinks, lines))
 }
 
+/// Whether the alarm, isolation and diagnosis lines go to standard error after the
+/// summary: whenever standard output is not the default JSON lines, i.e. with
+/// `--output` or `--report`.
+fn lines_on_stderr(args: &ReplayArgs) -> bool {
+    args.output.is_some() || args.report.is_some()
+}
+
 /// Closes the sinks (files' summaries, the report); the first failure is the error.
 fn close(fanout: Fanout) -> anyhow::Result<()> {
     let mut first = None;
@@ -169,7 +176,7 @@ fn replay_csv(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
         "glrmon replay: channel \"{}\": {rows} rows, {} samples, {} alarms, {errors} errors",
         channel.name, c.samples, c.alarms,
     );
-    if args.output.is_some() {
+    if lines_on_stderr(args) {
         for line in &take_lines(&lines) {
             eprintln!("  {line}");
         }
@@ -276,7 +283,7 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
     for (name, n) in &unknown {
         eprintln!("  channel \"{name}\": {n} inputs skipped: not in the configuration");
     }
-    if args.output.is_some() {
+    if lines_on_stderr(args) {
         for line in &take_lines(&lines) {
             eprintln!("  {line}");
         }
