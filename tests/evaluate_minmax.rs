@@ -15,7 +15,7 @@ mod support;
 use std::path::{Path, PathBuf};
 
 use serde_json::Value;
-use support::{Scratch, glrmon, run_ok};
+use support::{Scratch, evaluate_gas_pipeline_table1, glrmon, run_ok};
 
 const RUNS: usize = 40;
 /// The χ²(1) upper 1 % quantile: the threshold at `isolation_alpha = 0.01`.
@@ -32,20 +32,8 @@ fn config(name: &str) -> PathBuf {
 fn evaluate(dir: &Path) -> (String, Value, String) {
     let (json, html) = (dir.join("eval.json"), dir.join("eval.html"));
     let out = run_ok(
-        glrmon()
-            .args(["evaluate", "--config"])
-            .arg(config("paper2014-gas-pipeline.toml"))
-            .args([
-                "--fault",
-                "g0_leak:-2e-5,gp_leak:-1e-5",
-                "--runs",
-                &RUNS.to_string(),
-                "--onset",
-                "300",
-                "--samples",
-                "500",
-                "--json-out",
-            ])
+        evaluate_gas_pipeline_table1(RUNS)
+            .arg("--json-out")
             .arg(&json)
             .arg("--report")
             .arg(&html)

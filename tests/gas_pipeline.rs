@@ -29,7 +29,7 @@
 mod support;
 
 use std::path::{Path, PathBuf};
-use support::{Scratch, glrmon, run_ok};
+use support::{Scratch, evaluate_gas_pipeline_table1, glrmon, run_ok};
 
 const THRESHOLD: f64 = 50.0;
 
@@ -229,21 +229,7 @@ fn first_alarm(records: &[serde_json::Value], onset: u64, own: &str, other: &str
 #[test]
 fn fig8_each_inlet_fault_is_told_from_the_other() {
     const RUNS: usize = 200;
-    let out = run_ok(
-        glrmon()
-            .args(["evaluate", "--json", "--config"])
-            .arg(config())
-            .args([
-                "--fault",
-                "g0_leak:-2e-5,gp_leak:-1e-5",
-                "--runs",
-                &RUNS.to_string(),
-                "--onset",
-                "300",
-                "--samples",
-                "500",
-            ]),
-    );
+    let out = run_ok(evaluate_gas_pipeline_table1(RUNS).arg("--json"));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let results = v["results"].as_array().unwrap();
     assert_eq!(results.len(), 2);

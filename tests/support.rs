@@ -14,6 +14,22 @@ pub(crate) fn glrmon() -> Command {
     Command::new(env!("CARGO_BIN_EXE_glrmon"))
 }
 
+/// `glrmon evaluate` of the 2014 gas pipeline's Table 1 faults (fault 1 −2e-5, fault 2
+/// −1e-5 at sample 300 of 500), `runs` runs each: the Fig. 7-8 protocol. The caller
+/// adds the outputs (`--json`, `--json-out`, `--report`).
+pub(crate) fn evaluate_gas_pipeline_table1(runs: usize) -> Command {
+    let mut cmd = glrmon();
+    cmd.args(["evaluate", "--config"])
+        .arg(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../config/examples/paper2014-gas-pipeline.toml"),
+        )
+        .args(["--fault", "g0_leak:-2e-5,gp_leak:-1e-5", "--runs"])
+        .arg(runs.to_string())
+        .args(["--onset", "300", "--samples", "500"]);
+    cmd
+}
+
 /// Runs `cmd` and returns its output, failing the test with both streams when it fails.
 pub(crate) fn run_ok(cmd: &mut Command) -> Output {
     let out = cmd.output().unwrap();

@@ -90,13 +90,7 @@ pub(crate) fn run(
     let clean = outputs(DVector::zeros(m))?;
     let mut engine = DiagnosisEngine::new(channel, SAMPLES).map_err(|e| e.to_string())?;
     for x in &faulty {
-        let s = glrmon_core::Sample {
-            k: x.k,
-            u: &x.u,
-            y: &x.y,
-            p: &x.p,
-        };
-        engine.step(&s).map_err(|e| e.to_string())?;
+        engine.step(&x.sample()).map_err(|e| e.to_string())?;
     }
     let last = SAMPLES as u64 - 1;
     let d = engine

@@ -132,6 +132,15 @@ pub(crate) fn example1_channel(
     residual: ResidualKind,
 ) -> Result<Channel, String> {
     let cfg = glrmon_spec::load(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    ltv3(&cfg, path, residual)
+}
+
+/// The `ltv3` channel of `cfg` (read from `path`), with the given residual kind.
+fn ltv3(
+    cfg: &glrmon_spec::Config,
+    path: &std::path::Path,
+    residual: ResidualKind,
+) -> Result<Channel, String> {
     let mut channel = cfg
         .channel("ltv3")
         .cloned()
@@ -212,13 +221,7 @@ pub(crate) fn trial(channel: &Channel, q: usize, seed: u64, whiten: bool) -> Res
             signal.push([s[0], s[1]]);
             noise.push([x.y[0] - s[0], x.y[1] - s[1]]);
         }
-        let s = glrmon_core::Sample {
-            k: x.k,
-            u: &x.u,
-            y: &x.y,
-            p: &x.p,
-        };
-        engine.step(&s).map_err(|e| e.to_string())?;
+        engine.step(&x.sample()).map_err(|e| e.to_string())?;
     }
     let last = n_samples as u64 - 1;
     let (found, on_path) = match engine.diagnose(last, 0, 1, last) {
@@ -314,12 +317,7 @@ pub(crate) fn example1_channel_with_noise(
     }
     let text = text.replacen(line, &format!("\nR = {r:?}\n"), 1);
     let cfg = glrmon_spec::parse(&text).map_err(|e| format!("{}: {e}", path.display()))?;
-    let mut channel = cfg
-        .channel("ltv3")
-        .cloned()
-        .ok_or_else(|| format!("{}: no channel \"ltv3\"", path.display()))?;
-    channel.diagnosis.residual = residual;
-    Ok(channel)
+    ltv3(&cfg, path, residual)
 }
 
 /// What a row of trials gave.

@@ -273,13 +273,7 @@ kind = "all_sensors"
         let mut nis = 0.0;
         for _ in 0..n {
             let x = sim.next_sample();
-            let s = glrmon_core::Sample {
-                k: x.k,
-                u: &x.u,
-                y: &x.y,
-                p: &x.p,
-            };
-            detector.step(&s, &mut out).unwrap();
+            detector.step(&x.sample(), &mut out).unwrap();
             nis += out.normalized_innovation;
         }
         // NIS ~ χ²(2): variance 4, so the mean's σ is √(4/n) = 0.014.

@@ -75,6 +75,19 @@ pub struct SimSample {
     pub p: Vec<f64>,
 }
 
+impl SimSample {
+    /// The sample as the monitors and filters take it.
+    #[must_use]
+    pub fn sample(&self) -> glrmon_core::Sample<'_> {
+        glrmon_core::Sample {
+            k: self.k,
+            u: &self.u,
+            y: &self.y,
+            p: &self.p,
+        }
+    }
+}
+
 /// A seeded plant simulator.
 pub struct Simulator {
     model: Box<dyn StateSpace>,
