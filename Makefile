@@ -142,7 +142,7 @@ check-install: ## install (debug build) into a scratch prefix and check the layo
 demo: ## the main job on built-in simulated channels with an injected fault
 	$(CARGO) run --release -q -p glrmon-cli -- demo
 
-reproduce: ## regenerate the command blocks of docs/REPRODUCTION.md: Zhang 2021 Tables I and II, the 2014 gas-pipeline Monte Carlo (~12 min on 2 cores)
+reproduce: ## regenerate the command blocks of docs/REPRODUCTION.md: Zhang 2021 Tables I and II, the 2014 gas-pipeline Monte Carlo, Willsky–Jones (~6 min on 2 cores after the release build)
 	bash scripts/reproduce.sh
 
 tank-table: ## the quadruple-tank identify → calibrate → monitor table of docs/IDENTIFY.md (50 runs per fault)
