@@ -200,7 +200,12 @@ fn text(d: &SpanDiagnosis, faults: usize) -> String {
         if r.support.is_empty() {
             "(none)".to_owned()
         } else {
-            format!("{} ({} faults)", r.support.join(", "), r.support.len())
+            let n = r.support.len();
+            format!(
+                "{} ({n} fault{})",
+                r.support.join(", "),
+                if n == 1 { "" } else { "s" }
+            )
         }
     );
     if let Some(t) = &d.detail.test {
