@@ -5,7 +5,7 @@ pub mod identify;
 pub mod noise;
 
 use glrmon_core::threshold::chi2_upper_quantile;
-use glrmon_monitor::Monitor;
+use glrmon_monitor::{IsolationGroup, Monitor};
 use glrmon_report::{DecisionError, FaultEvaluation, MinmaxEvaluation};
 use glrmon_sim::{Injection, SimSample};
 use glrmon_spec::Channel;
@@ -217,6 +217,7 @@ pub fn evaluate(
         runs,
         seed,
     } = protocol;
+    let groups = Monitor::from_channel(channel)?.isolation_groups().to_vec();
     let mut results = Vec::new();
     for (fault, magnitude) in injected {
         let outcomes: Vec<Result<Run, EvalError>> = std::thread::scope(|scope| {
@@ -239,7 +240,7 @@ pub fn evaluate(
         results.push(FaultResult {
             fault: fault.clone(),
             magnitude: *magnitude,
-            minmax: minmax_tests(channel, fault, &runs),
+            minmax: minmax_tests(channel, &groups, fault, &runs),
             runs,
         });
     }
@@ -261,7 +262,7 @@ pub fn one_run(
 ) -> Result<Run, EvalError> {
     let mut sim = simulator(channel, seed, fault, magnitude, onset)?;
     let mut mon = Monitor::from_channel(channel)?;
-    let tests = isolation_tests(channel);
+    let tests = mon.isolation_groups().to_vec();
     // Detection, onset and isolation come from the alarm and isolation records.
     mon.set_stat_records(false);
     let mut x = SimSample {
@@ -332,27 +333,12 @@ fn isolated(tests: &[glrmon_wire::IsolationResult]) -> Vec<String> {
         .collect()
 }
 
-/// The channel's isolation tests as its monitor runs them: its groups, else one test per
-/// fault against all others; `(name, fault indices)`.
-fn isolation_tests(channel: &Channel) -> Vec<(String, Vec<usize>)> {
-    if channel.groups.is_empty() {
-        channel
-            .fault_names
-            .iter()
-            .enumerate()
-            .map(|(j, n)| (n.clone(), vec![j]))
-            .collect()
-    } else {
-        channel.groups.clone()
-    }
-}
-
 /// The minmax outcomes of an isolation the monitor just made at onset estimate `onset`:
 /// statistic, threshold and decision from its record, the degrees of freedom from the
 /// detector, still at the sample of that isolation (the record does not carry them).
 fn minmax_outcomes(
     mon: &Monitor,
-    tests: &[(String, Vec<usize>)],
+    tests: &[IsolationGroup],
     onset: u64,
     isolation: &[glrmon_wire::IsolationResult],
 ) -> Vec<MinmaxOutcome> {
@@ -360,10 +346,7 @@ fn minmax_outcomes(
     isolation
         .iter()
         .map(|r| {
-            let faults = tests
-                .iter()
-                .find(|(name, _)| *name == r.fault)
-                .map(|t| &t.1);
+            let faults = tests.iter().find(|g| g.name == r.fault).map(|g| &g.faults);
             let dof = match (&fisher, faults) {
                 (Some(fisher), Some(faults)) => {
                     fisher.minmax(faults).map_or(faults.len(), |m| m.dof.max(1))
@@ -382,19 +365,26 @@ fn minmax_outcomes(
         .collect()
 }
 
-/// Each isolation test's statistics over `runs` of the injected `fault`, with the
+/// Each isolation test (`groups`, as the channel's monitor runs them:
+/// [`Monitor::isolation_groups`]) with its statistics over `runs` of the injected
+/// `fault`, with the
 /// type-II rate (the test's faults include `fault`: runs in which it did not fire) or
 /// the type-I rate (they do not: runs in which it fired), as Zhang & Basseville 2014
 /// report them for Fig. 8 (eq. (42)).
 #[must_use]
-pub fn minmax_tests(channel: &Channel, fault: &str, runs: &[Run]) -> Vec<MinmaxTest> {
+pub fn minmax_tests(
+    channel: &Channel,
+    groups: &[IsolationGroup],
+    fault: &str,
+    runs: &[Run],
+) -> Vec<MinmaxTest> {
     let injected = channel.fault_names.iter().position(|f| f == fault);
-    isolation_tests(channel)
-        .into_iter()
-        .map(|(test, faults)| {
+    groups
+        .iter()
+        .map(|IsolationGroup { name: test, faults }| {
             let outcomes: Vec<&MinmaxOutcome> = runs
                 .iter()
-                .filter_map(|r| r.minmax.iter().find(|o| o.test == test))
+                .filter_map(|r| r.minmax.iter().find(|o| o.test == *test))
                 .collect();
             let (threshold, dof) = most_common(outcomes.iter().map(|o| (o.threshold, o.dof)))
                 .unwrap_or_else(|| {
@@ -402,7 +392,7 @@ pub fn minmax_tests(channel: &Channel, fault: &str, runs: &[Run]) -> Vec<MinmaxT
                     let calibrated = channel
                         .isolation_thresholds
                         .iter()
-                        .find(|(name, _)| *name == test)
+                        .find(|(name, _)| *name == *test)
                         .map(|t| t.1);
                     let threshold = calibrated.unwrap_or_else(|| {
                         chi2_upper_quantile(dof as f64, channel.isolation_alpha).unwrap_or(f64::NAN)
@@ -422,7 +412,7 @@ pub fn minmax_tests(channel: &Channel, fault: &str, runs: &[Run]) -> Vec<MinmaxT
                     .iter()
                     .filter_map(|j| channel.fault_names.get(*j).cloned())
                     .collect(),
-                test,
+                test: test.clone(),
                 threshold,
                 dof,
                 statistics: outcomes.iter().map(|o| o.statistic).collect(),
@@ -685,7 +675,11 @@ mod tests {
         let runs: Vec<Run> = (1..4)
             .map(|seed| one_run(channel, seed, "g0_leak", -2e-5, 300, 500).unwrap())
             .collect();
-        let tests = minmax_tests(channel, "g0_leak", &runs);
+        let groups = Monitor::from_channel(channel)
+            .unwrap()
+            .isolation_groups()
+            .to_vec();
+        let tests = minmax_tests(channel, &groups, "g0_leak", &runs);
         assert!(matches!(tests[0].error_rate, ErrorRate::TypeII(_)));
         assert!(matches!(tests[1].error_rate, ErrorRate::TypeI(_)));
         assert!(matches!(tests[2].error_rate, ErrorRate::TypeI(_)));

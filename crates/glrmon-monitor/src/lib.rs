@@ -368,6 +368,13 @@ impl Monitor {
         &self.detector
     }
 
+    /// The isolation tests this monitor runs at an alarm: the configured groups, else
+    /// one test per fault.
+    #[must_use]
+    pub fn isolation_groups(&self) -> &[IsolationGroup] {
+        &self.groups
+    }
+
     /// Whether an alarm episode is going on.
     #[must_use]
     pub fn alarm_active(&self) -> bool {
