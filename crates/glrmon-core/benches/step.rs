@@ -1,4 +1,4 @@
-//! Per-sample cost of `Detector::step`: bench-A, a larger LPV channel, and an LTI
+//! Per-sample cost of `GlrDetector::step`: bench-A, a larger LPV channel, and an LTI
 //! channel with and without the stationary fast path.
 //!
 //! `cargo bench -p glrmon-core --bench step`; figures in docs/PERFORMANCE.md.

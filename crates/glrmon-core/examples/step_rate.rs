@@ -1,4 +1,4 @@
-//! Samples per second of `Detector::step` per scenario and vector level, best of
+//! Samples per second of `GlrDetector::step` per scenario and vector level, best of
 //! several rounds (robust to a shared machine's noise; criterion's `make bench` gives
 //! the confidence intervals).
 //!

@@ -371,7 +371,7 @@ mod tests {
     }
 
     use crate::StepError;
-    use crate::detector::{Detector, Sample, StepOutput, WindowSettings};
+    use crate::detector::{GlrDetector, Sample, StepOutput, WindowSettings};
     use crate::fault::{Column, Fault, FaultDictionary, Onset};
     use crate::innovation::InnovationFilter;
     use crate::kitanidis::{KitanidisResidual, ResidualRow, ResidualSample};
@@ -477,8 +477,8 @@ mod tests {
         .unwrap()
     }
 
-    fn detector(window: usize, unknown_input: bool) -> Detector {
-        let det = Detector::new(
+    fn detector(window: usize, unknown_input: bool) -> GlrDetector {
+        let det = GlrDetector::new(
             Box::new(example1()),
             dictionary(),
             DVector::zeros(3),
@@ -703,7 +703,7 @@ mod tests {
             .unwrap()
         };
         let make = |steady_tolerance| {
-            Detector::new(
+            GlrDetector::new(
                 Box::new(lti()),
                 dictionary(),
                 DVector::zeros(3),

@@ -17,7 +17,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::detector::{Detector, Sample, StepOutput};
+use crate::detector::{GlrDetector, Sample, StepOutput};
 use crate::error::StepError;
 use crate::fault::Onset;
 
@@ -88,7 +88,7 @@ pub enum InformationError {
 /// [`InformationError::TooFewSamples`] when `samples` ends early,
 /// [`InformationError::OnsetOutOfWindow`] should the detector not hold the onset read.
 pub fn window_information<I>(
-    detector: &mut Detector,
+    detector: &mut GlrDetector,
     samples: I,
 ) -> Result<WindowInformation, InformationError>
 where
@@ -153,7 +153,7 @@ mod tests {
 
     /// x_{k+1} = 0.9 x_k + w_k, y_k = x_k + v_k, with a step on the state ("drift") and
     /// a step on the sensor ("bias").
-    fn detector(window: usize, onset: Onset) -> Detector {
+    fn detector(window: usize, onset: Onset) -> GlrDetector {
         let scalar = |v| DMatrix::from_element(1, 1, v);
         let model = Lpv::lti(
             scalar(A),
@@ -173,7 +173,7 @@ mod tests {
             ],
         )
         .unwrap();
-        Detector::new(
+        GlrDetector::new(
             Box::new(model),
             faults,
             DVector::zeros(1),

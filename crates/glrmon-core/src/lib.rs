@@ -23,7 +23,10 @@ pub mod sparse;
 pub mod threshold;
 
 pub use alarm::{AlarmSettings, AlarmState, AlarmTransition};
-pub use detector::{DEFAULT_STEADY_TOLERANCE, Detector, Sample, StepOutput, WindowSettings};
+pub use detector::{
+    Chi2Detector, DEFAULT_STEADY_TOLERANCE, Detector, GlrDetector, Sample, StepOutput,
+    WindowSettings,
+};
 pub use error::{ModelError, StepError};
 pub use fault::{Column, ColumnFn, Fault, FaultDictionary, Onset};
 pub use glr::DEFAULT_RANK_TOLERANCE;

@@ -59,7 +59,7 @@ fn fused_window_pass_equals_the_separate_passes_bit_for_bit() {
     }
 }
 
-/// Signatures are kept only on request (`Detector::keep_signatures`), and the fused
+/// Signatures are kept only on request (`GlrDetector::keep_signatures`), and the fused
 /// pass keeps the same bits as the passes: every onset of the window at every 50th
 /// sample, n = 3, p = 2, m = 4, w = 45. Without the request, and after switching it
 /// on until the next measured step, `signature` says there is none.
@@ -107,7 +107,7 @@ fn kept_signatures_of_the_fused_pass_equal_the_passes_and_are_off_by_default() {
 
 /// Sample k of `sim` through `det`, measured.
 fn step_one(
-    det: &mut glrmon_core::Detector,
+    det: &mut glrmon_core::GlrDetector,
     sim: &mut glrmon_sim::Simulator,
     out: &mut StepOutput,
     k: u64,

@@ -4,7 +4,7 @@
 //! GLR of Zhang & Basseville 2014.
 
 use glrmon_core::{
-    Column, Detector, Fault, FaultDictionary, Lpv, Onset, Sample, StateSpace, StepOutput,
+    Column, Fault, FaultDictionary, GlrDetector, Lpv, Onset, Sample, StateSpace, StepOutput,
     WindowSettings,
 };
 use nalgebra::{DMatrix, DVector};
@@ -71,7 +71,7 @@ fn simulate(
         .collect()
 }
 
-fn detector(sys: &Innovation, p0: f64, steady_tolerance: f64) -> Detector {
+fn detector(sys: &Innovation, p0: f64, steady_tolerance: f64) -> GlrDetector {
     let q = &sys.k * &sys.re * sys.k.transpose();
     let model = Lpv::lti(
         sys.a.clone(),
@@ -99,7 +99,7 @@ fn detector(sys: &Innovation, p0: f64, steady_tolerance: f64) -> Detector {
         ],
     )
     .unwrap();
-    Detector::new(
+    GlrDetector::new(
         Box::new(model),
         faults,
         DVector::zeros(2),
@@ -241,7 +241,7 @@ fn correlated_noise_and_an_unknown_input_are_refused_together() {
         )],
     )
     .unwrap();
-    let err = Detector::new(
+    let err = GlrDetector::new(
         Box::new(model),
         faults,
         DVector::zeros(2),

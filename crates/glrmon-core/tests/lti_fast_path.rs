@@ -8,7 +8,7 @@
 mod common;
 
 use common::run_pair;
-use glrmon_core::{Detector, StepOutput};
+use glrmon_core::{GlrDetector, StepOutput};
 use glrmon_sim::{Simulator, scenarios};
 
 /// Counts of one comparison run.
@@ -43,7 +43,7 @@ fn compare(
     let mut fast = sc.detector().unwrap();
     let mut general_sc = sc.clone();
     general_sc.window.steady_tolerance = 0.0;
-    let mut general: Detector = general_sc.detector().unwrap();
+    let mut general: GlrDetector = general_sc.detector().unwrap();
     let (p, m) = (sc.model_outputs(), sc.faults.len());
     let (mut a, mut b) = (StepOutput::new(p, m), StepOutput::new(p, m));
     let mut run = Run::default();

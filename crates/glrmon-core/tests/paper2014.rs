@@ -2,8 +2,8 @@
 
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{
-    Column, Detector, Dims, Fault, FaultDictionary, Onset, Sample, Signals, StateSpace, StepOutput,
-    SystemMatrices, WindowSettings,
+    Column, Dims, Fault, FaultDictionary, GlrDetector, Onset, Sample, Signals, StateSpace,
+    StepOutput, SystemMatrices, WindowSettings,
 };
 use glrmon_sim::{Injection, Rng, SimSample, Simulator, scenarios};
 use nalgebra::{DMatrix, DVector};
@@ -94,8 +94,8 @@ fn run_pair(
     };
     let x0 = DVector::zeros(dims.states);
     let p0 = DMatrix::identity(dims.states, dims.states);
-    let mut clean = Detector::new(model(), faults(), x0.clone(), p0.clone(), settings).unwrap();
-    let mut faulty = Detector::new(model(), faults(), x0, p0, settings).unwrap();
+    let mut clean = GlrDetector::new(model(), faults(), x0.clone(), p0.clone(), settings).unwrap();
+    let mut faulty = GlrDetector::new(model(), faults(), x0, p0, settings).unwrap();
     faulty.keep_signatures(true);
     let mut sim0 = sim(None);
     let mut sim1 = sim(Some(Injection {
@@ -216,7 +216,7 @@ fn innovation_identity_prop2_closed_loop_unstable_plant() {
 fn recursive_c_d_equal_stacked_z_m_r_eqs_38_to_41() {
     let ltv = RandomLtv::new(5, 3, 1, 2, 200);
     let dims = ltv.dims;
-    let mut det = Detector::new(
+    let mut det = GlrDetector::new(
         Box::new(ltv.clone()),
         dictionary(6, dims, Onset::Step),
         DVector::zeros(3),

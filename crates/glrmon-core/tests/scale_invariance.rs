@@ -11,7 +11,7 @@ use glrmon_core::information::window_information;
 use glrmon_core::isolability::{DEFAULT_CORRELATION_LIMIT, IsolabilityReport, isolability};
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{
-    Column, ColumnFn, Detector, Dims, Fault, FaultDictionary, FisherStatistics, Onset, Sample,
+    Column, ColumnFn, Dims, Fault, FaultDictionary, FisherStatistics, GlrDetector, Onset, Sample,
     Signals, StateSpace, StepOutput, SystemMatrices, WindowSettings,
 };
 use glrmon_sim::{Injection, Rng, SimSample, Simulator};
@@ -242,7 +242,7 @@ struct Decisions {
     isolability: Option<IsolabilityReport>,
 }
 
-fn decisions(det: &Detector, out: &StepOutput) -> Decisions {
+fn decisions(det: &GlrDetector, out: &StepOutput) -> Decisions {
     let m = det.fault_count();
     let mut d = Decisions {
         glr: out.glr,
@@ -385,7 +385,7 @@ fn check_case(seed: u64, lti: bool, m: usize, kind: &str) {
         ..WindowSettings::default()
     };
     let detector = |u: &Units| {
-        Detector::new(
+        GlrDetector::new(
             Box::new(u.plant(&plant)),
             u.dictionary(plant.dims, &specs),
             DVector::zeros(3),
@@ -568,14 +568,14 @@ fn gas_faults() -> FaultDictionary {
     .unwrap()
 }
 
-fn gas_detector() -> Detector {
+fn gas_detector() -> GlrDetector {
     // §6.2: a moving window of w = 160 samples (320 min).
     let settings = WindowSettings {
         window: 160,
         min_lag: 1,
         ..WindowSettings::default()
     };
-    Detector::new(
+    GlrDetector::new(
         Box::new(GasPipe),
         gas_faults(),
         DVector::zeros(2),

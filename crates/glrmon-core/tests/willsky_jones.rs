@@ -46,8 +46,8 @@
 //! nalgebra's operators, not taken from glrmon's filter.
 
 use glrmon_core::{
-    Column, Detector, Dims, Fault, FaultDictionary, Onset, Sample, Signals, StateSpace, StepOutput,
-    SystemMatrices, WindowSettings,
+    Column, Dims, Fault, FaultDictionary, GlrDetector, Onset, Sample, Signals, StateSpace,
+    StepOutput, SystemMatrices, WindowSettings,
 };
 use glrmon_sim::{Rng, Simulator, scenarios};
 use nalgebra::{DMatrix, DVector};
@@ -161,7 +161,7 @@ struct Track {
 #[allow(clippy::too_many_arguments)]
 fn compare(
     model: &mut dyn StateSpace,
-    det: &mut Detector,
+    det: &mut GlrDetector,
     sim: &mut Simulator,
     p0: DMatrix<f64>,
     onsets: &[u64],
@@ -276,7 +276,7 @@ fn stable_ltv_run(printed: bool) -> Vec<Track> {
     let plant = StableLtv::new(31);
     let dims = plant.dims();
     let p0 = DMatrix::identity(3, 3);
-    let mut det = Detector::new(
+    let mut det = GlrDetector::new(
         Box::new(plant.clone()),
         jump_dictionary(dims),
         DVector::zeros(3),

@@ -35,7 +35,7 @@ use glrmon_core::calibration::{
     Calibration, CalibrationError, Quantile, Target, calibrate, calibrate_sample_far,
     count_episodes, upper_quantile,
 };
-use glrmon_input::{InputError, McapInput, Samples, is_mcap};
+use glrmon_input::{InputError, InputFormat, McapInput, Samples};
 use glrmon_monitor::Monitor;
 use glrmon_sim::SimSample;
 use glrmon_spec::Channel;
@@ -256,7 +256,7 @@ pub fn recorded(
     // threshold in force, and would bias l_k's tail upwards. Only the daemon's
     // recorder captures; it alone names its `instance` in the file's header
     // (`glrmon simulate` and `replay` write whole runs, whatever the configuration).
-    if is_mcap(path) {
+    if InputFormat::of(path) == InputFormat::Mcap {
         let input = McapInput::open(path)?;
         let by_daemon = input
             .header
@@ -403,13 +403,9 @@ pub fn calibrate_channel(
 ) -> Result<ChannelCalibration, CalibrateError> {
     let g = &channel.alarm;
     let current_episodes = count_episodes(&stats.glr, *g);
-    // l_k shares the innovations of its window with its neighbours; the plain χ²
-    // detector's has no memory.
-    let memory = if channel.chi2_detector {
-        1
-    } else {
-        channel.window.window
-    };
+    // The GLR's l_k shares the innovations of its window with its neighbours; the
+    // plain χ² detector's statistic has no memory.
+    let memory = channel.detector()?.memory();
     let alarm = match target {
         Target::Mtbfa(m) => calibrate(&stats.glr, m, g.hysteresis, g.clear_samples),
         Target::SampleFar(f) => calibrate_sample_far(&stats.glr, f, memory),

@@ -274,7 +274,7 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
 /// The runs of `file`; for a recording, channel `channel`'s if it has one, else its
 /// only channel's.
 fn read_runs(file: &Path, channel: &str) -> Result<Vec<Table>, InputError> {
-    if glrmon_input::is_mcap(file) {
+    if glrmon_input::InputFormat::of(file) == glrmon_input::InputFormat::Mcap {
         match read_table(file, Some(channel)) {
             Ok(runs) => return Ok(runs),
             Err(e) if matches!(e.kind(), glrmon_input::InputErrorKind::Table(_)) => {}
@@ -380,7 +380,7 @@ fn sigma_mismatch(
     steps: usize,
     model: &InnovationModel,
 ) -> Result<f64, String> {
-    let mut detector = channel.detector().map_err(|e| e.to_string())?;
+    let mut detector = channel.glr_detector().map_err(|e| e.to_string())?;
     let dims = channel.dims;
     let mut out = glrmon_core::StepOutput::new(dims.outputs, detector.fault_count());
     let (u, y) = (vec![0.0; dims.inputs], vec![0.0; dims.outputs]);

@@ -213,7 +213,7 @@ type Names = (Vec<String>, Vec<String>);
 /// The runs of `file` and the names of its u and y columns: a recording's channel
 /// samples are `u0…`, `y0…`; a CSV file's columns are the channel's.
 fn read_runs(file: &Path, channel: &Channel) -> Result<(Vec<Table>, Names), InputError> {
-    if glrmon_input::is_mcap(file) {
+    if glrmon_input::InputFormat::of(file) == glrmon_input::InputFormat::Mcap {
         let numbered = glrmon_spec::Columns::numbered(channel.dims);
         let tables = read_table(file, Some(&channel.name))?;
         return Ok((tables, (numbered.u, numbered.y)));

@@ -2,6 +2,7 @@
 
 mod csv;
 mod error;
+mod format;
 mod mcap;
 mod play;
 mod readahead;
@@ -11,9 +12,10 @@ mod table;
 
 pub use csv::{CsvReader, HeaderError, RowError, write_header, write_header_named, write_row};
 pub use error::{InputError, InputErrorKind};
-pub use mcap::{McapInput, RecordedInput, is_mcap};
+pub use format::{InputFormat, OutputFormat, embedded_config};
+pub use mcap::{McapInput, RecordedInput};
 pub use play::{Playback, PlayedSample, due};
 pub use readahead::{ReadAhead, ReadAheadError};
 pub use replay::{CsvReplayed, McapReplayed, ReplayError, replay_csv, replay_mcap};
-pub use samples::{Samples, recorded_config};
+pub use samples::Samples;
 pub use table::{Table, read_table};

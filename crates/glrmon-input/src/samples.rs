@@ -10,10 +10,10 @@ use glrmon_runtime::InputItem;
 use glrmon_spec::{Channel, Columns};
 use glrmon_wire::{IntakeEvent, Sample};
 
-use crate::{CsvReader, InputError, InputErrorKind, McapInput, is_mcap};
+use crate::{CsvReader, InputError, InputErrorKind, InputFormat, McapInput};
 
 /// The samples of one channel from a CSV file or an MCAP recording (chosen by
-/// [`is_mcap`]), one at a time, with the problems of each in the order they occur.
+/// [`InputFormat::of`]), one at a time, with the problems of each in the order they occur.
 ///
 /// # Examples
 ///
@@ -74,10 +74,9 @@ impl Samples {
         dims: Dims,
         columns: &Columns,
     ) -> Result<Self, InputError> {
-        let source = if is_mcap(path) {
-            Source::Mcap(Box::new(McapInput::open(path)?), channel.to_owned())
-        } else {
-            Source::Csv(CsvReader::open_with_columns(path, dims, columns)?)
+        let source = match InputFormat::of(path) {
+            InputFormat::Mcap => Source::Mcap(Box::new(McapInput::open(path)?), channel.to_owned()),
+            InputFormat::Csv => Source::Csv(CsvReader::open_with_columns(path, dims, columns)?),
         };
         Ok(Self { source })
     }
@@ -127,13 +126,4 @@ impl Samples {
             },
         }
     }
-}
-
-/// The configuration recorded in an MCAP file (see [`McapInput::recorded_config`]).
-///
-/// # Errors
-/// An [`InputError`] when the file cannot be opened or read, or carries no valid
-/// configuration.
-pub fn recorded_config(path: &Path) -> Result<glrmon_spec::Config, InputError> {
-    McapInput::open(path)?.recorded_config()
 }

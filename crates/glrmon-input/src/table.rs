@@ -7,7 +7,7 @@ use std::path::Path;
 
 use glrmon_runtime::InputItem;
 
-use crate::{InputError, InputErrorKind, McapInput, is_mcap};
+use crate::{InputError, InputErrorKind, InputFormat, McapInput};
 
 /// One run of consecutive samples: column names and their values, in file order.
 #[derive(Debug, Clone, PartialEq)]
@@ -62,10 +62,11 @@ impl Table {
 /// ([`InputErrorKind::Table`]); for a recording, one without channel `channel` (or with
 /// several channels and none named).
 pub fn read_table(path: &Path, channel: Option<&str>) -> Result<Vec<Table>, InputError> {
-    if is_mcap(path) {
-        read_recording(path, channel)
-    } else {
-        read_csv(path).map_err(|why| InputError::new(path, InputErrorKind::Table(why)))
+    match InputFormat::of(path) {
+        InputFormat::Mcap => read_recording(path, channel),
+        InputFormat::Csv => {
+            read_csv(path).map_err(|why| InputError::new(path, InputErrorKind::Table(why)))
+        }
     }
 }
 

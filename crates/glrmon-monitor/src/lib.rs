@@ -93,9 +93,6 @@ pub struct MonitorSettings {
     /// Calibrated isolation thresholds by test (group or fault) name, replacing the χ²
     /// quantile for those tests (found by `glrmon calibrate`).
     pub isolation_thresholds: Vec<(String, f64)>,
-    /// Alarm on the plain χ² test of εᵀΣ⁻¹ε (the classical baseline) instead of the
-    /// windowed GLR: `glr` in the records is then εᵀΣ⁻¹ε and the onset k itself.
-    pub chi2_detector: bool,
     /// Largest gap (missing samples) filled with predict-only steps; after a longer one
     /// the filter restarts from its initial state at the sample that follows it
     /// (reported as `gap`), so that an outage never leaves a channel dead.
@@ -158,7 +155,7 @@ pub struct MonitorCounters {
 #[derive(Debug)]
 pub struct Monitor {
     channel: String,
-    detector: Detector,
+    detector: Box<dyn Detector>,
     alarm: AlarmState,
     settings: MonitorSettings,
     groups: Vec<IsolationGroup>,
@@ -201,9 +198,9 @@ struct PendingUpdate {
 }
 
 impl Monitor {
-    /// A monitor of channel `channel` around `detector`.
+    /// A monitor of channel `channel` around `detector`, of any kind.
     #[must_use]
-    pub fn new(channel: &str, detector: Detector, settings: MonitorSettings) -> Self {
+    pub fn new(channel: &str, detector: Box<dyn Detector>, settings: MonitorSettings) -> Self {
         let fault_names: Vec<String> = detector
             .faults()
             .faults()
@@ -223,7 +220,7 @@ impl Monitor {
             settings.groups.clone()
         };
         let dims = detector.dims();
-        let out = StepOutput::new(dims.outputs, detector.fault_count());
+        let out = StepOutput::new(dims.outputs, detector.faults().len());
         Self {
             channel: channel.to_owned(),
             alarm: AlarmState::new(settings.alarm),
@@ -303,7 +300,6 @@ impl Monitor {
             isolation_delay: channel.isolation_delay,
             isolation_alpha: channel.isolation_alpha,
             isolation_thresholds: channel.isolation_thresholds.clone(),
-            chi2_detector: channel.chi2_detector,
             groups: channel
                 .groups
                 .iter()
@@ -364,8 +360,8 @@ impl Monitor {
 
     /// The detector.
     #[must_use]
-    pub fn detector(&self) -> &Detector {
-        &self.detector
+    pub fn detector(&self) -> &dyn Detector {
+        self.detector.as_ref()
     }
 
     /// The isolation tests this monitor runs at an alarm: the configured groups, else
@@ -559,7 +555,15 @@ impl Monitor {
         if self.diagnosis_restart {
             if let Some(engine) = &mut self.diagnosis {
                 // The detector's prediction for k is the residual filter's new prior.
-                if let Err(e) = engine.restart(self.detector.filter()) {
+                let restarted = match self.detector.innovation_filter() {
+                    Some(filter) => engine.restart(filter).map_err(|e| e.to_string()),
+                    None => Err(format!(
+                        "the {} detector runs no Kalman filter to restart the residual \
+                         filter from",
+                        self.detector.kind()
+                    )),
+                };
+                if let Err(e) = restarted {
                     self.reject(
                         records,
                         Some(k),
@@ -608,10 +612,6 @@ impl Monitor {
             return;
         }
         self.counters.samples += 1;
-        if self.settings.chi2_detector {
-            self.out.glr = Some(self.out.normalized_innovation);
-            self.out.onset = Some(k);
-        }
         if let Some(block) = self
             .consistency
             .as_mut()
@@ -904,14 +904,13 @@ mod tests {
         let threshold = chi2_upper_quantile(2.0, 1e-4 / 99.0).unwrap();
         Monitor::new(
             "unstable",
-            sc.detector().unwrap(),
+            Box::new(sc.detector().unwrap()),
             MonitorSettings {
                 alarm: AlarmSettings::with_threshold(threshold),
                 isolation_delay: 2,
                 isolation_alpha: 0.01,
                 groups: vec![],
                 isolation_thresholds: vec![],
-                chi2_detector: false,
                 max_gap: 10,
                 max_reorder: 16,
             },

@@ -98,7 +98,7 @@ fn the_largest_index_is_refused_and_the_stream_goes_on() {
         seen.alarms
     );
     // And the core refuses it too, for library users.
-    let mut det = channel().detector().unwrap();
+    let mut det = channel().glr_detector().unwrap();
     let mut out = glrmon_core::StepOutput::new(1, 1);
     let e = det
         .step(

@@ -27,12 +27,14 @@
 //!   output queue, then close the sinks, within a bounded time.
 #![warn(missing_docs)]
 
+mod decode;
 mod fanout;
 mod pipeline;
 mod sink;
 mod sinks;
 mod status;
 
+pub use decode::{JsonDecoder, PayloadDecoder, decoder};
 pub use fanout::{DeliveryPlan, Fanout};
 pub use pipeline::{ChannelPipeline, Emit, PipelineError};
 pub use sink::{ChannelIndex, InputItem, InputOutput, Interest, Output, Sink, SinkError};
@@ -52,7 +54,7 @@ use glrmon_wire::{DecodeLimits, ErrorCode, Sample, decode_samples};
 /// A payload as received from a source.
 #[derive(Debug)]
 pub struct Payload {
-    /// Bytes of the sample or batch (JSON).
+    /// Bytes of the sample or batch, as the channel's decoder reads them.
     pub bytes: Vec<u8>,
     /// When it was received.
     pub received: Instant,
@@ -391,20 +393,57 @@ impl std::fmt::Debug for Runtime {
     }
 }
 
+/// One channel as the runtime runs it: its monitor and the decoder of its payloads.
+#[derive(Debug)]
+pub struct ChannelSetup {
+    /// The channel's monitor.
+    pub monitor: Monitor,
+    /// The decoder of the payloads on its key.
+    pub decoder: Box<dyn PayloadDecoder>,
+}
+
+impl ChannelSetup {
+    /// A validated channel of the configuration: its monitor
+    /// ([`Monitor::from_channel`]) and the decoder of its `payload` format.
+    ///
+    /// # Errors
+    /// As [`Monitor::from_channel`].
+    pub fn from_channel(channel: &glrmon_spec::Channel) -> Result<Self, glrmon_core::ModelError> {
+        Ok(Self {
+            monitor: Monitor::from_channel(channel)?,
+            decoder: decoder(channel.payload),
+        })
+    }
+}
+
+/// A monitor whose payloads are JSON.
+impl From<Monitor> for ChannelSetup {
+    fn from(monitor: Monitor) -> Self {
+        Self {
+            monitor,
+            decoder: Box::new(JsonDecoder),
+        }
+    }
+}
+
 impl Runtime {
-    /// Starts the workers and the output stage for `monitors` (in channel index order)
-    /// writing to `sinks`.
+    /// Starts the workers and the output stage for `channels` (in channel index order:
+    /// [`ChannelSetup`]s, or monitors of JSON channels) writing to `sinks`.
     #[must_use]
     pub fn start(
-        monitors: Vec<Monitor>,
+        channels: Vec<impl Into<ChannelSetup>>,
         sinks: Vec<Box<dyn Sink>>,
         settings: &RuntimeSettings,
         events: Arc<dyn RuntimeEvents>,
     ) -> Self {
-        let workers_n = settings.workers.clamp(1, monitors.len().max(1));
-        let names: Vec<String> = monitors.iter().map(|m| m.channel().to_owned()).collect();
+        let channels: Vec<ChannelSetup> = channels.into_iter().map(Into::into).collect();
+        let workers_n = settings.workers.clamp(1, channels.len().max(1));
+        let names: Vec<String> = channels
+            .iter()
+            .map(|c| c.monitor.channel().to_owned())
+            .collect();
         let stats: Arc<Vec<Arc<ChannelStats>>> = Arc::new(
-            monitors
+            channels
                 .iter()
                 .map(|_| Arc::new(ChannelStats::default()))
                 .collect(),
@@ -421,9 +460,12 @@ impl Runtime {
             .spawn(move || output_stage(out_rx, fanout, events.as_ref(), &out_metrics))
             .ok();
         let mut shards: Vec<Vec<ChannelPipeline>> = (0..workers_n).map(|_| Vec::new()).collect();
-        for (i, m) in monitors.into_iter().enumerate() {
-            shards[i % workers_n]
-                .push(ChannelPipeline::new(i, m, plan.clone()).with_stats(stats[i].clone()));
+        for (i, c) in channels.into_iter().enumerate() {
+            shards[i % workers_n].push(
+                ChannelPipeline::new(i, c.monitor, plan.clone())
+                    .with_decoder(c.decoder)
+                    .with_stats(stats[i].clone()),
+            );
         }
         let mut queues = Vec::new();
         let mut queued_bytes = Vec::new();
@@ -586,9 +628,6 @@ fn join_until<T>(h: JoinHandle<T>, until: Instant) -> Option<T> {
 /// The longest time records wait in a sink's buffers under continuous load.
 const FLUSH_INTERVAL: Duration = Duration::from_secs(1);
 
-/// Longest refused payload kept, as text, in its [`IntakeEvent::Rejected`].
-const MAX_KEPT_PAYLOAD: usize = 64 * 1024;
-
 /// What a worker needs besides its queue and pipelines.
 struct WorkerContext {
     emit: QueueEmit,
@@ -632,7 +671,6 @@ fn worker(
     metrics: &RuntimeMetrics,
     queued_bytes: &AtomicUsize,
 ) {
-    let mut samples: Vec<Sample> = Vec::new();
     loop {
         let job = match rx.recv() {
             // `Job::Stop`, or every sender gone: all accepted payloads are processed.
@@ -670,30 +708,13 @@ fn worker(
                 if dropped_before > 0 {
                     let _ = pipeline.dropped(dropped_before, log_time_ns, &mut cx.emit);
                 }
-                let decoded =
-                    decode_samples(pipeline.name(), &payload.bytes, &cx.limits, &mut samples);
-                match decoded {
-                    Ok(()) => {
-                        for s in &mut samples {
-                            if s.t.is_none() {
-                                s.t = payload.source_time;
-                            }
-                            let _ = pipeline.sample(s, log_time_ns, &mut cx.emit);
-                        }
-                    }
-                    Err(e) => {
-                        let kept = (payload.bytes.len() <= MAX_KEPT_PAYLOAD)
-                            .then(|| String::from_utf8_lossy(&payload.bytes).into_owned());
-                        let _ = pipeline.rejected(
-                            e.code(),
-                            e.to_string(),
-                            None,
-                            kept,
-                            log_time_ns,
-                            &mut cx.emit,
-                        );
-                    }
-                }
+                let _ = pipeline.payload(
+                    &payload.bytes,
+                    payload.source_time,
+                    &cx.limits,
+                    log_time_ns,
+                    &mut cx.emit,
+                );
             }
             Job::Reject(_, code, message, _) => {
                 let message = format!("channel \"{}\": {message}", pipeline.name());

@@ -1,8 +1,11 @@
-//! One channel's path: decoded input → monitor → encoded records → an [`Emit`]ter.
+//! One channel's path: payload → decoder → sample → monitor → encoded records → an
+//! [`Emit`]ter.
 //!
-//! The daemon's workers and `glrmon replay` drive the same [`ChannelPipeline`]; they
-//! differ only in the emitter: a worker sends to the output thread's [`Fanout`], a
-//! replay hands to its [`Fanout`] directly. The records a replay writes therefore equal
+//! The daemon's workers hand raw payloads ([`ChannelPipeline::payload`]), `glrmon
+//! replay` the samples a recording or CSV file holds ([`ChannelPipeline::sample`],
+//! [`ChannelPipeline::feed`]); from the sample on they drive the same code and differ
+//! only in the emitter: a worker sends to the output thread's [`Fanout`], a replay
+//! hands to its [`Fanout`] directly. The records a replay writes therefore equal
 //! the live ones by construction: the same code counts, decimates and encodes them.
 
 use std::sync::Arc;
@@ -10,11 +13,12 @@ use std::sync::atomic::Ordering;
 
 use glrmon_monitor::Monitor;
 use glrmon_wire::{
-    EncodeError, ErrorCode, ErrorRecord, IntakeEvent, Record, Sample, Stage, encode_intake,
-    encode_json, encode_sample,
+    DecodeLimits, EncodeError, ErrorCode, ErrorRecord, IntakeEvent, Record, Sample, Stage,
+    encode_intake, encode_json, encode_sample,
 };
 
 use crate::ChannelStats;
+use crate::decode::{JsonDecoder, PayloadDecoder};
 use crate::fanout::{DeliveryPlan, Fanout};
 use crate::sink::{ChannelIndex, InputItem, InputOutput, Output, SinkError};
 
@@ -22,6 +26,8 @@ use crate::sink::{ChannelIndex, InputItem, InputOutput, Output, SinkError};
 const RECORD_JSON_CAPACITY: usize = 256;
 /// Capacity of a fresh buffer for one input's JSON.
 const INPUT_JSON_CAPACITY: usize = 128;
+/// Longest refused payload kept, as text, in its [`IntakeEvent::Rejected`].
+const MAX_KEPT_PAYLOAD: usize = 64 * 1024;
 
 /// Where a pipeline hands its inputs and records, in order: each input before the
 /// records it produced.
@@ -89,8 +95,8 @@ pub enum PipelineError {
     Sink(#[from] SinkError),
 }
 
-/// One channel's monitor with the bookkeeping around it: the inputs and records it
-/// hands on, the decimation of `stat` records, the channel's counters.
+/// One channel's decoder and monitor with the bookkeeping around them: the inputs and
+/// records it hands on, the decimation of `stat` records, the channel's counters.
 ///
 /// # Examples
 ///
@@ -127,6 +133,9 @@ pub struct ChannelPipeline {
     index: ChannelIndex,
     name: Arc<str>,
     monitor: Monitor,
+    decoder: Box<dyn PayloadDecoder>,
+    /// The samples of the payload being processed (buffers reused).
+    samples: Vec<Sample>,
     stats: Arc<ChannelStats>,
     plan: DeliveryPlan,
     /// `stat` records produced so far (a sink's decimation counts them).
@@ -137,6 +146,7 @@ pub struct ChannelPipeline {
 impl ChannelPipeline {
     /// A pipeline for the channel at `index` feeding sinks with this `plan`
     /// ([`Fanout::plan`]); the monitor builds `stat` records only if a sink keeps some.
+    /// Its payloads are JSON until [`ChannelPipeline::with_decoder`] says otherwise.
     #[must_use]
     pub fn new(index: ChannelIndex, mut monitor: Monitor, plan: DeliveryPlan) -> Self {
         monitor.set_stat_records(plan.wants_stats());
@@ -144,6 +154,8 @@ impl ChannelPipeline {
             index,
             name: Arc::from(monitor.channel()),
             monitor,
+            decoder: Box::new(JsonDecoder),
+            samples: Vec::new(),
             stats: Arc::new(ChannelStats::default()),
             plan,
             stat_count: 0,
@@ -156,6 +168,62 @@ impl ChannelPipeline {
     pub fn with_stats(mut self, stats: Arc<ChannelStats>) -> Self {
         self.stats = stats;
         self
+    }
+
+    /// Decodes this channel's payloads with `decoder` ([`crate::decoder`] builds the
+    /// one a configuration names).
+    #[must_use]
+    pub fn with_decoder(mut self, decoder: Box<dyn PayloadDecoder>) -> Self {
+        self.decoder = decoder;
+        self
+    }
+
+    /// The payload decoder.
+    #[must_use]
+    pub fn decoder(&self) -> &dyn PayloadDecoder {
+        self.decoder.as_ref()
+    }
+
+    /// One payload as received: decoded within `limits`, then each of its samples
+    /// as by [`ChannelPipeline::sample`], with `source_time` (the transport's
+    /// timestamp) as the time of those that carry none. A payload that cannot be
+    /// decoded is [`ChannelPipeline::rejected`] whole, with its text if short enough.
+    ///
+    /// # Errors
+    /// As [`ChannelPipeline::sample`]; the first error, after every sample had its turn.
+    pub fn payload(
+        &mut self,
+        payload: &[u8],
+        source_time: Option<f64>,
+        limits: &DecodeLimits,
+        log_time_ns: u64,
+        emit: &mut dyn Emit,
+    ) -> Result<(), PipelineError> {
+        let mut samples = std::mem::take(&mut self.samples);
+        let decoded = self
+            .decoder
+            .decode(&self.name, payload, limits, &mut samples);
+        let mut first = None;
+        match decoded {
+            Ok(()) => {
+                for s in &mut samples {
+                    if s.t.is_none() {
+                        s.t = source_time;
+                    }
+                    keep_first(&mut first, self.sample(s, log_time_ns, emit));
+                }
+            }
+            Err(e) => {
+                let kept = (payload.len() <= MAX_KEPT_PAYLOAD)
+                    .then(|| String::from_utf8_lossy(payload).into_owned());
+                keep_first(
+                    &mut first,
+                    self.rejected(e.code(), e.to_string(), None, kept, log_time_ns, emit),
+                );
+            }
+        }
+        self.samples = samples;
+        first.map_or(Ok(()), Err)
     }
 
     /// One decoded sample: the input (if wanted), then the monitor's records.

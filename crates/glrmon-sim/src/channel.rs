@@ -267,7 +267,7 @@ kind = "all_sensors"
 "#;
         let c = glrmon_spec::parse(text).unwrap().channels[0].clone();
         let mut sim = from_channel(&c, 5).unwrap();
-        let mut detector = c.detector().unwrap();
+        let mut detector = c.glr_detector().unwrap();
         let mut out = glrmon_core::StepOutput::new(2, detector.fault_count());
         let n = 20_000;
         let mut nis = 0.0;

@@ -1,7 +1,7 @@
 //! Ready-made channels: the papers' examples and the benchmark plants.
 
 use glrmon_core::{
-    Column, Detector, Fault, FaultDictionary, Lpv, LpvMatrix, ModelError, Onset, StateSpace,
+    Column, Fault, FaultDictionary, GlrDetector, Lpv, LpvMatrix, ModelError, Onset, StateSpace,
     WindowSettings,
 };
 use nalgebra::{DMatrix, DVector};
@@ -68,9 +68,9 @@ impl Scenario {
     /// The detector of this channel.
     ///
     /// # Errors
-    /// As [`Detector::new`].
-    pub fn detector(&self) -> Result<Detector, ModelError> {
-        Detector::new(
+    /// As [`GlrDetector::new`].
+    pub fn detector(&self) -> Result<GlrDetector, ModelError> {
+        GlrDetector::new(
             Box::new(self.model.clone()),
             self.dictionary()?,
             self.x0.clone(),

@@ -15,16 +15,18 @@
 //! "#).unwrap();
 //! assert_eq!(cfg.channels[0].key, "plant/tank");
 //! let detector = cfg.channels[0].detector().unwrap();
-//! assert_eq!(detector.fault_count(), 1);
+//! assert_eq!((detector.kind(), detector.faults().len()), ("glr", 1));
 //! ```
 #![warn(missing_docs)]
 
 pub mod covariance;
+mod detector;
 pub mod edit;
 pub mod expr;
 pub mod keys;
 pub mod limits;
 mod locate;
+mod payload;
 pub mod reference;
 pub mod schema;
 pub mod template;
@@ -38,15 +40,17 @@ use glrmon_core::kitanidis::unknown_input_rank;
 use glrmon_core::sparse::{LassoSettings, PlateauScale};
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{
-    AlarmSettings, Column, DEFAULT_RANK_TOLERANCE, Detector, Dims, Fault, FaultDictionary, Lpv,
-    LpvMatrix, ModelError, Onset, SignalScaling, WindowSettings,
+    AlarmSettings, Column, DEFAULT_RANK_TOLERANCE, Dims, Fault, FaultDictionary, Lpv, LpvMatrix,
+    ModelError, Onset, SignalScaling, WindowSettings,
 };
 use nalgebra::{DMatrix, DVector};
 
 pub use crate::covariance::PSD_TOLERANCE;
 use crate::covariance::Verdict;
+pub use crate::detector::DetectorKind;
 use crate::expr::{Expr, ExprColumn, ExprContext};
 pub use crate::locate::did_you_mean;
+pub use crate::payload::PayloadFormat;
 use crate::schema::{
     ChannelSpec, ConfigFile, DaemonSpec, DiagnosisSpec, EntrySpec, FaultSpec, MatrixSpec,
     RecordingSpec, ZenohSpec,
@@ -536,6 +540,8 @@ pub struct Channel {
     pub name: String,
     /// Input key expression.
     pub key: String,
+    /// How its payloads are encoded.
+    pub payload: PayloadFormat,
     /// Sample period in seconds, if given.
     pub period: Option<f64>,
     /// Dimensions.
@@ -569,8 +575,8 @@ pub struct Channel {
     /// Calibrated isolation thresholds by test name (`[channels.glr.calibrated]
     /// isolation`), replacing the χ² quantile of those tests.
     pub isolation_thresholds: Vec<(String, f64)>,
-    /// The detection statistic is the plain χ² test of εᵀΣ⁻¹ε instead of the GLR.
-    pub chi2_detector: bool,
+    /// The detection method ([`Channel::detector`] builds it).
+    pub detector_kind: DetectorKind,
     /// Largest gap filled by predict-only steps.
     pub max_gap: u64,
     /// How many indices before the last processed one a sample is refused as late;
@@ -618,25 +624,6 @@ impl Channel {
             })
             .collect();
         FaultDictionary::new(d, faults)
-    }
-
-    /// The channel's detector.
-    ///
-    /// # Errors
-    /// As [`Detector::new`] (not expected after validation).
-    pub fn detector(&self) -> Result<Detector, ModelError> {
-        let detector = Detector::new(
-            Box::new(self.model.clone()),
-            self.dictionary()?,
-            self.x0.clone(),
-            self.p0.clone(),
-            self.window,
-        )?;
-        match (&self.unknown_input, &self.cross_covariance) {
-            (Some(e), _) => detector.with_unknown_input(e.clone()),
-            (None, Some(s)) => detector.with_cross_covariance(s.clone()),
-            (None, None) => Ok(detector),
-        }
     }
 
     /// The degrees of freedom of the detector's whitened innovation: p, or p − q with
@@ -1564,24 +1551,18 @@ impl Validator {
                 format!("{tolerance} is not in (0, 1)"),
             );
         }
-        let chi2_detector = match glr.detector.as_deref() {
-            None | Some("glr") => false,
-            Some("chi2") => true,
-            Some(other) => {
+        let detector_kind = match glr.detector.as_deref() {
+            None => DetectorKind::default(),
+            Some(name) => DetectorKind::from_name(name).unwrap_or_else(|| {
                 self.error(
                     gpath("detector"),
-                    locate::not_one_of(other, &["glr", "chi2"]),
+                    locate::not_one_of(name, &DetectorKind::NAMES),
                 );
-                false
-            }
+                DetectorKind::default()
+            }),
         };
-        // The χ² detector tests εᵀΣ⁻¹ε ~ χ²(p) on one sample (χ²(p − q) decoupled from
-        // q unknown inputs): no window to correct for.
-        let m = if chi2_detector {
-            (dims.outputs - e.as_ref().map_or(0, |e| e.shape().1).min(dims.outputs)).max(1)
-        } else {
-            faults.len().max(1)
-        };
+        let innovation_dof = dims.outputs - e.as_ref().map_or(0, |e| e.shape().1).min(dims.outputs);
+        let m = detector_kind.statistic_dof(faults.len(), innovation_dof);
         let known = faults.iter().all(|f| f.onset == Onset::Known);
         let given = [
             glr.threshold.is_some(),
@@ -1682,13 +1663,14 @@ impl Validator {
                     false
                 }
             };
-            let onsets = if known || chi2 || chi2_detector {
+            let per_onset = !detector_kind.maximises_over_onsets();
+            let onsets = if known || chi2 || per_onset {
                 1
             } else {
                 glr.window.saturating_sub(glr.min_lag).max(1)
             };
             match chi2_upper_quantile(m as f64, a / onsets as f64) {
-                Ok(t) if chi2 || chi2_detector => (t, ThresholdSource::Chi2 { false_alarm: a }),
+                Ok(t) if chi2 || per_onset => (t, ThresholdSource::Chi2 { false_alarm: a }),
                 Ok(t) => (t, ThresholdSource::Bonferroni { false_alarm: a }),
                 Err(e) => {
                     self.error(gpath("false_alarm"), e.to_string());
@@ -1781,11 +1763,22 @@ impl Validator {
                 0
             }
         };
+        let payload = match spec.payload.as_deref() {
+            None => PayloadFormat::default(),
+            Some(name) => PayloadFormat::from_name(name).unwrap_or_else(|| {
+                self.error(
+                    join(prefix, "payload"),
+                    locate::not_one_of(name, &PayloadFormat::NAMES),
+                );
+                PayloadFormat::default()
+            }),
+        };
         if self.errors.len() > before {
             return None;
         }
         Some(Channel {
             name: spec.name.clone(),
+            payload,
             key: spec
                 .key
                 .clone()
@@ -1816,7 +1809,7 @@ impl Validator {
             threshold_source,
             isolation_delay: glr.isolation_delay.unwrap_or(n as u32),
             isolation_alpha: glr.isolation_alpha,
-            chi2_detector,
+            detector_kind,
             isolation_thresholds: glr
                 .calibrated
                 .as_ref()

@@ -270,6 +270,11 @@ pub struct ChannelSpec {
     /// Zenoh key expression the channel's samples arrive on (outside `glrmon/**`).
     /// Default `plant/<name>`.
     pub key: Option<String>,
+    /// How the payloads on `key` are encoded: `json` (a sample object
+    /// `{"k": …, "t": …, "u": […], "y": […], "p": […]}` or an array of them; the
+    /// format docs/WIRE.md describes). Default `json`.
+    #[schemars(extend("enum" = ["json"]))]
+    pub payload: Option<String>,
     /// Sample period in seconds; informative only (reports). Default: none.
     pub period: Option<f64>,
     /// Number q of exogenous (scheduling) signals p0…p{q−1} per sample (at most 1024).

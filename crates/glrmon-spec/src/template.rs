@@ -70,6 +70,7 @@ const TEMPLATE: &str = r#"# glrmon configuration. Reference of every key: docs/C
 [[channels]]
 name = "@NAME@"
 # key = "@KEY@"                      # Zenoh key of the samples
+# payload = "json"                   # how the samples are encoded (docs/WIRE.md)
 # period = 0.1                       # seconds, informative
 # signals = 0                        # scheduling signals p0...; default: highest used + 1
 

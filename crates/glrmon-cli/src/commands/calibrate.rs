@@ -16,7 +16,7 @@ use glrmon_eval::calibrate::{
 use glrmon_spec::edit::EditError;
 use serde::Serialize;
 
-use glrmon_input::{is_mcap, recorded_config};
+use glrmon_input::embedded_config;
 
 use crate::common::pick;
 use crate::common::{InvalidInput, input_error, load_config};
@@ -64,10 +64,14 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         (None, Some(f)) => Target::SampleFar(f),
         _ => unreachable!("clap requires exactly one of --mtbfa and --sample-far"),
     };
-    let cfg = match (&args.config, args.input.first()) {
+    let embedded = match (&args.config, args.input.first()) {
+        (None, Some(input)) => embedded_config(input).map_err(input_error)?,
+        _ => None,
+    };
+    let cfg = match (&args.config, embedded) {
         (Some(path), _) => load_config(path)?,
-        (None, Some(input)) if is_mcap(input) => recorded_config(input).map_err(input_error)?,
-        _ => {
+        (None, Some(cfg)) => cfg,
+        (None, None) => {
             return Err(InvalidInput(
                 "give --config (only an MCAP recording carries its configuration)".into(),
             )

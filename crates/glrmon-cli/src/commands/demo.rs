@@ -14,8 +14,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use clap::Args;
-use glrmon_monitor::Monitor;
-use glrmon_runtime::{FnSink, Output, Runtime, Sink};
+use glrmon_input::OutputFormat;
+use glrmon_runtime::{ChannelSetup, FnSink, Output, Runtime, Sink};
 use glrmon_sim::SimSample;
 
 use crate::common::InvalidInput;
@@ -65,10 +65,10 @@ pub(crate) struct DemoArgs {
 /// The demo's outputs: the MCAP recording (unless `--no-record`) and the JSON lines
 /// file, from the `--output` names' extensions.
 fn outputs(args: &DemoArgs) -> anyhow::Result<(Option<PathBuf>, Option<PathBuf>)> {
-    let (mcap, jsonl): (Vec<&PathBuf>, Vec<&PathBuf>) = args.output.iter().partition(|p| {
-        p.extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
-    });
+    let (mcap, jsonl): (Vec<&PathBuf>, Vec<&PathBuf>) = args
+        .output
+        .iter()
+        .partition(|p| OutputFormat::of(p) == OutputFormat::Mcap);
     if mcap.len() > 1 || jsonl.len() > 1 {
         return Err(InvalidInput(
             "--output: at most one .mcap recording and one JSON lines file".into(),
@@ -140,7 +140,7 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let monitors = cfg
         .channels
         .iter()
-        .map(Monitor::from_channel)
+        .map(ChannelSetup::from_channel)
         .collect::<Result<Vec<_>, _>>()?;
     let latency = Arc::new(Mutex::new(Latency::default()));
     let measured = latency.clone();

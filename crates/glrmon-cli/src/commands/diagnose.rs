@@ -17,7 +17,7 @@ use glrmon_monitor::{DiagnosisEngine, SpanDiagnosis};
 use glrmon_spec::ResidualKind;
 use glrmon_wire::{Record, Sample, encode_json};
 
-use glrmon_input::{Samples, is_mcap, recorded_config};
+use glrmon_input::{Samples, embedded_config};
 
 use crate::common::pick;
 use crate::common::{InvalidInput, input_error, load_config};
@@ -104,14 +104,15 @@ fn for_each_sample(
 pub(crate) fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     let cfg = match &args.config {
         Some(path) => load_config(path)?,
-        None if is_mcap(&args.input) => recorded_config(&args.input).map_err(input_error)?,
-        None => {
-            return Err(InvalidInput(format!(
-                "{}: a CSV file needs --config (only MCAP recordings carry their configuration)",
-                args.input.display()
-            ))
-            .into());
-        }
+        None => embedded_config(&args.input)
+            .map_err(input_error)?
+            .ok_or_else(|| {
+                InvalidInput(format!(
+                    "{}: a CSV file needs --config (only MCAP recordings carry their \
+                     configuration)",
+                    args.input.display()
+                ))
+            })?,
     };
     let mut channel = pick(&cfg, args.channel.as_deref())?.clone();
     if let Some(r) = args.residual {

@@ -131,14 +131,7 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
         std::fs::write(path, json()?)?;
     }
     if let Some(path) = &args.report {
-        let detector = if channel.chi2_detector {
-            "χ² test of εᵀΣ⁻¹ε per sample".to_owned()
-        } else {
-            format!(
-                "GLR, window w = {}, s = {}",
-                channel.window.window, channel.window.min_lag
-            )
-        };
+        let detector = channel.detector()?.describe();
         let evaluation = Evaluation {
             title: format!("glrmon evaluate: channel {}", channel.name),
             config: args.config.display().to_string(),

@@ -10,7 +10,9 @@ use std::sync::{Arc, Mutex};
 
 use anyhow::Context as _;
 use clap::Args;
-use glrmon_input::{CsvReader, CsvReplayed, McapInput, McapReplayed, ReplayError, is_mcap};
+use glrmon_input::{
+    CsvReader, CsvReplayed, InputFormat, McapInput, McapReplayed, OutputFormat, ReplayError,
+};
 use glrmon_monitor::Monitor;
 use glrmon_record::{FileHeader, McapFileSink};
 use glrmon_report::ReportSink;
@@ -66,7 +68,7 @@ fn output_sinks(
             std::io::BufWriter::with_capacity(1 << 16, std::io::stdout()),
             args.stat_every,
         ))),
-        Some(p) if is_mcap(p) => {
+        Some(p) if OutputFormat::of(p) == OutputFormat::Mcap => {
             let sink = McapFileSink::create(p, header)
                 .with_context(|| format!("creating {}", p.display()))?;
             sinks.push(Box::new(sink.with_stat_every(args.stat_every)));
@@ -136,10 +138,9 @@ fn take_lines(lines: &AlarmLines) -> Vec<String> {
 
 /// Replays `args.input`; wall-clock times in the report are shown in `zone`.
 pub(crate) fn run(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
-    if is_mcap(&args.input) {
-        replay_mcap(args, zone)
-    } else {
-        replay_csv(args, zone)
+    match InputFormat::of(&args.input) {
+        InputFormat::Mcap => replay_mcap(args, zone),
+        InputFormat::Csv => replay_csv(args, zone),
     }
 }
 

@@ -11,8 +11,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use clap::Args;
-use glrmon_monitor::Monitor;
-use glrmon_runtime::{Output, Runtime, RuntimeSettings, Sink, SinkError};
+use glrmon_runtime::{ChannelSetup, Output, Runtime, RuntimeSettings, Sink, SinkError};
 use glrmon_wire::Record;
 use glrmon_zenoh::{ConnectivityWatch, Ownership, Presence, StatusSource, ZenohSink, ZenohSource};
 
@@ -210,7 +209,7 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     let monitors = cfg
         .channels
         .iter()
-        .map(Monitor::from_channel)
+        .map(ChannelSetup::from_channel)
         .collect::<Result<Vec<_>, _>>()?;
     let mut sinks: Vec<Box<dyn Sink>> = vec![
         Box::new(ZenohSink::new(session.clone())),

@@ -81,21 +81,23 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     // An MCAP output holds the samples as a recording's inputs, with the configuration:
     // `glrmon replay OUT.mcap` needs nothing else.
     let mut mcap_out = match &args.output {
-        Some(path) if glrmon_input::is_mcap(path) => Some(
-            glrmon_record::McapFile::create(
-                path,
-                glrmon_record::FileOptions::default(),
-                &glrmon_record::FileHeader {
-                    config: cfg.source.clone(),
-                    channels: vec![channel.name.clone()],
-                    extra: std::collections::BTreeMap::from([(
-                        "source".to_owned(),
-                        format!("glrmon simulate --seed {}", args.seed),
-                    )]),
-                },
+        Some(path) if glrmon_input::OutputFormat::of(path) == glrmon_input::OutputFormat::Mcap => {
+            Some(
+                glrmon_record::McapFile::create(
+                    path,
+                    glrmon_record::FileOptions::default(),
+                    &glrmon_record::FileHeader {
+                        config: cfg.source.clone(),
+                        channels: vec![channel.name.clone()],
+                        extra: std::collections::BTreeMap::from([(
+                            "source".to_owned(),
+                            format!("glrmon simulate --seed {}", args.seed),
+                        )]),
+                    },
+                )
+                .with_context(|| format!("creating {}", path.display()))?,
             )
-            .with_context(|| format!("creating {}", path.display()))?,
-        ),
+        }
         _ => None,
     };
     let mut json = Vec::new();

@@ -10,7 +10,7 @@ use glrmon_core::StepError;
 use glrmon_core::calibration::Target;
 use glrmon_core::information::{InformationError, warmup_samples, window_information};
 use glrmon_core::isolability::{DEFAULT_CORRELATION_LIMIT, isolability};
-use glrmon_spec::{Channel, ThresholdSource};
+use glrmon_spec::{Channel, DetectorKind, ThresholdSource};
 use nalgebra::DMatrix;
 
 use crate::common::InvalidInput;
@@ -228,7 +228,7 @@ fn channel_information(
         None => channel,
     };
     let mut det = channel
-        .detector()
+        .glr_detector()
         .map_err(|e| InvalidInput(format!("model: {e}")))?;
     let mut sim =
         simulator(channel, 1, &[], 0).map_err(|e| InvalidInput(format!("simulation: {e}")))?;
@@ -307,11 +307,15 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
             channel.alarm.threshold,
             channel.fault_names.len()
         ),
-        ThresholdSource::Chi2 { false_alarm } if channel.chi2_detector => format!(
-            "{:.4} (χ²({}) upper quantile at {false_alarm:e} per sample)",
-            channel.alarm.threshold,
-            channel.innovation_dof()
-        ),
+        ThresholdSource::Chi2 { false_alarm } if !channel.detector_kind.maximises_over_onsets() => {
+            format!(
+                "{:.4} (χ²({}) upper quantile at {false_alarm:e} per sample)",
+                channel.alarm.threshold,
+                channel
+                    .detector_kind
+                    .statistic_dof(channel.fault_names.len(), channel.innovation_dof())
+            )
+        }
         ThresholdSource::Chi2 { false_alarm } => format!(
             "{:.4} (χ²({}) upper quantile at {false_alarm:e} per onset: optimistic, the window's \
              maximum exceeds it far more often; see `glrmon calibrate`)",
@@ -346,11 +350,13 @@ fn report(channel: &Channel, warnings: &mut Vec<String>) -> anyhow::Result<Strin
         ),
     };
     let _ = writeln!(s, "  model: {model}; {window}; threshold {threshold}");
-    if channel.chi2_detector {
+    if channel.detector_kind != DetectorKind::Glr {
         let _ = writeln!(
             s,
             "  detector: the plain χ²({}) test of εᵀΣ⁻¹ε on each sample (baseline; no onset estimate, no isolation)",
-            channel.dims.outputs
+            channel
+                .detector_kind
+                .statistic_dof(channel.fault_names.len(), channel.innovation_dof())
         );
     }
     let faults: Vec<String> = channel

@@ -327,7 +327,7 @@ impl SlotArrays<'_> {
 /// m ≥ 3 in a loop of its own, [`split_statistic`]), and Γ ← AΓ + b·G (eq. (46),
 /// [`forcing`]); each onset gets the operations of the passes in their order, so the
 /// results are the same bits. L⁻¹S stays in registers unless the signatures are kept
-/// (`Detector::keep_signatures`).
+/// (`GlrDetector::keep_signatures`).
 ///
 /// # Safety
 /// `v.sized(N, M, P)` and s0 + L ≤ `v.w` (checked once per step by the caller, so the

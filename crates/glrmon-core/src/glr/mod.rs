@@ -96,7 +96,7 @@ macro_rules! wide_call {
     ($this:ident, $body:ident, $avx2:ident, $avx512:ident, ($($a:expr),*)) => {
         match $this.level {
             // SAFETY: the level is Avx2 or Avx512 only when the processor has the
-            // feature (`VectorLevel::detect`, or `Detector::set_vector_level`, which
+            // feature (`VectorLevel::detect`, or `GlrDetector::set_vector_level`, which
             // checks `VectorLevel::supported`).
             #[cfg(target_arch = "x86_64")]
             crate::simd::VectorLevel::Avx2 => unsafe { $this.$avx2($($a),*) },
@@ -203,7 +203,7 @@ pub(crate) struct WindowBank {
     factored: bool,
     /// Whether measured steps keep every onset's L_k⁻¹S_k(r) readable
     /// ([`WindowBank::whitened_signature`]); off by default, see
-    /// `Detector::keep_signatures`.
+    /// `GlrDetector::keep_signatures`.
     keep_signatures: bool,
     /// Set when `keep_signatures` is switched on, until the next measured step: the
     /// signatures in store are not the last step's.

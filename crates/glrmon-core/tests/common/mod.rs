@@ -5,7 +5,7 @@
 // Each test crate that includes this module uses a part of it.
 #![allow(dead_code)]
 
-use glrmon_core::{Detector, Sample, StepOutput};
+use glrmon_core::{GlrDetector, Sample, StepOutput};
 use glrmon_sim::Simulator;
 
 /// Every output of a step as bits: ε, εᵀΣ⁻¹ε, l_k, r̂, rank, θ̂.
@@ -22,12 +22,12 @@ pub(crate) fn bits(out: &StepOutput) -> Vec<u64> {
 /// Samples 0 … steps − 1 of `sim` through `det` (a predict-only step where `gap(k)`),
 /// with `each` called after every measured step; returns what `each` returned, in order.
 pub(crate) fn run_steps<T>(
-    det: &mut Detector,
+    det: &mut GlrDetector,
     sim: &mut Simulator,
     out: &mut StepOutput,
     steps: u64,
     gap: impl Fn(u64) -> bool,
-    mut each: impl FnMut(&Detector, &StepOutput) -> T,
+    mut each: impl FnMut(&GlrDetector, &StepOutput) -> T,
 ) -> Vec<T> {
     let mut all = Vec::new();
     for k in 0..steps {
@@ -52,12 +52,12 @@ pub(crate) fn run_steps<T>(
 /// both where `gap(k)`), with `each(k, measured, detectors, outputs)` called after
 /// every sample.
 pub(crate) fn run_pair(
-    detectors: [&mut Detector; 2],
+    detectors: [&mut GlrDetector; 2],
     outputs: [&mut StepOutput; 2],
     sim: &mut Simulator,
     steps: u64,
     gap: impl Fn(u64) -> bool,
-    mut each: impl FnMut(u64, bool, [&Detector; 2], [&StepOutput; 2]),
+    mut each: impl FnMut(u64, bool, [&GlrDetector; 2], [&StepOutput; 2]),
 ) {
     let [first, second] = detectors;
     let [a, b] = outputs;

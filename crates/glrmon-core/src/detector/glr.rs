@@ -1,4 +1,4 @@
-//! One channel's detector: model evaluation → Kalman innovation → Γ signatures →
+//! The GLR detector: model evaluation → Kalman innovation → Γ signatures →
 //! moving-window GLR, one sample at a time, without allocating.
 //!
 //! Ref.: Zhang & Basseville 2014, §3-§5 (eqs. (6)-(10), (32)-(37), (44)-(46)).
@@ -13,6 +13,8 @@ use crate::innovation::InnovationFilter;
 use crate::isolation::FisherStatistics;
 use crate::linalg::gemm;
 use crate::model::{Dims, LpvMatrix, Signals, StateSpace, SystemMatrices};
+
+use super::{Detector, Sample, StepOutput};
 
 /// Default [`WindowSettings::steady_tolerance`].
 pub const DEFAULT_STEADY_TOLERANCE: f64 = 1e-12;
@@ -55,60 +57,13 @@ impl Default for WindowSettings {
     }
 }
 
-/// One sample of a channel: index k, known inputs U_k, outputs Y_k, signals p(k).
-#[derive(Debug, Clone, Copy)]
-pub struct Sample<'a> {
-    /// Sample index k; consecutive samples have consecutive indices.
-    pub k: u64,
-    /// U_k (length l).
-    pub u: &'a [f64],
-    /// Y_k (length p).
-    pub y: &'a [f64],
-    /// p(k) (length q).
-    pub p: &'a [f64],
-}
-
-/// What one step produced. Allocated once with [`StepOutput::new`], overwritten by
-/// every [`Detector::step`].
-#[derive(Debug, Clone, PartialEq)]
-pub struct StepOutput {
-    /// The sample index k.
-    pub k: u64,
-    /// ε_k (eq. (10)).
-    pub innovation: DVector<f64>,
-    /// εᵀΣ⁻¹ε: χ²(p) under no fault.
-    pub normalized_innovation: f64,
-    /// l_k (eq. (35)); `None` while no onset is admissible (k − s before the first sample).
-    pub glr: Option<f64>,
-    /// r̂_k (eq. (36)).
-    pub onset: Option<u64>,
-    /// θ̂ = C_k(r̂)⁺d_k(r̂), one value per fault (eq. (34)); zeros when `glr` is `None`.
-    pub magnitude: DVector<f64>,
-    /// rank C_k(r̂): the χ² degrees of freedom of l_k.
-    pub rank: usize,
-}
-
-impl StepOutput {
-    /// Buffers for a detector with `outputs` outputs and `faults` faults.
-    #[must_use]
-    pub fn new(outputs: usize, faults: usize) -> Self {
-        Self {
-            k: 0,
-            innovation: DVector::zeros(outputs),
-            normalized_innovation: 0.0,
-            glr: None,
-            onset: None,
-            magnitude: DVector::zeros(faults),
-            rank: 0,
-        }
-    }
-}
-
-/// The detector of one channel.
+/// The moving-window GLR detector of one channel (Zhang & Basseville 2014): the
+/// Kalman innovation filter, the Γ signature window bank and the GLR maximum over the
+/// window's onsets. The reference implementation of [`Detector`].
 ///
 /// # Examples
 /// ```
-/// use glrmon_core::detector::{Detector, Sample, StepOutput, WindowSettings};
+/// use glrmon_core::detector::{GlrDetector, Sample, StepOutput, WindowSettings};
 /// use glrmon_core::fault::{Column, Fault, FaultDictionary, Onset};
 /// use glrmon_core::model::{Lpv, StateSpace};
 /// use nalgebra::{DMatrix, DVector};
@@ -121,7 +76,7 @@ impl StepOutput {
 /// let faults = FaultDictionary::new(model.dims(), vec![
 ///     Fault::output("bias", Onset::Step, Column::Constant(DVector::from_vec(vec![1.0]))),
 /// ]).unwrap();
-/// let mut det = Detector::new(
+/// let mut det = GlrDetector::new(
 ///     Box::new(model), faults, DVector::zeros(1), DMatrix::identity(1, 1),
 ///     WindowSettings { window: 20, min_lag: 0, ..Default::default() },
 /// ).unwrap();
@@ -134,7 +89,7 @@ impl StepOutput {
 /// assert!((out.magnitude[0] - 1.0).abs() < 1e-9);
 /// ```
 #[derive(Debug)]
-pub struct Detector {
+pub struct GlrDetector {
     model: Box<dyn StateSpace>,
     faults: FaultDictionary,
     filter: InnovationFilter,
@@ -159,7 +114,7 @@ pub struct Detector {
     input_moments: Vec<(f64, f64)>,
     input_count: u64,
     input_variance: Vec<f64>,
-    /// The initial state and covariance, for [`Detector::restart`].
+    /// The initial state and covariance, for [`GlrDetector::restart`].
     x0: DVector<f64>,
     p0: DMatrix<f64>,
     /// The matrices and fault columns the stationary regime is built on (or is being
@@ -179,7 +134,7 @@ pub struct Detector {
     cross: Option<DMatrix<f64>>,
 }
 
-/// E_k of a plant with an unknown input E_kd_k ([`Detector::with_unknown_input`]).
+/// E_k of a plant with an unknown input E_kd_k ([`GlrDetector::with_unknown_input`]).
 #[derive(Debug, Clone)]
 struct UnknownInput {
     matrix: LpvMatrix,
@@ -189,7 +144,7 @@ struct UnknownInput {
     complement: RangeComplement,
 }
 
-impl Detector {
+impl GlrDetector {
     /// Builds a detector; every buffer the per-sample path needs is allocated here.
     ///
     /// # Errors
@@ -322,7 +277,7 @@ impl Detector {
     /// §III-B, Prop. 2, eq. (27); [`crate::decoupling`]), so that no d_k can raise an
     /// alarm. A state fault's component in range(E_k) cannot be told from d and is
     /// removed; a fault entirely in it has no signature (not detectable). A missing
-    /// sample cannot be bridged ([`Detector::predict_only`] refuses it): d moves the
+    /// sample cannot be bridged ([`GlrDetector::predict_only`] refuses it): d moves the
     /// state unobserved over it.
     ///
     /// # Errors
@@ -385,7 +340,7 @@ impl Detector {
     /// Allocates (it is off the per-sample path).
     ///
     /// # Errors
-    /// [`ModelError`] only if (x̂₀, P₀) were invalid, which [`Detector::new`] excludes.
+    /// [`ModelError`] only if (x̂₀, P₀) were invalid, which [`GlrDetector::new`] excludes.
     pub fn restart(&mut self) -> Result<(), ModelError> {
         let (n, p, m) = (self.dims.states, self.dims.outputs, self.faults.len());
         let filter = InnovationFilter::new(self.x0.clone(), self.p0.clone(), p)?;
@@ -424,17 +379,17 @@ impl Detector {
     /// # Errors
     /// [`StepError::WrongDimension`] / [`StepError::NonFinite`] for a malformed sample,
     /// [`StepError::OutOfOrder`] when k is not the next index (call
-    /// [`Detector::predict_only`] for missing samples), [`StepError::Numerical`] when
+    /// [`GlrDetector::predict_only`] for missing samples), [`StepError::Numerical`] when
     /// the model at this sample gives a non-finite matrix or a singular Σ_k. On error
     /// the detector's state is unchanged.
     ///
     /// # Examples
     ///
-    /// A wrong index is refused and changes nothing (the [`Detector`] example runs a
+    /// A wrong index is refused and changes nothing (the [`GlrDetector`] example runs a
     /// whole fault):
     ///
     /// ```
-    /// use glrmon_core::detector::{Detector, Sample, StepOutput, WindowSettings};
+    /// use glrmon_core::detector::{GlrDetector, Sample, StepOutput, WindowSettings};
     /// use glrmon_core::fault::{Column, Fault, FaultDictionary, Onset};
     /// use glrmon_core::model::{Lpv, StateSpace};
     /// use glrmon_core::StepError;
@@ -445,7 +400,7 @@ impl Detector {
     /// let faults = FaultDictionary::new(model.dims(), vec![
     ///     Fault::output("bias", Onset::Step, Column::Constant(DVector::from_vec(vec![1.0]))),
     /// ]).unwrap();
-    /// let mut det = Detector::new(Box::new(model), faults, DVector::zeros(1), DMatrix::identity(1, 1),
+    /// let mut det = GlrDetector::new(Box::new(model), faults, DVector::zeros(1), DMatrix::identity(1, 1),
     ///     WindowSettings { window: 10, min_lag: 0, ..Default::default() }).unwrap();
     /// let mut out = StepOutput::new(1, 1);
     /// det.step(&Sample { k: 0, u: &[], y: &[0.1], p: &[] }, &mut out).unwrap();
@@ -709,7 +664,7 @@ impl Detector {
     /// [`StepError::OutOfOrder`] when k is not the next index or no sample has been
     /// seen yet; [`StepError::Numerical`] when the model is not finite;
     /// [`StepError::UnknownInputGap`] for a plant with an unknown input
-    /// ([`Detector::with_unknown_input`]), whose state d moves unobserved over a gap.
+    /// ([`GlrDetector::with_unknown_input`]), whose state d moves unobserved over a gap.
     pub fn predict_only(&mut self, k: u64) -> Result<(), StepError> {
         if self.unknown_input.is_some() {
             return Err(StepError::UnknownInputGap { k });
@@ -868,7 +823,7 @@ impl Detector {
     }
 
     /// Keeps (`true`) or stops keeping the fault signature of every onset after each
-    /// measured step, for [`Detector::signature`], from the next measured step on.
+    /// measured step, for [`GlrDetector::signature`], from the next measured step on.
     ///
     /// Off by default: the statistic needs only C_k(r) and d_k(r) (eqs. (32)-(33)),
     /// which the fused window pass computes from signatures it holds in registers.
@@ -877,8 +832,8 @@ impl Detector {
     /// 37.5 KiB and a 48 KiB L1 data cache then no longer holds it).
     ///
     /// ```
-    /// # use glrmon_core::Detector;
-    /// # fn f(det: &mut Detector) {
+    /// # use glrmon_core::GlrDetector;
+    /// # fn f(det: &mut GlrDetector) {
     /// det.keep_signatures(true);
     /// # }
     /// ```
@@ -888,9 +843,9 @@ impl Detector {
 
     /// Writes the fault signature S_k(r) = H_kΓ_k(r) + Φ_k(r) (p×m, eq. (45)) of onset r
     /// at the last measured sample k; false when r is not in the window, or when the
-    /// signatures are not kept ([`Detector::keep_signatures`]) or were switched on after
+    /// signatures are not kept ([`GlrDetector::keep_signatures`]) or were switched on after
     /// that sample. With an unknown input it is the part the decoupled innovation sees,
-    /// L_k[0; Q₂ᵀ]L_k⁻¹S_k(r) ([`Detector::with_unknown_input`]).
+    /// L_k[0; Q₂ᵀ]L_k⁻¹S_k(r) ([`GlrDetector::with_unknown_input`]).
     pub fn signature(&self, onset: u64, out: &mut DMatrix<f64>) -> bool {
         if self.last_measured != self.next_k.map(|n| n - 1) {
             // The last step was predict-only: no signature at that sample.
@@ -923,5 +878,58 @@ impl Detector {
     #[must_use]
     pub fn onset_statistic(&self, onset: u64) -> Option<(f64, usize)> {
         Some((self.bank.statistic_of(onset)?, self.bank.rank_of(onset)?))
+    }
+}
+
+impl Detector for GlrDetector {
+    fn kind(&self) -> &'static str {
+        "glr"
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "GLR, window w = {}, s = {}",
+            self.settings.window, self.settings.min_lag
+        )
+    }
+
+    fn memory(&self) -> usize {
+        self.settings.window
+    }
+
+    fn dims(&self) -> Dims {
+        self.dims
+    }
+
+    fn faults(&self) -> &FaultDictionary {
+        &self.faults
+    }
+
+    fn unknown_inputs(&self) -> usize {
+        GlrDetector::unknown_inputs(self)
+    }
+
+    fn next_index(&self) -> Option<u64> {
+        self.next_k
+    }
+
+    fn step(&mut self, sample: &Sample<'_>, out: &mut StepOutput) -> Result<(), StepError> {
+        GlrDetector::step(self, sample, out)
+    }
+
+    fn predict_only(&mut self, k: u64) -> Result<(), StepError> {
+        GlrDetector::predict_only(self, k)
+    }
+
+    fn restart(&mut self) -> Result<(), ModelError> {
+        GlrDetector::restart(self)
+    }
+
+    fn fisher_statistics(&self, onset: u64) -> Option<FisherStatistics> {
+        GlrDetector::fisher_statistics(self, onset)
+    }
+
+    fn innovation_filter(&self) -> Option<&InnovationFilter> {
+        Some(&self.filter)
     }
 }

@@ -1,0 +1,201 @@
+//! Detectors: a residual generator and the decision statistic computed on it, one
+//! sample at a time, behind the one interface every consumer uses ([`Detector`]).
+//!
+//! The kinds:
+//! - [`GlrDetector`] (`glr.rs`): the Kalman (or, with an unknown input, Kitanidis)
+//!   innovation, the Γ signature window bank and the moving-window GLR of Zhang &
+//!   Basseville 2014, §3-§5, with the sufficient statistics minmax isolation needs;
+//! - [`Chi2Detector`] (`chi2.rs`): the classical baseline, the χ² test of one
+//!   sample's normalized innovation εᵀΣ⁻¹ε, on the same filter.
+//!
+//! # Adding a kind
+//! A new kind is a new module here implementing [`Detector`], allocation-free in
+//! [`Detector::step`] like the others; the configuration names it in one variant of
+//! `glrmon_spec::DetectorKind` (its name, its threshold law and one line of the
+//! factory `Channel::detector`). The monitor, the daemon, recording, replay, the
+//! report, `calibrate`, `evaluate` and `validate` then run it unchanged.
+
+mod chi2;
+mod glr;
+
+pub use chi2::Chi2Detector;
+pub use glr::{DEFAULT_STEADY_TOLERANCE, GlrDetector, WindowSettings};
+
+use nalgebra::DVector;
+
+use crate::error::{ModelError, StepError};
+use crate::fault::FaultDictionary;
+use crate::innovation::InnovationFilter;
+use crate::isolation::FisherStatistics;
+use crate::model::Dims;
+
+/// A channel's fault detector: the residual generator of a model-based method and the
+/// decision statistic it computes on each sample.
+///
+/// Its contract, which the monitor relies on:
+/// - samples come with consecutive indices k; [`Detector::step`] refuses any other
+///   (and a malformed sample) with its state unchanged, and a missing sample is
+///   bridged by [`Detector::predict_only`] or, where the kind cannot bridge one,
+///   by [`Detector::restart`];
+/// - [`Detector::step`] overwrites a [`StepOutput`] made once by [`StepOutput::new`]
+///   with [`Detector::dims`]`.outputs` and [`Detector::faults`]`.len()`, and does
+///   not allocate;
+/// - the decision statistic is [`StepOutput::glr`] (compared with the channel's
+///   threshold), with the onset estimate [`StepOutput::onset`] and one magnitude per
+///   fault of the dictionary; [`StepOutput::normalized_innovation`] is the residual's
+///   χ² statistic, which the filter-consistency test reads;
+/// - the same samples give the same bits.
+pub trait Detector: std::fmt::Debug + Send {
+    /// The kind's name as the configuration writes it (`glr`, `chi2`).
+    fn kind(&self) -> &'static str;
+
+    /// One line naming the method and its settings, for reports.
+    fn describe(&self) -> String;
+
+    /// How many consecutive samples one value of the decision statistic depends on:
+    /// 1 for a test of one sample, the window length w for the GLR. Calibration
+    /// counts exceedances closer than this as one cluster.
+    fn memory(&self) -> usize;
+
+    /// The channel's dimensions.
+    fn dims(&self) -> Dims;
+
+    /// The fault dictionary: the faults the magnitudes and isolation tests refer to.
+    fn faults(&self) -> &FaultDictionary;
+
+    /// q, the number of unknown inputs the residual is decoupled from (0 without);
+    /// the residual then has p − q degrees of freedom.
+    fn unknown_inputs(&self) -> usize {
+        0
+    }
+
+    /// The index expected next (`None` before the first sample or after a restart).
+    fn next_index(&self) -> Option<u64>;
+
+    /// Processes sample k.
+    ///
+    /// # Errors
+    /// [`StepError`] for a malformed sample or an index other than the next one
+    /// (state unchanged), or a numerical failure (the caller restarts).
+    fn step(&mut self, sample: &Sample<'_>, out: &mut StepOutput) -> Result<(), StepError>;
+
+    /// Bridges the missing sample k without a measurement.
+    ///
+    /// # Errors
+    /// [`StepError::OutOfOrder`] when k is not the next index,
+    /// [`StepError::UnknownInputGap`] where the kind cannot bridge a gap,
+    /// [`StepError::Numerical`] on a numerical failure.
+    fn predict_only(&mut self, k: u64) -> Result<(), StepError>;
+
+    /// Forgets every sample: the next one may carry any index, as for a new
+    /// detector. Off the per-sample path (may allocate).
+    ///
+    /// # Errors
+    /// [`ModelError`] when the initial state cannot be rebuilt.
+    fn restart(&mut self) -> Result<(), ModelError>;
+
+    /// The Fisher information C_k(r) and score d_k(r) of onset r after the last step,
+    /// on which minmax and sensitivity isolation run (Zhang & Basseville 2014, eqs.
+    /// (38)-(41)). `None` when the kind has none or r is not available. Allocates:
+    /// for alarms, not for every sample.
+    fn fisher_statistics(&self, onset: u64) -> Option<FisherStatistics> {
+        let _ = onset;
+        None
+    }
+
+    /// The Kalman innovation filter, for the kinds that run one: sparse diagnosis
+    /// restarts its residual filter from this filter's prediction.
+    fn innovation_filter(&self) -> Option<&InnovationFilter> {
+        None
+    }
+}
+
+impl<D: Detector + ?Sized> Detector for Box<D> {
+    fn kind(&self) -> &'static str {
+        (**self).kind()
+    }
+    fn describe(&self) -> String {
+        (**self).describe()
+    }
+    fn memory(&self) -> usize {
+        (**self).memory()
+    }
+    fn dims(&self) -> Dims {
+        (**self).dims()
+    }
+    fn faults(&self) -> &FaultDictionary {
+        (**self).faults()
+    }
+    fn unknown_inputs(&self) -> usize {
+        (**self).unknown_inputs()
+    }
+    fn next_index(&self) -> Option<u64> {
+        (**self).next_index()
+    }
+    fn step(&mut self, sample: &Sample<'_>, out: &mut StepOutput) -> Result<(), StepError> {
+        (**self).step(sample, out)
+    }
+    fn predict_only(&mut self, k: u64) -> Result<(), StepError> {
+        (**self).predict_only(k)
+    }
+    fn restart(&mut self) -> Result<(), ModelError> {
+        (**self).restart()
+    }
+    fn fisher_statistics(&self, onset: u64) -> Option<FisherStatistics> {
+        (**self).fisher_statistics(onset)
+    }
+    fn innovation_filter(&self) -> Option<&InnovationFilter> {
+        (**self).innovation_filter()
+    }
+}
+
+/// One sample of a channel: index k, known inputs U_k, outputs Y_k, signals p(k).
+#[derive(Debug, Clone, Copy)]
+pub struct Sample<'a> {
+    /// Sample index k; consecutive samples have consecutive indices.
+    pub k: u64,
+    /// U_k (length l).
+    pub u: &'a [f64],
+    /// Y_k (length p).
+    pub y: &'a [f64],
+    /// p(k) (length q).
+    pub p: &'a [f64],
+}
+
+/// What one step produced. Allocated once with [`StepOutput::new`], overwritten by
+/// every [`Detector::step`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepOutput {
+    /// The sample index k.
+    pub k: u64,
+    /// The residual: the innovation ε_k (Zhang & Basseville 2014, eq. (10)) for the
+    /// kinds built on the Kalman filter.
+    pub innovation: DVector<f64>,
+    /// εᵀΣ⁻¹ε: χ²(p) under no fault (χ²(p − q) decoupled from q unknown inputs).
+    pub normalized_innovation: f64,
+    /// The decision statistic: l_k (eq. (35)) for the GLR; `None` while the kind has
+    /// no value to report (no admissible onset yet, warm-up).
+    pub glr: Option<f64>,
+    /// The onset estimate r̂_k (eq. (36)); k itself for a test of one sample.
+    pub onset: Option<u64>,
+    /// θ̂, one value per fault (eq. (34): C_k(r̂)⁺d_k(r̂)); zeros when `glr` is `None`.
+    pub magnitude: DVector<f64>,
+    /// rank C_k(r̂): the χ² degrees of freedom of l_k.
+    pub rank: usize,
+}
+
+impl StepOutput {
+    /// Buffers for a detector with `outputs` outputs and `faults` faults.
+    #[must_use]
+    pub fn new(outputs: usize, faults: usize) -> Self {
+        Self {
+            k: 0,
+            innovation: DVector::zeros(outputs),
+            normalized_innovation: 0.0,
+            glr: None,
+            onset: None,
+            magnitude: DVector::zeros(faults),
+            rank: 0,
+        }
+    }
+}

@@ -1,0 +1,134 @@
+//! The detector kinds a channel can run (`[channels.glr] detector`) and the factory
+//! that builds a channel's [`Detector`].
+//!
+//! A new kind, once its numerics are a module of `glrmon_core::detector`, is one
+//! variant of [`DetectorKind`] with its name and the law of its statistic below, and
+//! one arm of [`Channel::detector`]; the schema's `detector` field lists the names
+//! from [`DetectorKind::NAMES`].
+
+use glrmon_core::{Chi2Detector, Detector, GlrDetector, ModelError};
+
+use crate::Channel;
+
+/// The detection method of a channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DetectorKind {
+    /// The moving-window GLR of Zhang & Basseville 2014 on the Kalman (or Kitanidis)
+    /// innovation: onset, magnitude and isolation.
+    #[default]
+    Glr,
+    /// The classical χ² test of one sample's εᵀΣ⁻¹ε (the baseline to compare with).
+    Chi2,
+}
+
+impl DetectorKind {
+    /// Every kind, in the order the configuration reference lists them.
+    pub const ALL: [Self; 2] = [Self::Glr, Self::Chi2];
+
+    /// The names the configuration accepts, as [`DetectorKind::ALL`].
+    pub const NAMES: [&'static str; 2] = ["glr", "chi2"];
+
+    /// The configuration's name of the kind.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Glr => "glr",
+            Self::Chi2 => "chi2",
+        }
+    }
+
+    /// The kind named `name` in a configuration.
+    #[must_use]
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == name)
+    }
+
+    /// The degrees of freedom of the statistic's χ² law under no fault, for one tested
+    /// onset: m for the GLR (the number of faults: l_k(r) ~ χ²(rank C_k(r)) ≤ χ²(m),
+    /// Zhang & Basseville 2014 §5), the innovation's p − q for the χ² test.
+    #[must_use]
+    pub fn statistic_dof(self, faults: usize, innovation_dof: usize) -> usize {
+        match self {
+            Self::Glr => faults.max(1),
+            Self::Chi2 => innovation_dof.max(1),
+        }
+    }
+
+    /// Whether the statistic is a maximum over the window's candidate onsets, so that
+    /// a false-alarm probability per sample is shared among them (Bonferroni).
+    #[must_use]
+    pub fn maximises_over_onsets(self) -> bool {
+        match self {
+            Self::Glr => true,
+            Self::Chi2 => false,
+        }
+    }
+}
+
+impl Channel {
+    /// The channel's detector, of the kind the configuration names: the one factory
+    /// the monitor, `calibrate`, `evaluate` and `validate` build detectors with.
+    ///
+    /// # Errors
+    /// As [`GlrDetector::new`] (not expected after validation).
+    pub fn detector(&self) -> Result<Box<dyn Detector>, ModelError> {
+        Ok(match self.detector_kind {
+            DetectorKind::Glr => Box::new(self.glr_detector()?),
+            DetectorKind::Chi2 => Box::new(Chi2Detector::new(self.glr_detector()?)),
+        })
+    }
+
+    /// The GLR detector of the channel's model and faults, whatever its kind: for the
+    /// analyses of the GLR window itself (its Fisher information, Σ_k).
+    ///
+    /// # Errors
+    /// As [`GlrDetector::new`] (not expected after validation).
+    pub fn glr_detector(&self) -> Result<GlrDetector, ModelError> {
+        let detector = GlrDetector::new(
+            Box::new(self.model.clone()),
+            self.dictionary()?,
+            self.x0.clone(),
+            self.p0.clone(),
+            self.window,
+        )?;
+        match (&self.unknown_input, &self.cross_covariance) {
+            (Some(e), _) => detector.with_unknown_input(e.clone()),
+            (None, Some(s)) => detector.with_cross_covariance(s.clone()),
+            (None, None) => Ok(detector),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_kind_round_trips_through_its_name() {
+        assert_eq!(DetectorKind::ALL.len(), DetectorKind::NAMES.len());
+        for (kind, name) in DetectorKind::ALL.into_iter().zip(DetectorKind::NAMES) {
+            assert_eq!(kind.name(), name);
+            assert_eq!(DetectorKind::from_name(name), Some(kind));
+        }
+        assert_eq!(DetectorKind::from_name("cusum"), None);
+    }
+
+    #[test]
+    fn the_factory_builds_the_configured_kind() {
+        for (kind, memory) in [("glr", 30), ("chi2", 1)] {
+            let cfg = crate::parse(&format!(
+                r#"
+[[channels]]
+name = "tank"
+model = {{ F = [[0.9]], H = [[1.0]], Q = 0.01, R = 0.04 }}
+faults = [{{ name = "level_bias", kind = "sensor_bias", output = 0 }}]
+glr = {{ window = 30, detector = "{kind}" }}
+"#
+            ))
+            .unwrap();
+            let det = cfg.channels[0].detector().unwrap();
+            assert_eq!((det.kind(), det.memory()), (kind, memory));
+            assert_eq!(det.faults().len(), 1);
+        }
+    }
+}
