@@ -5,7 +5,13 @@ use std::io::IsTerminal as _;
 
 use clap::ValueEnum;
 use glrmon_report::clock::{Zone, format_time};
-use glrmon_runtime::{RuntimeEvents, SinkError};
+use std::collections::HashMap;
+use std::time::{Duration, Instant};
+
+use glrmon_runtime::{Output, RuntimeEvents, Sink, SinkError};
+use glrmon_wire::Record;
+
+use crate::print;
 use tracing_subscriber::fmt::format::Writer;
 use tracing_subscriber::fmt::time::FormatTime;
 
@@ -83,6 +89,65 @@ pub(crate) struct LogEvents;
 impl RuntimeEvents for LogEvents {
     fn sink_error(&self, error: &SinkError) {
         tracing::error!(error = %error, "A result could not be delivered.");
+    }
+}
+
+/// Logs alarms (INFO) and rejected input (WARN, at most one line per channel and code
+/// per second, with the number suppressed).
+pub(crate) struct LogSink {
+    last: HashMap<(String, &'static str), (Instant, u64)>,
+}
+
+impl LogSink {
+    pub(crate) fn new() -> Self {
+        Self {
+            last: HashMap::new(),
+        }
+    }
+}
+
+impl Sink for LogSink {
+    fn name(&self) -> &str {
+        "log"
+    }
+
+    fn write(&mut self, output: &Output) -> Result<(), SinkError> {
+        match &output.record {
+            Record::Alarm(_) | Record::Isolation(_) | Record::AlarmEnd(_) => {
+                if let Some(line) = print::line(&output.record) {
+                    tracing::info!(channel = output.record.channel(), "{line}");
+                }
+            }
+            Record::Consistency(c) => {
+                let line = print::line(&output.record).unwrap_or_default();
+                if c.state == "consistent" {
+                    tracing::info!(channel = %c.channel, "The model fits again: {line}");
+                } else {
+                    tracing::warn!(channel = %c.channel, "The model no longer fits the plant: {line}");
+                }
+            }
+            Record::Error(e) => {
+                let key = (e.channel.clone(), e.code.as_str());
+                let now = Instant::now();
+                let entry = self
+                    .last
+                    .entry(key)
+                    .or_insert((now - Duration::from_secs(2), 0));
+                if now.duration_since(entry.0) >= Duration::from_secs(1) {
+                    let what = if e.code.rejects_input() {
+                        "Rejected input"
+                    } else {
+                        "Input stream"
+                    };
+                    tracing::warn!(channel = %e.channel, code = e.code.as_str(), suppressed = entry.1, "{what}: {}.", e.message);
+                    *entry = (now, 0);
+                } else {
+                    entry.1 += 1;
+                }
+            }
+            _ => {}
+        }
+        Ok(())
     }
 }
 

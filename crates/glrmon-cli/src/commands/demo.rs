@@ -6,7 +6,6 @@
 //! alarm's latency: samples from the crossing (the first l_k above λ in the `stat`
 //! records) to the sample of the `alarm` record.
 
-use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -14,13 +13,14 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use clap::Args;
+use glrmon_daemon::DaemonBuilder;
 use glrmon_input::OutputFormat;
-use glrmon_runtime::{ChannelSetup, FnSink, Output, Runtime, Sink};
+use glrmon_runtime::{FnSink, JsonLinesSink, Output};
 use glrmon_sim::SimSample;
 
 use crate::common::InvalidInput;
 use glrmon_wire::{Record, Sample, decode_record, encode_sample};
-use glrmon_zenoh::{SessionSettings, ZenohSink, ZenohSource};
+use glrmon_zenoh::SessionSettings;
 use zenoh::Wait as _;
 use zenoh::sample::Sample as ZenohSample;
 
@@ -103,13 +103,13 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("embedded demo config: {e}"))?;
     let rate_hz = if args.rate > 0.0 { args.rate } else { 100.0 };
     let samples = (args.seconds as f64 * rate_hz).round() as u64;
-    let session = glrmon_zenoh::open(&SessionSettings {
+    let session_settings = SessionSettings {
         mode: Some("peer".into()),
         listen: args.listen.clone(),
         multicast_scouting: Some(false),
         ..SessionSettings::default()
-    })
-    .await?;
+    };
+    let session = glrmon_zenoh::open(&session_settings).await?;
 
     // The watcher: alarms, isolation updates and ends as `glrmon watch` prints them.
     let alarms_seen = Arc::new(AtomicU64::new(0));
@@ -136,60 +136,48 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         );
     }
 
-    // The daemon: runtime, Zenoh sink (and optionally a JSONL file), Zenoh source.
-    let monitors = cfg
-        .channels
-        .iter()
-        .map(ChannelSetup::from_channel)
-        .collect::<Result<Vec<_>, _>>()?;
+    // The daemon: runtime, Zenoh sink (and optionally a JSONL file), Zenoh source, on
+    // the demo's own session, with nothing to announce.
     let latency = Arc::new(Mutex::new(Latency::default()));
     let measured = latency.clone();
-    let mut sinks: Vec<Box<dyn Sink>> = vec![
-        Box::new(ZenohSink::new(session.clone())),
-        Box::new(FnSink::new("latency", move |o: &Output| {
+    let mut builder = DaemonBuilder::new(cfg.clone(), "demo")
+        .announce(false)
+        .metrics(None)
+        .events(Arc::new(LogEvents))
+        .sink(Box::new(FnSink::new("latency", move |o: &Output| {
             if let Ok(mut l) = measured.lock() {
                 l.see(&o.record);
             }
-        })),
-    ];
+        })));
     if let Some(p) = &jsonl {
         let file = std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?;
-        let w = Mutex::new(std::io::BufWriter::new(file));
-        sinks.push(Box::new(FnSink::new("jsonl", move |o: &Output| {
-            if let Ok(mut w) = w.lock() {
-                let _ = w
-                    .write_all(&o.json)
-                    .and_then(|()| w.write_all(b"\n"))
-                    .and_then(|()| w.flush());
-            }
-        })));
+        builder = builder.sink(Box::new(JsonLinesSink::new(
+            std::io::BufWriter::new(file),
+            1,
+        )));
     }
-    let recorder_stats = if let Some(record) = &record {
+    let recorder = record.as_ref().map(|record| {
         let directory = match record.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
             _ => PathBuf::from("."),
         };
-        let settings = glrmon_record::RecorderSettings {
+        glrmon_record::RecorderSettings {
             directory,
             prefix: ".glrmon-demo".into(),
             max_file_bytes: None,
             max_file_duration: None,
             ..glrmon_record::RecorderSettings::default()
-        };
-        let recorder =
-            glrmon_record::Recorder::start(settings, glrmon_record::file_header(&cfg, "demo"))
-                .map_err(|e| anyhow::anyhow!("starting the recorder: {e}"))?;
-        let stats = recorder.stats();
-        sinks.push(Box::new(recorder));
-        Some(stats)
-    } else {
-        None
-    };
+        }
+    });
     let mut settings = glrmon_runtime::RuntimeSettings::from_spec(&cfg.daemon);
     settings.stat_every = 1;
-    let runtime = Runtime::start(monitors, sinks, &settings, Arc::new(LogEvents));
+    let endpoints = glrmon_zenoh::Endpoints::of(&session_settings)?;
+    let daemon = builder
+        .recorder(recorder)
+        .runtime_settings(settings)
+        .start(&session, &endpoints)
+        .await?;
     let keys: Vec<String> = cfg.channels.iter().map(|c| c.key.clone()).collect();
-    let source = ZenohSource::declare(&session, &keys, &runtime.intake()).await?;
 
     // The plant: each channel simulated and published on its key.
     let mut plants = Vec::new();
@@ -266,8 +254,8 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         }
     }
     // Wait until every published sample has been processed (a condition, bounded).
-    let stats = runtime.stats();
-    let names = runtime.channel_names().to_vec();
+    let stats = daemon.runtime().stats();
+    let names = daemon.runtime().channel_names().to_vec();
     let deadline = Instant::now() + Duration::from_secs(30);
     while glrmon_runtime::channel_statuses(&names, &stats)
         .iter()
@@ -276,10 +264,7 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     {
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
-    drop(source);
-    let (in_time, sinks) =
-        tokio::task::spawn_blocking(move || runtime.shutdown(Duration::from_secs(10))).await?;
-    drop(sinks);
+    let stopped = daemon.shutdown(Duration::from_secs(10)).await;
     let raised: u64 = glrmon_runtime::channel_statuses(&names, &stats)
         .iter()
         .map(|c| c.alarms)
@@ -323,7 +308,7 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     if let Some(p) = &jsonl {
         println!("records written to {}", p.display());
     }
-    if let (Some(stats), Some(record)) = (recorder_stats, &record) {
+    if let (Some(stats), Some(record)) = (stopped.recorder, &record) {
         let finished = stats.finished.lock().map(|f| f.clone()).unwrap_or_default();
         if let Some(file) = finished.last() {
             std::fs::rename(file, record)
@@ -338,7 +323,7 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         }
     }
     let _ = session.close().await;
-    anyhow::ensure!(in_time, "the runtime did not drain in time");
+    anyhow::ensure!(stopped.in_time, "the runtime did not drain in time");
     Ok(())
 }
 

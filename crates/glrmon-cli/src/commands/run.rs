@@ -1,26 +1,21 @@
-//! `glrmon run`: the daemon. One Zenoh session; a subscriber per channel feeds the
-//! runtime's workers; results go back on Zenoh (and to the log); SIGINT/SIGTERM stop
+//! `glrmon run`: the daemon ([`glrmon_daemon`]) in a process: flags, the Zenoh session,
+//! the log, signals. A subscriber per channel feeds the runtime's workers; results go
+//! back on Zenoh (and to the log); SIGINT/SIGTERM stop
 //! intake, drain, publish what is pending and close the session within a bounded time.
 //! Under systemd (`Type=notify`, `NOTIFY_SOCKET` set) it reports READY=1 once intake is
 //! open, RELOADING=1 … READY=1 around a SIGHUP reload and STOPPING=1 when the drain
 //! starts, and pings the watchdog while every worker runs (`WatchdogSec=`).
 
-use std::collections::HashMap;
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use clap::Args;
-use glrmon_runtime::{ChannelSetup, Output, Runtime, RuntimeSettings, Sink, SinkError};
-use glrmon_wire::Record;
-use glrmon_zenoh::{ConnectivityWatch, Ownership, Presence, StatusSource, ZenohSink, ZenohSource};
-
-use glrmon_record::{Recorder, RecorderSettings};
+use glrmon_daemon::{Daemon, DaemonBuilder};
 
 use crate::common::load_config;
 use crate::flags::ZenohArgs;
-use crate::log::LogEvents;
-use crate::print;
+use crate::log::{LogEvents, LogSink};
 
 #[derive(Debug, Args)]
 pub(crate) struct RunArgs {
@@ -46,65 +41,6 @@ pub(crate) struct RunArgs {
     metrics: Option<String>,
 }
 
-/// Logs alarms (INFO) and rejected input (WARN, at most one line per channel and code
-/// per second, with the number suppressed).
-pub(crate) struct LogSink {
-    last: HashMap<(String, &'static str), (Instant, u64)>,
-}
-
-impl LogSink {
-    pub(crate) fn new() -> Self {
-        Self {
-            last: HashMap::new(),
-        }
-    }
-}
-
-impl Sink for LogSink {
-    fn name(&self) -> &str {
-        "log"
-    }
-
-    fn write(&mut self, output: &Output) -> Result<(), SinkError> {
-        match &output.record {
-            Record::Alarm(_) | Record::Isolation(_) | Record::AlarmEnd(_) => {
-                if let Some(line) = print::line(&output.record) {
-                    tracing::info!(channel = output.record.channel(), "{line}");
-                }
-            }
-            Record::Consistency(c) => {
-                let line = print::line(&output.record).unwrap_or_default();
-                if c.state == "consistent" {
-                    tracing::info!(channel = %c.channel, "The model fits again: {line}");
-                } else {
-                    tracing::warn!(channel = %c.channel, "The model no longer fits the plant: {line}");
-                }
-            }
-            Record::Error(e) => {
-                let key = (e.channel.clone(), e.code.as_str());
-                let now = Instant::now();
-                let entry = self
-                    .last
-                    .entry(key)
-                    .or_insert((now - Duration::from_secs(2), 0));
-                if now.duration_since(entry.0) >= Duration::from_secs(1) {
-                    let what = if e.code.rejects_input() {
-                        "Rejected input"
-                    } else {
-                        "Input stream"
-                    };
-                    tracing::warn!(channel = %e.channel, code = e.code.as_str(), suppressed = entry.1, "{what}: {}.", e.message);
-                    *entry = (now, 0);
-                } else {
-                    entry.1 += 1;
-                }
-            }
-            _ => {}
-        }
-        Ok(())
-    }
-}
-
 pub(crate) fn run(args: &RunArgs) -> anyhow::Result<()> {
     let cfg = load_config(&args.config)?;
     // What `glrmon validate` prints as warnings, e.g. a rounded covariance the model
@@ -126,28 +62,8 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         (None, None) => None,
     };
     let configured = cfg.channels.len();
-    let mut cfg = cfg;
-    if let Some(expr) = &args.channels {
-        let selector = zenoh::key_expr::KeyExpr::new(expr.as_str()).map_err(|e| {
-            crate::common::InvalidInput(format!(
-                "--channels \"{expr}\" is not a key expression: {e}"
-            ))
-        })?;
-        cfg.channels.retain(|c| {
-            zenoh::key_expr::KeyExpr::new(c.key.as_str()).is_ok_and(|k| k.intersects(&selector))
-        });
-        tracing::info!(keyexpr = %expr, channels = cfg.channels.len(), of = configured, "Monitoring the channels whose key intersects the selection.");
-        if cfg.channels.is_empty() {
-            tracing::warn!(keyexpr = %expr, "No configured channel's key intersects the selection.");
-        }
-    }
-    let cfg = cfg.into_shard(shard);
-    if let Some(s) = shard {
-        tracing::info!(shard = %s, channels = cfg.channels.len(), of = configured, "Monitoring one shard of the configured channels.");
-        if cfg.channels.is_empty() {
-            tracing::warn!(shard = %s, "No configured channel falls in this shard.");
-        }
-    }
+    let cfg = glrmon_daemon::select_channels(cfg, args.channels.as_deref(), shard)
+        .map_err(daemon_error)?;
     if let Some(name) = &args.instance
         && let Err(e) = glrmon_spec::validate_instance(name)
     {
@@ -164,123 +80,17 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     }
     let session = open_session(&settings).await?;
     let endpoints = glrmon_zenoh::Endpoints::of(&settings)?;
-    let status_overlaps = Arc::new(std::sync::atomic::AtomicU64::new(0));
-    let names: Vec<String> = cfg.channels.iter().map(|c| c.name.clone()).collect();
-    let overlaps = Arc::clone(&status_overlaps);
-    let ownership = Ownership::claim(
-        &session,
-        &instance,
-        &names,
-        Duration::from_secs(3),
-        move |channel, other| {
-            overlaps.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            tracing::error!(channel, other, "Another instance claims a channel this one monitors: both publish its results. Give each instance a disjoint set of channels (daemon.shard).");
-        },
-    )
-    .await
-    .map_err(|e| match e {
-        glrmon_zenoh::ZenohError::Overlap(m) => anyhow::Error::new(crate::common::InvalidInput(m)),
-        other => other.into(),
-    })?;
-    let connectivity = ConnectivityWatch::start(
-        session.clone(),
-        Duration::from_millis(100),
-        |connected, state| {
-            let reconnections = state
-                .reconnections
-                .load(std::sync::atomic::Ordering::Relaxed);
-            if !connected {
-                tracing::warn!(
-                    "Lost every Zenoh connection (routers and peers); retrying. Channels keep their state."
-                );
-            } else if reconnections > 0 {
-                tracing::info!(reconnections, "Reconnected to the Zenoh network.");
-            } else {
-                tracing::info!("Connected to the Zenoh network.");
-            }
-        },
-    )?;
-    // A daemon that listens can be reached by publishers as soon as its listener is up
-    // (the session would not have opened otherwise): readiness does not wait for one.
-    connectivity.state().listening.store(
-        !endpoints.listen.is_empty(),
-        std::sync::atomic::Ordering::Relaxed,
-    );
-    let monitors = cfg
-        .channels
-        .iter()
-        .map(ChannelSetup::from_channel)
-        .collect::<Result<Vec<_>, _>>()?;
-    let mut sinks: Vec<Box<dyn Sink>> = vec![
-        Box::new(ZenohSink::new(session.clone())),
-        Box::new(LogSink::new()),
-    ];
-    let mut recorder_stats = None;
-    if cfg.recording.enabled {
-        let settings = RecorderSettings::from_spec(&cfg.recording);
-        for f in glrmon_record::leftovers(&settings.directory) {
-            tracing::warn!(
-                file = %f.display(),
-                "An unfinished recording from an earlier run: `glrmon recover {}` rewrites it as a finished file.",
-                f.display()
-            );
-        }
-        let directory = settings.directory.clone();
-        let recorder = Recorder::start(settings, glrmon_record::file_header(&cfg, &instance))
-            .map_err(|e| anyhow::anyhow!("starting the recorder: {e}"))?;
-        recorder_stats = Some(recorder.stats());
-        tracing::info!(directory = %directory.display(), "Recording inputs and results (MCAP).");
-        sinks.push(Box::new(recorder));
-    }
-    let runtime = Runtime::start(
-        monitors,
-        sinks,
-        &RuntimeSettings::from_spec(&cfg.daemon),
-        Arc::new(LogEvents),
-    );
-    let ready = Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let metrics_server = match args.metrics.as_ref().or(cfg.daemon.metrics.as_ref()) {
-        Some(addr) => {
-            let runtime_metrics = runtime.metrics();
-            let source = glrmon_metrics::MetricsSource {
-                instance: instance.clone(),
-                channels: runtime.channel_names().to_vec(),
-                stats: runtime.stats(),
-                workers: runtime_metrics
-                    .workers_alive
-                    .load(std::sync::atomic::Ordering::Relaxed),
-                runtime: runtime_metrics,
-                connectivity: connectivity.state(),
-                recorder: recorder_stats.clone(),
-                started: Instant::now(),
-                ready: Arc::clone(&ready),
-            };
-            {
-                let (bound, task) = glrmon_metrics::serve(addr, Arc::new(source)).await?;
-                tracing::info!(address = %bound, "Serving /metrics, /healthz and /readyz.");
-                if let Some(warning) = glrmon_metrics::exposure_warning(bound) {
-                    tracing::warn!(address = %bound, "{warning}");
-                }
-                Some(task)
-            }
-        }
-        None => None,
-    };
-    let keys: Vec<String> = cfg.channels.iter().map(|c| c.key.clone()).collect();
-    let source = ZenohSource::declare(&session, &keys, &runtime.intake()).await?;
-    let presence = Presence::declare(&session, {
-        let mut status = StatusSource::new(
-            instance.clone(),
-            runtime.channel_names().to_vec(),
-            runtime.stats(),
-        );
-        status.connectivity = Some(connectivity.state());
-        status.shard = shard.map(|s| s.to_string());
-        status.overlaps = status_overlaps;
-        status
-    })
-    .await?;
-    ready.store(true, std::sync::atomic::Ordering::Relaxed);
+    let channels = cfg.channels.len();
+    let timeout = Duration::from_secs_f64(cfg.daemon.shutdown_timeout);
+    let metrics = args.metrics.clone().or_else(|| cfg.daemon.metrics.clone());
+    let mut daemon = DaemonBuilder::new(cfg, &instance)
+        .shard(shard)
+        .metrics(metrics)
+        .sink(Box::new(LogSink::new()))
+        .events(Arc::new(LogEvents))
+        .start(&session, &endpoints)
+        .await
+        .map_err(daemon_error)?;
     let zenoh_line = format!(
         "zenoh {} {}, listen {}, connect {}",
         endpoints.mode,
@@ -290,7 +100,7 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     );
     tracing::info!(
         instance = %instance,
-        channels = cfg.channels.len(),
+        channels,
         mode = %endpoints.mode,
         zid = %session.zid(),
         listen = %list_or_none(&endpoints.listen),
@@ -311,15 +121,12 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     };
     // Lets tests and supervisors know intake is open.
     let monitoring = format!(
-        "instance {instance} monitoring {} channel(s){}",
-        cfg.channels.len(),
+        "instance {instance} monitoring {channels} channel(s){}",
         shard.map_or(String::new(), |s| format!(" (shard {s} of {configured})"))
     );
     println!("glrmon run: {monitoring}; {zenoh_line}");
     notify::ready(&monitoring);
-    let watchdog = notify::watchdog(runtime.metrics());
-    let timeout = Duration::from_secs_f64(cfg.daemon.shutdown_timeout);
-    let mut applied = cfg;
+    let watchdog = notify::watchdog(daemon.runtime().metrics());
     #[cfg(unix)]
     {
         let (mut hup, mut term, mut int) = signals;
@@ -338,9 +145,7 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
                 () = next(&mut int) => break,
                 () = next(&mut hup) => {
                     notify::reloading();
-                    applied = tokio::task::block_in_place(|| {
-                        reload(&args.config, applied, shard, &runtime)
-                    });
+                    tokio::task::block_in_place(|| reload(&args.config, &mut daemon));
                     notify::ready(&monitoring);
                 }
             }
@@ -348,25 +153,12 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     }
     #[cfg(not(unix))]
     wait_for_signal().await;
-    drop(applied);
     let started = Instant::now();
     notify::stopping();
     drop(watchdog);
     tracing::info!("Stopping: intake closed, draining.");
-    drop(source);
-    ready.store(false, std::sync::atomic::Ordering::Relaxed);
-    let runtime = Mutex::new(Some(runtime));
-    let (in_time, sinks) = tokio::task::spawn_blocking(move || {
-        runtime
-            .lock()
-            .ok()
-            .and_then(|mut r| r.take())
-            .map_or((true, Vec::new()), |r| r.shutdown(timeout))
-    })
-    .await?;
-    // Dropping the recorder finishes its file (summary, index, final name).
-    drop(sinks);
-    if let Some(stats) = recorder_stats {
+    let stopped = daemon.shutdown(timeout).await;
+    if let Some(stats) = stopped.recorder {
         let finished = stats.finished.lock().map(|f| f.clone()).unwrap_or_default();
         tracing::info!(
             messages = stats.messages.load(std::sync::atomic::Ordering::Relaxed),
@@ -375,16 +167,10 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
             "Recording finished."
         );
     }
-    drop(presence);
-    if let Some(server) = metrics_server {
-        server.abort();
-    }
-    drop(ownership);
-    drop(connectivity);
     if let Err(e) = tokio::time::timeout(Duration::from_secs(2), session.close()).await {
         tracing::warn!(error = %e, "The Zenoh session did not close in time.");
     }
-    if in_time {
+    if stopped.in_time {
         tracing::info!(
             elapsed_ms = started.elapsed().as_millis() as u64,
             "Stopped."
@@ -394,6 +180,15 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         Err(anyhow::anyhow!(
             "the drain did not finish within {timeout:?}: pending results were lost"
         ))
+    }
+}
+
+/// A daemon that could not start: the user's fault (exit code 2) or the machine's.
+fn daemon_error(e: glrmon_daemon::DaemonError) -> anyhow::Error {
+    if e.is_invalid_input() {
+        crate::common::InvalidInput(e.to_string()).into()
+    } else {
+        e.into()
     }
 }
 
@@ -495,38 +290,26 @@ mod notify {
 
 /// SIGHUP: reads the configuration file again and applies each channel's new
 /// thresholds and alarm settings to its running monitor; refuses (logging why, changing
-/// nothing) an invalid file or any change that needs a restart. Returns the
-/// configuration in force.
-fn reload(
-    path: &std::path::Path,
-    current: glrmon_spec::Config,
-    shard: Option<glrmon_spec::Shard>,
-    runtime: &Runtime,
-) -> glrmon_spec::Config {
+/// nothing) an invalid file or any change that needs a restart.
+fn reload(path: &std::path::Path, daemon: &mut Daemon) {
     let new = match load_config(path) {
         Ok(c) => c,
         Err(e) => {
             tracing::error!(config = %path.display(), "Reload refused, nothing changed: {e}");
-            return current;
+            return;
         }
     };
-    let blockers = current.restart_needed(&new);
-    if !blockers.is_empty() {
-        tracing::error!(
+    match daemon.reload(new) {
+        Ok(retuned) => tracing::info!(
             config = %path.display(),
-            "Reload refused, nothing changed: {}. Restart glrmon to apply these.",
-            blockers.join("; ")
-        );
-        return current;
+            channels = retuned,
+            "Configuration reloaded: thresholds and alarm settings applied; the filters go on."
+        ),
+        Err(refused) => tracing::error!(
+            config = %path.display(),
+            "Reload refused, nothing changed: {refused}. Restart glrmon to apply these."
+        ),
     }
-    let new = new.into_shard(shard);
-    let retuned = runtime.retune_from(&new);
-    tracing::info!(
-        config = %path.display(),
-        channels = retuned,
-        "Configuration reloaded: thresholds and alarm settings applied; the filters go on."
-    );
-    new
 }
 
 /// Opens the session; in client mode, retries until a router answers (the daemon may
