@@ -3,6 +3,7 @@
 pub mod calibrate;
 pub mod identify;
 pub mod noise;
+pub mod validation;
 
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_monitor::{IsolationGroup, Monitor};

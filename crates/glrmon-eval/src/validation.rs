@@ -1,0 +1,581 @@
+//! `glrmon validate`'s report of a channel: its settings in words and the isolability
+//! of its fault dictionary, computed on the channel's own simulated samples.
+
+use std::fmt::Write as _;
+
+use glrmon_core::Onset;
+use glrmon_core::StepError;
+use glrmon_core::calibration::Target;
+use glrmon_core::information::{InformationError, warmup_samples, window_information};
+use glrmon_core::isolability::{DEFAULT_CORRELATION_LIMIT, isolability};
+use glrmon_spec::{Channel, DetectorKind, ThresholdSource};
+use nalgebra::DMatrix;
+
+/// Widest matrix printed on one line.
+const INLINE_COLUMNS: usize = 6;
+/// Widest matrix printed in full, one aligned row per line; a wider one is summarised.
+const FULL_COLUMNS: usize = 12;
+
+/// A matrix for the report, after `label = `: up to [`INLINE_COLUMNS`] columns on the
+/// same line (`[[a, b], [c, d]]`); up to [`FULL_COLUMNS`], one aligned row per line
+/// under the label, indented by `indent`; wider, a summary (shape, diagonal, extreme
+/// entries, condition number), never one line of hundreds of numbers.
+fn fmt_matrix(m: &DMatrix<f64>, indent: &str) -> String {
+    if m.ncols() <= INLINE_COLUMNS {
+        let rows: Vec<String> = m
+            .row_iter()
+            .map(|r| {
+                let v: Vec<String> = r.iter().map(|x| format!("{x:.6e}")).collect();
+                format!("[{}]", v.join(", "))
+            })
+            .collect();
+        return format!("[{}]", rows.join(", "));
+    }
+    let cell = |x: f64| format!("{x:.3e}");
+    let width = m
+        .iter()
+        .map(|x| cell(*x).chars().count())
+        .max()
+        .unwrap_or(0);
+    let mut out = format!("{}×{}", m.nrows(), m.ncols());
+    if m.ncols() <= FULL_COLUMNS {
+        for r in m.row_iter() {
+            let v: Vec<String> = r.iter().map(|x| format!("{:>width$}", cell(*x))).collect();
+            let _ = write!(out, "\n{indent}  {}", v.join(" "));
+        }
+        return out;
+    }
+    let diagonal: Vec<f64> = m.diagonal().iter().copied().collect();
+    let _ = write!(out, ", summarised (more than {FULL_COLUMNS} columns):");
+    let _ = write!(out, "\n{indent}  diagonal:");
+    for chunk in diagonal.chunks(INLINE_COLUMNS) {
+        let v: Vec<String> = chunk
+            .iter()
+            .map(|x| format!("{:>width$}", cell(*x)))
+            .collect();
+        let _ = write!(out, "\n{indent}    {}", v.join(" "));
+    }
+    let (min, max) = m
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+            (lo.min(*x), hi.max(*x))
+        });
+    let off_diagonal = (0..m.nrows())
+        .flat_map(|i| (0..m.ncols()).filter(move |&j| j != i).map(move |j| (i, j)))
+        .map(|(i, j)| m[(i, j)].abs())
+        .fold(0.0_f64, f64::max);
+    let _ = write!(
+        out,
+        "\n{indent}  entries in [{}, {}], largest off-diagonal |entry| {}",
+        cell(min),
+        cell(max),
+        cell(off_diagonal)
+    );
+    if m.is_square() && m.iter().all(|x| x.is_finite()) {
+        let sv = m.clone().singular_values();
+        let (lo, hi) = sv.iter().fold((f64::INFINITY, 0.0_f64), |(lo, hi), x| {
+            (lo.min(*x), hi.max(*x))
+        });
+        let condition = if lo > 0.0 { hi / lo } else { f64::INFINITY };
+        let _ = write!(out, "\n{indent}  condition number {condition:.3e}");
+    }
+    out
+}
+
+/// Most arithmetic operations the isolability report may take (about 2 s on one core
+/// of a 2020s machine in a release build): beyond it, the report is skipped and only
+/// the filter is checked (see [`report_work`]).
+const REPORT_WORK_BUDGET: f64 = 2e9;
+
+/// The operations [`window_information`] takes on `channel`: (warm-up + w) measured
+/// steps, each updating up to w onsets at about n²m + pnm + pm² + m³/3 operations, plus
+/// the filter's n³ + n²p per step.
+fn report_work(channel: &Channel) -> f64 {
+    let known = channel.onsets().iter().all(|o| *o == Onset::Known);
+    let w = channel.window.window as f64;
+    let steps = warmup_samples(channel.window.window, known) as f64 + w;
+    let slots = if known { 1.0 } else { w };
+    let d = channel.dims;
+    let (n, p, m) = (
+        d.states as f64,
+        d.outputs as f64,
+        (channel.fault_names.len() as f64).max(1.0),
+    );
+    let per_slot = n * n * m + p * n * m + p * m * m + m * m * m / 3.0 + 1.0;
+    steps * (slots * per_slot + n * n * n + n * n * p)
+}
+
+/// Why the filter run of `glrmon validate` failed, as a configuration error naming the
+/// field (a configuration that validates must run).
+fn filter_error(channel: &Channel, e: &InformationError, k: u64) -> ReportError {
+    let text = match e {
+        InformationError::Step(StepError::Numerical { what }) => {
+            let f = channel.model.matrices()[0].base().clone();
+            let radius = f
+                .complex_eigenvalues()
+                .iter()
+                .map(|z| z.norm())
+                .fold(0.0_f64, f64::max);
+            if radius >= 1.0 {
+                format!(
+                    "model.F: unstable (spectral radius {radius:.4} ≥ 1) and the Kalman filter \
+                     diverges on it: {what} at k = {k} (a mode of F on or outside the unit \
+                     circle that H does not observe makes P_k grow without bound: measure it, \
+                     or stabilise the model)"
+                )
+            } else {
+                format!(
+                    "model: the Kalman filter fails: {what} at k = {k} (check Q, R, P0 and \
+                     the range of the scheduling signals in [channels.simulation])"
+                )
+            }
+        }
+        InformationError::Step(step) => {
+            format!("simulation: the simulated sample k = {k} is refused: {step}")
+        }
+        other => format!("model: {other}"),
+    };
+    ReportError(text)
+}
+
+/// The Fisher information of the dictionary over one window, the steady-state Σ of an
+/// LTI model whose Riccati recursion converged, and the samples it took.
+struct ChannelInformation {
+    information: DMatrix<f64>,
+    steady: Option<DMatrix<f64>>,
+    samples: usize,
+}
+
+/// The Fisher information C_k(r) of the dictionary over one window
+/// ([`window_information`]), on the channel's simulated inputs and signals, with the
+/// steady-state Σ when the model is LTI and the Riccati recursion has converged. With
+/// `window = Some(w)`, the window setting is replaced by w (a short window that checks
+/// the filter only).
+fn channel_information(
+    channel: &Channel,
+    window: Option<usize>,
+) -> Result<ChannelInformation, ReportError> {
+    let mut short;
+    let channel = match window {
+        Some(w) => {
+            short = channel.clone();
+            short.window.window = w;
+            short.window.min_lag = short.window.min_lag.min(w - 1);
+            &short
+        }
+        None => channel,
+    };
+    let mut det = channel
+        .glr_detector()
+        .map_err(|e| ReportError(format!("model: {e}")))?;
+    let mut sim = glrmon_sim::from_channel(channel, 1)
+        .map_err(|e| ReportError(format!("simulation: {e}")))?;
+    let count = std::cell::Cell::new(0_u64);
+    let samples = std::iter::repeat_with(|| {
+        let s = sim.next_sample();
+        count.set(count.get() + 1);
+        (s.u, s.y, s.p)
+    });
+    let info = window_information(&mut det, samples)
+        .map_err(|e| filter_error(channel, &e, count.get().saturating_sub(1)))?;
+    let steady = (channel.model_is_constant() && info.converged).then_some(info.covariance);
+    Ok(ChannelInformation {
+        information: info.information,
+        steady,
+        samples: info.samples,
+    })
+}
+
+/// The faults whose own information (diagonal entry) is not finite, by their paths; or,
+/// should every diagonal entry be finite, those with a non-finite entry in their row.
+fn non_finite_faults(channel: &Channel, info: &DMatrix<f64>) -> Vec<String> {
+    let mut bad: Vec<usize> = (0..info.nrows())
+        .filter(|&j| !info[(j, j)].is_finite())
+        .collect();
+    if bad.is_empty() {
+        bad = (0..info.nrows())
+            .filter(|&j| info.row(j).iter().any(|x| !x.is_finite()))
+            .collect();
+    }
+    bad.into_iter()
+        .map(|j| {
+            channel
+                .fault_path(j)
+                .map(|p| p.split_once(": ").map_or(p, |(_, f)| f).to_owned())
+                .unwrap_or_else(|| format!("faults \"{}\"", channel.fault_names[j]))
+        })
+        .collect()
+}
+
+/// What `glrmon validate` reports of a valid channel: its text, and the verdicts that
+/// are warnings too (faults the minmax test cannot tell apart).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ChannelReport {
+    /// The report, one indented line per item.
+    pub text: String,
+    /// The isolability verdicts, each naming the channel.
+    pub warnings: Vec<String>,
+}
+
+/// A channel that parses but cannot run: the field at fault and why (a diverging
+/// filter, a fault signature that is not finite, an impossible simulation).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct ReportError(pub String);
+
+/// The report of a validated channel: dimensions, model and window, threshold and
+/// detector, faults, diagnosis and consistency settings, units, and the isolability
+/// of its fault dictionary over one window of simulated samples (the Fisher
+/// information, Basseville 1996 §5-6), which runs the filter and so also refuses a
+/// model it diverges on.
+///
+/// # Errors
+/// [`ReportError`] naming the field when the filter or the simulation fails on the
+/// channel, or a fault's signature is not finite.
+pub fn channel_report(channel: &Channel) -> Result<ChannelReport, ReportError> {
+    let mut text = settings(channel);
+    let mut warnings = Vec::new();
+    isolability_section(channel, &mut text, &mut warnings)?;
+    Ok(ChannelReport { text, warnings })
+}
+
+/// The channel's settings, one line each.
+fn settings(channel: &Channel) -> String {
+    let d = channel.dims;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "channel \"{}\" (key {}): n = {} states, l = {} inputs, p = {} outputs, q = {} signals, m = {} faults",
+        channel.name,
+        channel.key,
+        d.states,
+        d.inputs,
+        d.outputs,
+        d.signals,
+        channel.fault_names.len()
+    );
+    let model = if channel.model_is_constant() {
+        "LTI"
+    } else {
+        "LPV (time-varying)"
+    };
+    let known = channel.onsets().iter().all(|o| *o == Onset::Known);
+    let mut window = if known {
+        "known profiles: GLR over all samples (no onset search)".to_owned()
+    } else {
+        format!(
+            "window w = {}, s = {}",
+            channel.window.window, channel.window.min_lag
+        )
+    };
+    if channel.window.warm_up > 0 {
+        let _ = write!(
+            window,
+            ", GLR held off for the first {} samples after a (re)start",
+            channel.window.warm_up
+        );
+    }
+    let threshold = threshold_text(channel);
+    let _ = writeln!(s, "  model: {model}; {window}; threshold {threshold}");
+    if channel.detector_kind != DetectorKind::Glr {
+        let _ = writeln!(
+            s,
+            "  detector: the plain χ²({}) test of εᵀΣ⁻¹ε on each sample (baseline; no onset estimate, no isolation)",
+            channel
+                .detector_kind
+                .statistic_dof(channel.fault_names.len(), channel.innovation_dof())
+        );
+    }
+    let faults: Vec<String> = channel
+        .fault_names
+        .iter()
+        .zip(channel.onsets())
+        .map(|(n, o)| format!("{n} ({})", format!("{o:?}").to_lowercase()))
+        .collect();
+    let _ = writeln!(s, "  faults: {}", faults.join(", "));
+    let diag = &channel.diagnosis;
+    if diag.enabled {
+        let span = diag.span.map_or_else(
+            || "from r̂ to the alarm".to_owned(),
+            |n| format!("at most {n} samples"),
+        );
+        let _ = writeln!(
+            s,
+            "  sparse diagnosis at alarms: {:?} residual, span {span}, history {} samples, no-fault test at α = {}, λ path of {} points down to {:e}·λ_max, widest plateau in {} λ",
+            diag.residual,
+            diag.history,
+            diag.alpha,
+            diag.lasso.path_points,
+            diag.lasso.ratio,
+            diag.lasso.plateau_scale.as_str()
+        );
+    } else {
+        let _ = writeln!(s, "  sparse diagnosis at alarms: off");
+    }
+    match channel.consistency {
+        Some(c) => {
+            let band = glrmon_core::consistency::Consistency::new(channel.innovation_dof(), c)
+                .map(|t| t.band())
+                .unwrap_or((f64::NAN, f64::NAN));
+            let _ = writeln!(
+                s,
+                "  model consistency: blocks of {} samples, mean of εᵀΣ⁻¹ε expected {} within [{:.3}, {:.3}] (α = {:e})",
+                c.window,
+                channel.innovation_dof(),
+                band.0,
+                band.1,
+                c.alpha
+            );
+        }
+        None => {
+            let _ = writeln!(s, "  model consistency: off");
+        }
+    }
+    if let Some(e) = &channel.unknown_input {
+        let _ = writeln!(
+            s,
+            "  unknown input: E has {} column(s), decoupled from the innovation: the GLR runs on {} of the {} output directions (Zhang 2021 §III-B); faults in range(E) are not detectable",
+            e.shape().1,
+            channel.innovation_dof(),
+            channel.dims.outputs
+        );
+    }
+    if channel.cross_covariance.is_some() {
+        let _ = writeln!(
+            s,
+            "  correlated noises: S = E[w vᵀ] given, the predictor gain is (F P Hᵀ + S) Σ⁻¹ (an innovation model runs at its own order; sparse diagnosis's residual filters ignore S)"
+        );
+    }
+    if let Some(scaling) = &channel.scaling {
+        let list = |names: &[String], offset: &[f64], scale: &[f64]| {
+            names
+                .iter()
+                .zip(offset.iter().zip(scale))
+                .map(|(n, (o, s))| format!("{n} {o:.4} ± {s:.4}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let _ = writeln!(
+            s,
+            "  natural units: model = (raw − offset)/scale on intake; inputs [{}], outputs [{}]; \
+             sensor/actuator bias magnitudes in raw units",
+            list(&channel.columns.u, scaling.u_offset(), scaling.u_scale()),
+            list(&channel.columns.y, scaling.y_offset(), scaling.y_scale())
+        );
+    }
+    if channel.columns.named {
+        let _ = writeln!(
+            s,
+            "  CSV columns: u = [{}], y = [{}]{} (other columns are skipped)",
+            channel.columns.u.join(", "),
+            channel.columns.y.join(", "),
+            if channel.columns.p.is_empty() {
+                String::new()
+            } else {
+                format!(", p = [{}]", channel.columns.p.join(", "))
+            }
+        );
+    }
+    s
+}
+
+/// How the threshold was set, in words.
+fn threshold_text(channel: &Channel) -> String {
+    match channel.threshold_source {
+        ThresholdSource::Explicit => format!("{:.4} (explicit)", channel.alarm.threshold),
+        ThresholdSource::Bonferroni { false_alarm } => format!(
+            "{:.4} (χ²({}) upper quantile at {false_alarm:e}/(w − s), Bonferroni: conservative)",
+            channel.alarm.threshold,
+            channel.fault_names.len()
+        ),
+        ThresholdSource::Chi2 { false_alarm } if !channel.detector_kind.maximises_over_onsets() => {
+            format!(
+                "{:.4} (χ²({}) upper quantile at {false_alarm:e} per sample)",
+                channel.alarm.threshold,
+                channel
+                    .detector_kind
+                    .statistic_dof(channel.fault_names.len(), channel.innovation_dof())
+            )
+        }
+        ThresholdSource::Chi2 { false_alarm } => format!(
+            "{:.4} (χ²({}) upper quantile at {false_alarm:e} per onset: optimistic, the window's \
+             maximum exceeds it far more often; see `glrmon calibrate`)",
+            channel.alarm.threshold,
+            channel.fault_names.len()
+        ),
+        ThresholdSource::Calibrated {
+            target: Target::Mtbfa(mtbfa),
+            samples,
+            episodes,
+            interval,
+            ..
+        } => format!(
+            "{:.4} (calibrated for one false-alarm episode per {mtbfa} samples on {samples} \
+             fault-free samples, {episodes} episodes; 95 % interval {:.4}–{:.4})",
+            channel.alarm.threshold, interval[0], interval[1]
+        ),
+        ThresholdSource::Calibrated {
+            target: Target::SampleFar(fraction),
+            samples,
+            episodes,
+            exceedances,
+            interval,
+        } => format!(
+            "{:.4} (calibrated for a fraction {fraction} of fault-free samples above it on \
+             {samples} fault-free samples, {} above in {episodes} clusters; 95 % interval \
+             {:.4}–{:.4})",
+            channel.alarm.threshold,
+            exceedances.map_or_else(|| "?".to_owned(), |n| n.to_string()),
+            interval[0],
+            interval[1]
+        ),
+    }
+}
+
+/// Σ and the isolability of the dictionary, or, over validate's work budget, the
+/// filter checked on a short window.
+fn isolability_section(
+    channel: &Channel,
+    s: &mut String,
+    warnings: &mut Vec<String>,
+) -> Result<(), ReportError> {
+    let work = report_work(channel);
+    if work > REPORT_WORK_BUDGET {
+        // The filter alone (a 2-sample window), so that a diverging model is still
+        // refused; the isolability report would take too long.
+        let steady = channel_information(channel, Some(2))?.steady;
+        if let Some(sigma) = steady {
+            let _ = writeln!(
+                s,
+                "  steady-state innovation covariance Σ = {}",
+                fmt_matrix(&sigma, "  ")
+            );
+        }
+        let _ = writeln!(
+            s,
+            "  isolability: not computed (about {work:.1e} operations for w = {} and m = {}, \
+             more than validate's budget of {REPORT_WORK_BUDGET:.0e}; the filter was checked \
+             over {} samples)",
+            channel.window.window,
+            channel.fault_names.len(),
+            warmup_samples(2, false) + 2
+        );
+        return Ok(());
+    }
+    let ChannelInformation {
+        information: info,
+        steady,
+        samples,
+    } = channel_information(channel, None)?;
+    let bad = non_finite_faults(channel, &info);
+    if !bad.is_empty() {
+        return Err(ReportError(format!(
+            "{}: the fault signature is not finite over the window (information matrix has a \
+             non-finite entry): an expression of the column divides by zero or overflows on \
+             the simulated samples",
+            bad.join(", ")
+        )));
+    }
+    match steady {
+        Some(sigma) => {
+            let _ = writeln!(
+                s,
+                "  steady-state innovation covariance Σ = {}",
+                fmt_matrix(&sigma, "  ")
+            );
+        }
+        None if channel.model_is_constant() => {
+            let _ = writeln!(
+                s,
+                "  steady-state innovation covariance: the Riccati recursion had not converged"
+            );
+        }
+        None => {
+            let _ = writeln!(
+                s,
+                "  steady-state innovation covariance: none (the model varies with p(k))"
+            );
+        }
+    }
+    let rep = isolability(&info, DEFAULT_CORRELATION_LIMIT)
+        .map_err(|e| ReportError(format!("faults: {e}")))?;
+    let _ = writeln!(
+        s,
+        "  isolability over {samples} samples (Fisher information F = C_k(r), Basseville 1996 §5-6):"
+    );
+    let _ = writeln!(
+        s,
+        "    rank {} of {}, condition number {:.3e}, C1 = {:.4}, C2 = {:.4}, C3 = {:.4}",
+        rep.rank,
+        channel.fault_names.len(),
+        rep.condition_number,
+        rep.c1,
+        rep.c2,
+        rep.c3
+    );
+    if channel.fault_names.len() <= 12 {
+        let _ = writeln!(s, "    F = {}", fmt_matrix(&info, "    "));
+        let _ = writeln!(
+            s,
+            "    correlation = {}",
+            fmt_matrix(&rep.correlation, "    ")
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "    largest pairwise |correlation| {:.4} over {} pairs",
+            rep.max_pair_correlation(),
+            rep.pairs.len()
+        );
+    }
+    let names: Vec<&str> = channel.fault_names.iter().map(String::as_str).collect();
+    let verdicts = rep.verdicts(&names, samples);
+    if verdicts.is_empty() {
+        let _ = writeln!(
+            s,
+            "    verdict: every pair of faults is separable by the minmax test over {samples} samples (|correlation| ≤ {DEFAULT_CORRELATION_LIMIT})"
+        );
+    }
+    for v in verdicts {
+        let _ = writeln!(s, "    verdict: {v}");
+        warnings.push(format!("channel \"{}\": {v}", channel.name));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn small_matrices_stay_on_one_line() {
+        let m = DMatrix::from_row_slice(2, 2, &[1.0, 0.5, 0.5, 2.0]);
+        assert_eq!(
+            fmt_matrix(&m, "  "),
+            "[[1.000000e0, 5.000000e-1], [5.000000e-1, 2.000000e0]]"
+        );
+    }
+
+    #[test]
+    fn wider_matrices_are_aligned_rows_on_their_own_lines() {
+        let m = DMatrix::from_fn(8, 8, |i, j| if i == j { 1.0 } else { -0.25 });
+        let text = fmt_matrix(&m, "    ");
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines[0], "8×8");
+        assert_eq!(lines.len(), 9);
+        assert!(lines[1].starts_with("      "), "{text}");
+        let widths: Vec<usize> = lines[1..].iter().map(|l| l.chars().count()).collect();
+        assert!(widths.iter().all(|w| *w == widths[0]), "{text}");
+    }
+
+    #[test]
+    fn a_22_by_22_covariance_is_summarised() {
+        let m = DMatrix::from_fn(22, 22, |i, j| if i == j { 2.0 } else { 0.01 });
+        let text = fmt_matrix(&m, "  ");
+        assert!(text.starts_with("22×22, summarised"), "{text}");
+        assert!(text.contains("condition number"), "{text}");
+        assert!(text.lines().all(|l| l.chars().count() < 100), "{text}");
+        // 22 diagonal entries, 6 a line.
+        assert_eq!(text.lines().count(), 1 + 1 + 4 + 1 + 1, "{text}");
+    }
+}
