@@ -448,9 +448,42 @@ impl Monitor {
         }
     }
 
-    /// [`Monitor::on_sample`] with U_k, Y_k already in model units.
+    /// [`Monitor::on_sample`] with U_k, Y_k already in model units: the index checked
+    /// (and a gap bridged), the values checked, one detector step, then the records
+    /// it gives rise to.
     fn process(&mut self, sample: &Sample, u: &[f64], y: &[f64], records: &mut Vec<Record>) {
         let k = sample.k.unwrap_or(self.arrivals);
+        if !self.admit_index(k, sample.t, records) {
+            return;
+        }
+        if let Some(why) = too_large(u, y, &sample.p) {
+            self.reject(records, Some(k), ErrorCode::TooLarge, why);
+            return;
+        }
+        let core_sample = glrmon_core::Sample {
+            k,
+            u,
+            y,
+            p: &sample.p,
+        };
+        self.restart_diagnosis_if_due(k, records);
+        if !self.step_detector(&core_sample, sample.t, records) {
+            return;
+        }
+        self.counters.samples += 1;
+        self.check_consistency(k, sample.t, records);
+        self.step_diagnosis(&core_sample, records);
+        if self.stat_records {
+            self.push_stat(k, sample.t, records);
+        }
+        self.follow_alarm(k, sample.t, records);
+    }
+
+    /// Checks sample index k against the last processed one: a restart of the
+    /// publisher's numbering restarts the filter, a duplicate or late sample is
+    /// refused (false), a gap is bridged by predict-only steps or, past `max_gap` (or
+    /// with an unknown input), restarts the filter.
+    fn admit_index(&mut self, k: u64, t: Option<f64>, records: &mut Vec<Record>) -> bool {
         if k == u64::MAX {
             self.reject(
                 records,
@@ -460,7 +493,7 @@ impl Monitor {
                     "sample index k = {k} is the largest 64-bit index: no sample could follow it"
                 ),
             );
-            return;
+            return false;
         }
         self.arrivals = self.arrivals.max(k + 1);
         if let Some(next) = self.detector.next_index()
@@ -475,7 +508,7 @@ impl Monitor {
                 next - 1,
                 self.settings.max_reorder
             );
-            self.restart(k, sample.t, ErrorCode::SequenceReset, why, records);
+            self.restart(k, t, ErrorCode::SequenceReset, why, records);
             self.arrivals = k + 1;
         }
         if let Some(next) = self.detector.next_index() {
@@ -494,7 +527,7 @@ impl Monitor {
                     code,
                     format!("sample k = {k} {why} (expected {next})"),
                 );
-                return;
+                return false;
             }
             if k > next {
                 let missing = k - next;
@@ -504,14 +537,14 @@ impl Monitor {
                          the filter restarts from its initial state at k = {k}",
                         self.settings.max_gap
                     );
-                    self.restart(k, sample.t, ErrorCode::Gap, why, records);
+                    self.restart(k, t, ErrorCode::Gap, why, records);
                 } else if self.detector.unknown_inputs() > 0 {
                     let why = format!(
                         "{missing} samples missing before k = {k} and the model has an \
                          unknown input (model.E), which moves the state unobserved over a \
                          gap: the filter restarts from its initial state at k = {k}"
                     );
-                    self.restart(k, sample.t, ErrorCode::Gap, why, records);
+                    self.restart(k, t, ErrorCode::Gap, why, records);
                 } else {
                     let mut failed = None;
                     for gap_k in next..k {
@@ -526,7 +559,7 @@ impl Monitor {
                             "predict-only step at k = {gap_k} failed ({e}): the filter \
                              restarts from its initial state at k = {k}"
                         );
-                        self.restart(k, sample.t, ErrorCode::Numerical, why, records);
+                        self.restart(k, t, ErrorCode::Numerical, why, records);
                     } else {
                         self.diagnosis_restart = true;
                         self.reject(
@@ -542,16 +575,12 @@ impl Monitor {
                 }
             }
         }
-        if let Some(why) = too_large(u, y, &sample.p) {
-            self.reject(records, Some(k), ErrorCode::TooLarge, why);
-            return;
-        }
-        let core_sample = glrmon_core::Sample {
-            k,
-            u,
-            y,
-            p: &sample.p,
-        };
+        true
+    }
+
+    /// After a gap or a filter failure, the residual filter of sparse diagnosis starts
+    /// again from the detector's prediction for k.
+    fn restart_diagnosis_if_due(&mut self, k: u64, records: &mut Vec<Record>) {
         if self.diagnosis_restart {
             if let Some(engine) = &mut self.diagnosis {
                 // The detector's prediction for k is the residual filter's new prior.
@@ -575,7 +604,18 @@ impl Monitor {
             }
             self.diagnosis_restart = false;
         }
-        if let Err(e) = self.detector.step(&core_sample, &mut self.out) {
+    }
+
+    /// One detector step; false when the sample was refused or the statistics are
+    /// not finite (the filter then restarts).
+    fn step_detector(
+        &mut self,
+        core_sample: &glrmon_core::Sample<'_>,
+        t: Option<f64>,
+        records: &mut Vec<Record>,
+    ) -> bool {
+        let k = core_sample.k;
+        if let Err(e) = self.detector.step(core_sample, &mut self.out) {
             let code = match e {
                 StepError::WrongDimension { got: 0, .. } => ErrorCode::MissingField,
                 StepError::WrongDimension { .. } => ErrorCode::WrongDimension,
@@ -590,11 +630,11 @@ impl Monitor {
                     "{e}: sample dropped; the filter restarts from its initial state at the \
                      next sample"
                 );
-                self.restart(k, sample.t, code, why, records);
+                self.restart(k, t, code, why, records);
             } else {
                 self.reject(records, Some(k), code, e.to_string());
             }
-            return;
+            return false;
         }
         if !self.out.normalized_innovation.is_finite()
             || self.out.glr.is_some_and(|l| !l.is_finite())
@@ -608,10 +648,15 @@ impl Monitor {
                  sample",
                 self.out.normalized_innovation, self.out.glr
             );
-            self.restart(k, sample.t, ErrorCode::Numerical, why, records);
-            return;
+            self.restart(k, t, ErrorCode::Numerical, why, records);
+            return false;
         }
-        self.counters.samples += 1;
+        true
+    }
+
+    /// Feeds the filter-consistency test; a `consistency` record when a block's
+    /// verdict changes.
+    fn check_consistency(&mut self, k: u64, t: Option<f64>, records: &mut Vec<Record>) {
         if let Some(block) = self
             .consistency
             .as_mut()
@@ -621,7 +666,7 @@ impl Monitor {
             records.push(Record::Consistency(glrmon_wire::Consistency {
                 channel: self.channel.clone(),
                 k,
-                t: sample.t,
+                t,
                 state: block.verdict.as_str().to_owned(),
                 nis_mean: block.mean,
                 expected: (self.detector.dims().outputs - self.detector.unknown_inputs()) as f64,
@@ -632,8 +677,14 @@ impl Monitor {
                     .map_or(0, |c| c.settings().window as u64),
             }));
         }
+    }
+
+    /// One step of the residual filter of sparse diagnosis, reporting the first of a
+    /// run of failures.
+    fn step_diagnosis(&mut self, core_sample: &glrmon_core::Sample<'_>, records: &mut Vec<Record>) {
+        let k = core_sample.k;
         if let Some(engine) = &mut self.diagnosis {
-            match engine.step(&core_sample) {
+            match engine.step(core_sample) {
                 // A success right after a restart (a plain Kalman update, no unknown
                 // input yet) does not end a run of failures.
                 Ok(()) => {
@@ -660,11 +711,13 @@ impl Monitor {
                 }
             }
         }
-        if self.stat_records {
-            self.push_stat(k, sample.t, records);
-        }
+    }
+
+    /// The alarm episode after the step at k: `alarm` at the crossing, `alarm_end`,
+    /// and the announced isolation update when its sample has come.
+    fn follow_alarm(&mut self, k: u64, t: Option<f64>, records: &mut Vec<Record>) {
         match self.alarm.update(k, self.out.glr) {
-            AlarmTransition::Started => self.emit_alarm(k, sample.t, records),
+            AlarmTransition::Started => self.emit_alarm(k, t, records),
             AlarmTransition::Ended { started, peak } => {
                 // An episode shorter than the isolation delay: its alarm, raised at
                 // the crossing, stays its isolation (see the crate documentation).
@@ -672,7 +725,7 @@ impl Monitor {
                 records.push(Record::AlarmEnd(AlarmEnd {
                     channel: self.channel.clone(),
                     k,
-                    t: sample.t,
+                    t,
                     onset: self.reported_onset,
                     duration: k - started,
                     peak_glr: peak,
@@ -689,7 +742,7 @@ impl Monitor {
             self.out.onset,
         ) {
             self.pending = None;
-            self.emit_update(p, k, sample.t, glr, onset, records);
+            self.emit_update(p, k, t, glr, onset, records);
         }
     }
 
