@@ -1,7 +1,7 @@
-//! Issue 21, items 4, 5, 8, 9 and 10: `glrmon validate` of the real binary on the
-//! regression corpus `tests/data/issue21/`. Every invalid configuration exits 1 (never 3,
-//! never a panic's 101) with the channel and the field in the message; the largest
-//! window validates within seconds.
+//! `glrmon validate` of the real binary on the regression corpus of hostile
+//! configurations, `tests/data/hostile-configs/`. Every invalid configuration exits 1
+//! (never 3, never a panic's 101) with the channel and the field in the message; the
+//! largest window validates within seconds.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 fn corpus(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../tests/data/issue21")
+        .join("../../tests/data/hostile-configs")
         .join(name)
 }
 

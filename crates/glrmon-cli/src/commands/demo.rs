@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use clap::Args;
-use glrmon_daemon::DaemonBuilder;
+use glrmon_daemon::{Daemon, DaemonBuilder};
 use glrmon_input::OutputFormat;
 use glrmon_runtime::{FnSink, JsonLinesSink, Output};
 use glrmon_sim::SimSample;
@@ -110,8 +110,89 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         ..SessionSettings::default()
     };
     let session = glrmon_zenoh::open(&session_settings).await?;
+    let (watchers, alarms_seen) = watch_alarms(&session).await?;
+    let latency = Arc::new(Mutex::new(Latency::default()));
+    let daemon = start_daemon(
+        &cfg,
+        &session,
+        &session_settings,
+        record.as_ref(),
+        jsonl.as_ref(),
+        &latency,
+    )
+    .await?;
+    let keys: Vec<String> = cfg.channels.iter().map(|c| c.key.clone()).collect();
+    let mut plants = plants(&cfg, &session, args.seed).await?;
+    println!(
+        "glrmon demo: in-process Zenoh peer session {}, {} channels ({}), {samples} samples each at {}",
+        session.zid(),
+        plants.len(),
+        keys.join(", "),
+        if args.rate > 0.0 {
+            format!("{rate_hz} Hz")
+        } else {
+            "full speed".into()
+        }
+    );
+    println!(
+        "  injected: fault {} of magnitude {} on channel {} at k = {} ({:.2} s)",
+        FAULT.1,
+        FAULT.3,
+        FAULT.0,
+        FAULT.2,
+        FAULT.2 as f64 / rate_hz
+    );
+    let started = Instant::now();
+    publish(&mut plants, samples, args.rate, rate_hz).await?;
+    // Wait until every published sample has been processed (a condition, bounded).
+    let stats = daemon.runtime().stats();
+    let names = daemon.runtime().channel_names().to_vec();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while glrmon_runtime::channel_statuses(&names, &stats)
+        .iter()
+        .any(|c| c.samples + c.dropped < samples)
+        && Instant::now() < deadline
+    {
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    let stopped = daemon.shutdown(Duration::from_secs(10)).await;
+    let raised: u64 = glrmon_runtime::channel_statuses(&names, &stats)
+        .iter()
+        .map(|c| c.alarms)
+        .sum();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while alarms_seen.load(Ordering::Relaxed) < raised && Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    drop(watchers);
+    print_summary(started, &names, &stats, &latency);
+    if let Some(p) = &jsonl {
+        println!("records written to {}", p.display());
+    }
+    if let (Some(stats), Some(record)) = (stopped.recorder, &record) {
+        let finished = stats.finished.lock().map(|f| f.clone()).unwrap_or_default();
+        if let Some(file) = finished.last() {
+            std::fs::rename(file, record)
+                .with_context(|| format!("renaming {} to {}", file.display(), record.display()))?;
+            println!(
+                "recording: {} ({} messages); replay it with: {} replay {} --report report.html",
+                record.display(),
+                stats.messages.load(Ordering::Relaxed),
+                crate::common::invoked_as(),
+                record.display()
+            );
+        }
+    }
+    let _ = session.close().await;
+    anyhow::ensure!(stopped.in_time, "the runtime did not drain in time");
+    Ok(())
+}
 
-    // The watcher: alarms, isolation updates and ends as `glrmon watch` prints them.
+/// The watcher: alarms, isolation updates and ends printed as `glrmon watch` prints
+/// them, and the number of alarms seen.
+async fn watch_alarms(
+    session: &zenoh::Session,
+) -> anyhow::Result<(Vec<zenoh::pubsub::Subscriber<()>>, Arc<AtomicU64>)> {
     let alarms_seen = Arc::new(AtomicU64::new(0));
     let seen = alarms_seen.clone();
     let print_record = Arc::new(move |s: ZenohSample| {
@@ -135,10 +216,20 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
                 .map_err(|e| anyhow::anyhow!("subscribing to {key}: {e}"))?,
         );
     }
+    Ok((watchers, alarms_seen))
+}
 
-    // The daemon: runtime, Zenoh sink (and optionally a JSONL file), Zenoh source, on
-    // the demo's own session, with nothing to announce.
-    let latency = Arc::new(Mutex::new(Latency::default()));
+/// The daemon: runtime, Zenoh sink (and optionally a JSONL file and the recording),
+/// Zenoh source, on the demo's own session, with nothing to announce; every `stat`
+/// record goes to `latency`.
+async fn start_daemon(
+    cfg: &glrmon_spec::Config,
+    session: &zenoh::Session,
+    session_settings: &SessionSettings,
+    record: Option<&PathBuf>,
+    jsonl: Option<&PathBuf>,
+    latency: &Arc<Mutex<Latency>>,
+) -> anyhow::Result<Daemon> {
     let measured = latency.clone();
     let mut builder = DaemonBuilder::new(cfg.clone(), "demo")
         .announce(false)
@@ -149,14 +240,14 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
                 l.see(&o.record);
             }
         })));
-    if let Some(p) = &jsonl {
+    if let Some(p) = jsonl {
         let file = std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?;
         builder = builder.sink(Box::new(JsonLinesSink::new(
             std::io::BufWriter::new(file),
             1,
         )));
     }
-    let recorder = record.as_ref().map(|record| {
+    let recorder = record.map(|record| {
         let directory = match record.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
             _ => PathBuf::from("."),
@@ -171,18 +262,31 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     });
     let mut settings = glrmon_runtime::RuntimeSettings::from_spec(&cfg.daemon);
     settings.stat_every = 1;
-    let endpoints = glrmon_zenoh::Endpoints::of(&session_settings)?;
-    let daemon = builder
+    let endpoints = glrmon_zenoh::Endpoints::of(session_settings)?;
+    Ok(builder
         .recorder(recorder)
         .runtime_settings(settings)
-        .start(&session, &endpoints)
-        .await?;
-    let keys: Vec<String> = cfg.channels.iter().map(|c| c.key.clone()).collect();
+        .start(session, &endpoints)
+        .await?)
+}
 
-    // The plant: each channel simulated and published on its key.
+/// One simulated channel and the publisher of its samples.
+type Plant = (
+    String,
+    glrmon_sim::Simulator,
+    zenoh::pubsub::Publisher<'static>,
+);
+
+/// The plant: each channel simulated (the demo's fault injected on its channel) and
+/// published on its key.
+async fn plants(
+    cfg: &glrmon_spec::Config,
+    session: &zenoh::Session,
+    seed: u64,
+) -> anyhow::Result<Vec<Plant>> {
     let mut plants = Vec::new();
     for (i, c) in cfg.channels.iter().enumerate() {
-        let seed = args.seed.wrapping_add(i as u64);
+        let seed = seed.wrapping_add(i as u64);
         let sim = if c.name == FAULT.0 {
             crate::common::simulator(
                 c,
@@ -204,28 +308,19 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
             .map_err(|e| anyhow::anyhow!("declaring a publisher on {}: {e}", c.key))?;
         plants.push((c.name.clone(), sim, publisher));
     }
-    println!(
-        "glrmon demo: in-process Zenoh peer session {}, {} channels ({}), {samples} samples each at {}",
-        session.zid(),
-        plants.len(),
-        keys.join(", "),
-        if args.rate > 0.0 {
-            format!("{rate_hz} Hz")
-        } else {
-            "full speed".into()
-        }
-    );
-    println!(
-        "  injected: fault {} of magnitude {} on channel {} at k = {} ({:.2} s)",
-        FAULT.1,
-        FAULT.3,
-        FAULT.0,
-        FAULT.2,
-        FAULT.2 as f64 / rate_hz
-    );
-    let started = Instant::now();
+    Ok(plants)
+}
+
+/// Publishes `samples` samples of every plant, at `rate` Hz (0: full speed), with
+/// sample times at `rate_hz`.
+async fn publish(
+    plants: &mut [Plant],
+    samples: u64,
+    rate: f64,
+    rate_hz: f64,
+) -> anyhow::Result<()> {
     let mut interval =
-        (args.rate > 0.0).then(|| tokio::time::interval(Duration::from_secs_f64(1.0 / rate_hz)));
+        (rate > 0.0).then(|| tokio::time::interval(Duration::from_secs_f64(1.0 / rate_hz)));
     let mut x = SimSample {
         k: 0,
         u: vec![],
@@ -238,7 +333,7 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         if let Some(i) = &mut interval {
             i.tick().await;
         }
-        for (name, sim, publisher) in &mut plants {
+        for (name, sim, publisher) in plants.iter_mut() {
             sim.next_into(&mut x);
             sample.k = Some(x.k);
             sample.t = Some(k as f64 / rate_hz);
@@ -253,29 +348,18 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
                 .map_err(|e| anyhow::anyhow!("publishing on {name}: {e}"))?;
         }
     }
-    // Wait until every published sample has been processed (a condition, bounded).
-    let stats = daemon.runtime().stats();
-    let names = daemon.runtime().channel_names().to_vec();
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while glrmon_runtime::channel_statuses(&names, &stats)
-        .iter()
-        .any(|c| c.samples + c.dropped < samples)
-        && Instant::now() < deadline
-    {
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
-    let stopped = daemon.shutdown(Duration::from_secs(10)).await;
-    let raised: u64 = glrmon_runtime::channel_statuses(&names, &stats)
-        .iter()
-        .map(|c| c.alarms)
-        .sum();
-    let deadline = Instant::now() + Duration::from_secs(5);
-    while alarms_seen.load(Ordering::Relaxed) < raised && Instant::now() < deadline {
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
-    drop(watchers);
+    Ok(())
+}
+
+/// Each channel's counters and each alarm's measured latency.
+fn print_summary(
+    started: Instant,
+    names: &[String],
+    stats: &[Arc<glrmon_runtime::ChannelStats>],
+    latency: &Mutex<Latency>,
+) {
     println!("summary ({:.1} s):", started.elapsed().as_secs_f64());
-    for c in glrmon_runtime::channel_statuses(&names, &stats) {
+    for c in glrmon_runtime::channel_statuses(names, stats) {
         println!(
             "  {:<10} samples={} alarms={} errors={} dropped={} active={}",
             c.channel,
@@ -305,26 +389,6 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
             );
         }
     }
-    if let Some(p) = &jsonl {
-        println!("records written to {}", p.display());
-    }
-    if let (Some(stats), Some(record)) = (stopped.recorder, &record) {
-        let finished = stats.finished.lock().map(|f| f.clone()).unwrap_or_default();
-        if let Some(file) = finished.last() {
-            std::fs::rename(file, record)
-                .with_context(|| format!("renaming {} to {}", file.display(), record.display()))?;
-            println!(
-                "recording: {} ({} messages); replay it with: {} replay {} --report report.html",
-                record.display(),
-                stats.messages.load(Ordering::Relaxed),
-                crate::common::invoked_as(),
-                record.display()
-            );
-        }
-    }
-    let _ = session.close().await;
-    anyhow::ensure!(stopped.in_time, "the runtime did not drain in time");
-    Ok(())
 }
 
 /// One alarm as the demo measured it.

@@ -1,4 +1,4 @@
-//! Issue 20, calibration on several fault-free recordings and for a per-sample
+//! Calibration on several fault-free recordings and for a per-sample
 //! false-alarm fraction, on the §6.1 plant of Zhang & Basseville 2014 (the demo's
 //! `unstable` channel: m = 2, w = 100).
 
@@ -84,7 +84,7 @@ fn max(v: &[f64]) -> f64 {
 /// as two separate monitors on the two runs pooled, and no episode at the join. One
 /// monitor over the two runs joined sees the jump at the join as a fault.
 #[test]
-fn issue_20_two_files_are_separate_segments_with_no_episode_at_the_join() {
+fn two_files_are_separate_segments_with_no_episode_at_the_join() {
     let channel = channel(10.0, 100);
     let first = simulate(&channel, [1.0, 0.5], 11, 2_000);
     let second = simulate(&channel, [5.0, 0.5], 12, 2_000);
@@ -140,7 +140,7 @@ fn issue_20_two_files_are_separate_segments_with_no_episode_at_the_join() {
 /// −0.09/+0.11 %), so inside 0.24 %–2.44 %. An i.i.d. binomial band for 40 of 4 000
 /// (0.71 %–1.36 %) would have missed it. The χ²(2) 1 % quantile is exceeded by 6.2 %.
 #[test]
-fn issue_20_a_sample_far_threshold_gives_its_fraction_on_an_independent_run() {
+fn a_sample_far_threshold_gives_its_fraction_on_an_independent_run() {
     let channel = channel(0.0025, 10);
     let mut stats = simulated(&channel, 2_000, 21, None).unwrap();
     stats.append(simulated(&channel, 2_000, 22, None).unwrap());
@@ -195,7 +195,7 @@ fn issue_20_a_sample_far_threshold_gives_its_fraction_on_an_independent_run() {
 /// (d) A file with no usable sample is an error naming the file and why; so is a
 /// file of samples too few for an admissible onset.
 #[test]
-fn issue_20_a_file_with_no_usable_sample_is_an_error_naming_it() {
+fn a_file_with_no_usable_sample_is_an_error_naming_it() {
     let channel = channel(0.0025, 100);
     let dir = temp_dir("issue20-empty");
     let good = dir.join("good.csv");
@@ -225,13 +225,13 @@ fn issue_20_a_file_with_no_usable_sample_is_an_error_naming_it() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Issue 20, item 4: l_k does not depend on the threshold in force. The same samples
+/// l_k does not depend on the threshold in force. The same samples
 /// through a monitor whose λ = 10 keeps raising alarms (episodes, isolation updates)
 /// and one whose λ = 10⁹ never does give the same l_k bit for bit: nothing restarts
 /// or clears the detector at an alarm, so a quantile read off one replay holds at any
 /// threshold.
 #[test]
-fn issue_20_the_statistic_does_not_depend_on_the_threshold_in_force() {
+fn the_statistic_does_not_depend_on_the_threshold_in_force() {
     let base = channel(0.0025, 100);
     let samples = simulate(&base, [1.0, 0.5], 5, 3_000);
     let run = |threshold: f64| {
@@ -254,11 +254,11 @@ fn issue_20_the_statistic_does_not_depend_on_the_threshold_in_force() {
     assert_eq!(bits(&low.glr), bits(&high.glr));
 }
 
-/// Issue 20, item 4: a recording the daemon made in capture mode holds inputs chosen
+/// A recording the daemon made in capture mode holds inputs chosen
 /// by the threshold then in force, and is refused, naming the file; the same
 /// configuration in a file `glrmon simulate` wrote (whole runs) is not.
 #[test]
-fn issue_20_a_capture_mode_recording_is_refused_naming_it() {
+fn a_capture_mode_recording_is_refused_naming_it() {
     let channel = channel(0.0025, 100);
     let dir = temp_dir("issue20-capture");
     let config = format!(
