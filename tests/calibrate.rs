@@ -1,4 +1,4 @@
-//! Issue 7, `glrmon calibrate` end to end with the real binary: calibrated on 10⁶
+//! `glrmon calibrate` end to end with the real binary: calibrated on 10⁶
 //! fault-free samples of the §6.1 plant (Zhang & Basseville 2014) for one false-alarm
 //! episode per 10⁴ samples, the threshold written into the config gives that rate,
 //! within ±30 %, on an independent 10⁶-sample run replayed through the monitor.
@@ -146,12 +146,12 @@ fn glrmon_status(args: &[&str]) -> Output {
         .unwrap()
 }
 
-/// Issue 20: two fault-free recordings calibrated together for a 1 % per-sample
+/// Two fault-free recordings calibrated together for a 1 % per-sample
 /// false-alarm fraction; the target is written into the file, and `glrmon validate`
 /// shows it. Usage errors (both targets, neither) and a file with no usable sample
 /// are refused, naming what is wrong.
 #[test]
-fn issue_20_two_recordings_and_a_sample_far_target_are_written_and_validated() {
+fn two_recordings_and_a_sample_far_target_are_written_and_validated() {
     let dir = std::env::temp_dir().join(format!("glrmon-calibrate-20-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let config = dir.join("unstable.toml");

@@ -30,7 +30,7 @@ fn demo_prints_one_alarm_for_the_faulty_channel_with_the_right_isolation() {
     let stdout = String::from_utf8(out.stdout).unwrap();
     let alarms: Vec<&str> = stdout.lines().filter(|l| l.starts_with("ALARM")).collect();
     assert_eq!(alarms.len(), 1, "{stdout}");
-    // Issue 19: the alarm at the crossing (l_k first above λ at 201, the injected
+    // The alarm at the crossing (l_k first above λ at 201, the injected
     // onset), its isolation refined isolation_delay = n = 2 samples later.
     assert!(
         alarms[0].starts_with("ALARM unstable k=201 onset=200"),

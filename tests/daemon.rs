@@ -234,7 +234,7 @@ fn alarms<'a>(records: &'a [Record], channel: &str) -> Vec<&'a glrmon_wire::Alar
         .collect()
 }
 
-/// Issue 5: a faulty channel published to a running daemon gives exactly one alarm with
+/// A faulty channel published to a running daemon gives exactly one alarm with
 /// the right isolation; a clean channel none; status and liveliness answer; SIGTERM
 /// exits 0 within the bounded time.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -274,7 +274,7 @@ async fn faulty_channel_gives_one_alarm_clean_channel_none_then_sigterm_exits_0(
     let records = got.lock().unwrap().clone();
     let a = alarms(&records, "unstable");
     assert_eq!(a.len(), 1, "{a:#?}");
-    // Issue 19: the alarm at the crossing, its isolation refined 2 samples later.
+    // The alarm at the crossing, its isolation refined 2 samples later.
     assert_eq!((a[0].k, a[0].onset, a[0].update_k), (201, 200, Some(203)));
     let updates: Vec<&glrmon_wire::IsolationUpdate> = records
         .iter()
@@ -299,7 +299,7 @@ async fn faulty_channel_gives_one_alarm_clean_channel_none_then_sigterm_exits_0(
     let _ = session.close().await;
 }
 
-/// Issue 5: each kind of bad payload, interleaved with good samples, yields its `error`
+/// Each kind of bad payload, interleaved with good samples, yields its `error`
 /// record; the good stream's alarm arrives at the same k as without them; a gap (missing
 /// samples) is filled, not corrupting the filter.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -116,11 +116,11 @@ fn simulate_then_diagnose_finds_exactly_the_injected_faults() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Issue 19: on fault-free Example 1 data `glrmon diagnose` says "no fault": an
+/// On fault-free Example 1 data `glrmon diagnose` says "no fault": an
 /// empty support and estimate in the record, and the text names the χ² test. (The
 /// paper's rule alone always selected some of the 50 faults.)
 #[test]
-fn issue19_diagnose_on_fault_free_data_reports_no_fault() {
+fn diagnose_on_fault_free_data_reports_no_fault() {
     let dir = std::env::temp_dir().join(format!("glrmon-nofault-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let csv = dir.join("example1-clean.csv");
@@ -326,7 +326,7 @@ fn table_1_exact_support_rate_every_q() {
 /// - With glrmon's default, the plateau measured in ln λ, the rate at r = 100 is far
 ///   below the paper's (1000 trials: 50.8 % vs 78.6 %): the log scale prefers the
 ///   small-λ runs, and under strong noise those carry spurious faults. This is the
-///   gap the issue measured with `simulate` + `diagnose` (53.3 % at r = 100).
+///   gap first measured with `simulate` + `diagnose` (53.3 % at r = 100).
 #[test]
 fn table_2_exact_support_rate_with_sensor_noise() {
     let path = table1::example1_path();

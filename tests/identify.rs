@@ -1,4 +1,4 @@
-//! Issue 20, from recordings to a calibrated monitor with the real binary, on a plant
+//! From recordings to a calibrated monitor with the real binary, on a plant
 //! the project simulates itself: the nonlinear quadruple-tank process (Johansson 2000,
 //! minimum-phase set P−; `glrmon_sim::tank`), two pump voltages in, four level-sensor
 //! voltages out around an operating point of 0.7–6.4 V.

@@ -1,4 +1,4 @@
-//! Issue 8: several glrmon instances behind a Zenoh router, as users deploy them. One
+//! Several glrmon instances behind a Zenoh router, as users deploy them. One
 //! router on loopback (`zenohd` with deploy/zenohd.json5 when it is installed — `make
 //! deps` builds it from crates.io; otherwise, or with GLRMON_TEST_ROUTER=session, a
 //! router-mode Zenoh session in this process, the same routing code), two `glrmon run` instances in client mode with disjoint shards of 20

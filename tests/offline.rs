@@ -156,11 +156,11 @@ fn validate_lists_every_error_and_exits_1() {
     );
 }
 
-/// Issue 19: the 2014 paper's §6.2 Q as printed (four decimals, λ_min = −2.5·10⁻⁵) is
+/// The 2014 paper's §6.2 Q as printed (four decimals, λ_min = −2.5·10⁻⁵) is
 /// valid: exit 0, with a warning naming the field, λ_min and the change.
 #[test]
-fn issue19_validate_accepts_paper2014_gas_q_with_a_warning() {
-    let dir = TempDir::new("issue19");
+fn validate_accepts_paper2014_gas_q_with_a_warning() {
+    let dir = TempDir::new("gas-q");
     let file = dir.file("gas-q.toml");
     let text = std::fs::read_to_string(config("examples/paper2014-unstable.toml")).unwrap();
     assert!(text.contains("Q = 0.0025"), "fixture changed");
@@ -183,13 +183,13 @@ fn issue19_validate_accepts_paper2014_gas_q_with_a_warning() {
     assert!(warning.contains("max |ΔQ| = 1."), "{warning}");
 }
 
-/// Issue 19 (Zhang 2021 §III-B): with an unknown input E, `validate` says the GLR runs
+/// Zhang 2021 §III-B: with an unknown input E, `validate` says the GLR runs
 /// on p − q output directions and that a state fault in the range of E is not
 /// detectable (its signature is exactly zero), while the sensor bias outside it is; the
 /// fault-free replay of 3 000 samples with d ≈ 50 raises no alarm.
 #[test]
-fn issue19_validate_reports_faults_in_the_range_of_e_undetectable() {
-    let dir = TempDir::new("issue19-e");
+fn validate_reports_faults_in_the_range_of_e_undetectable() {
+    let dir = TempDir::new("unknown-input");
     let file = dir.file("e.toml");
     std::fs::write(
         &file,
@@ -246,9 +246,9 @@ unknown_input = ["50 + 10*sin(0.05*k)"]
     assert!(!replay.contains(r#""type":"alarm""#), "{replay}");
 }
 
-/// Issue 3: on the §6.1 plant the alarm lands within 5 samples of the injected onset
+/// On the §6.1 plant the alarm lands within 5 samples of the injected onset
 /// 201 and isolates the right state (both magnitudes of the paper's Figures 3-4).
-/// Issue 19: the `alarm` record's k is exactly the first sample whose l_k exceeds the
+/// The `alarm` record's k is exactly the first sample whose l_k exceeds the
 /// threshold (from the `stat` records of the same replay), and its `isolation` record,
 /// which decides the isolation, comes isolation_delay = n = 2 samples later.
 #[test]
@@ -296,7 +296,7 @@ fn paper2014_simulate_replay_alarm_within_5_samples_of_201_isolates_the_state() 
     }
 }
 
-/// Issue 3: on the DC motor each fault is isolated correctly.
+/// On the DC motor each fault is isolated correctly.
 #[test]
 fn dc_motor_each_fault_is_detected_and_isolated() {
     let dir = TempDir::new("dcmotor");
@@ -551,7 +551,7 @@ fn bad_rows_become_error_records_and_the_replay_continues() {
     assert_eq!(stats, 297);
 }
 
-/// Issue 3: scheduling signals may come from a file instead of expressions of k.
+/// Scheduling signals may come from a file instead of expressions of k.
 #[test]
 fn simulate_takes_scheduling_signals_from_a_file() {
     let dir = TempDir::new("signals");
@@ -687,7 +687,7 @@ fn evaluate_report_matches_json(html: &str, v: &serde_json::Value) {
     }
 }
 
-/// Issue 7, `glrmon evaluate` on the DC motor, both faults, 200 seeded runs each: every
+/// `glrmon evaluate` on the DC motor, both faults, 200 seeded runs each: every
 /// run detects, the sensor drift within 30 samples (median), the actuator bias within 5,
 /// and the isolation names the injected fault alone in at least 90 % of the runs. The
 /// `--report` page of the same runs states the JSON's numbers (see

@@ -1,4 +1,4 @@
-//! The black box (issue 6), end to end with the real binary, real Zenoh sessions on
+//! The black box, end to end with the real binary, real Zenoh sessions on
 //! loopback (explicit tcp/127.0.0.1 endpoints, multicast scouting off) and real MCAP
 //! files: a live run recorded and replayed to the same bits, a `kill -9` mid-recording
 //! recovered, a corrupt chunk skipped and reported.
@@ -312,7 +312,7 @@ fn files(dir: &Path, suffix: &str) -> Vec<PathBuf> {
     f
 }
 
-/// Issue 6: a live run through Zenoh, recorded; `glrmon replay FILE.mcap` (no
+/// A live run through Zenoh, recorded; `glrmon replay FILE.mcap` (no
 /// --config) gives every `stat`, `alarm`, `isolation`, `alarm_end`, `diagnosis` and
 /// `error` record
 /// byte for byte (hence bit for bit: shortest round-trip floats) — as JSON lines and as
@@ -491,7 +491,7 @@ fn inputs_in(path: &Path, channel: &str) -> usize {
     n
 }
 
-/// Issue 6, crash safety: `kill -9` while recording leaves a `.mcap.tmp` file that
+/// Crash safety: `kill -9` while recording leaves a `.mcap.tmp` file that
 /// reads back up to its last flushed chunk; `glrmon replay` replays it (reporting it
 /// unfinished) and `glrmon recover` rewrites it as a finished, replayable file.
 #[test]
@@ -589,7 +589,7 @@ fn chunks(bytes: &[u8]) -> Vec<(usize, usize)> {
     out
 }
 
-/// Issue 6: a recording with a corrupt chunk: the readable part is replayed, the damage
+/// A recording with a corrupt chunk: the readable part is replayed, the damage
 /// reported with its byte range, and the exit code is 1.
 #[test]
 fn corrupt_chunk_is_skipped_reported_and_exit_code_is_1() {

@@ -1,4 +1,4 @@
-//! Issue 8: SIGHUP reloads a running daemon's thresholds and alarm settings without
+//! SIGHUP reloads a running daemon's thresholds and alarm settings without
 //! restarting its filters, and refuses (logging why, changing nothing) an invalid file
 //! or a change that needs a restart. Real binary, a real Zenoh session on loopback.
 
@@ -207,7 +207,7 @@ async fn sighup_applies_thresholds_and_refuses_what_needs_a_restart() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Issue 21: a SIGHUP with each hostile configuration of the issue (an empty H, the
+/// A SIGHUP with each hostile configuration (an empty H, the
 /// oversized windows and history, a key in glrmon's own space, bad instance names) is
 /// refused by the same validation as `glrmon validate`, naming the field, and the daemon
 /// goes on: no panic (H = [] killed it with exit 101), samples still processed, a clean

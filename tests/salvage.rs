@@ -1,4 +1,4 @@
-//! MCAP salvage end to end with the real binary (issue 21, item 7): a recording whose
+//! MCAP salvage end to end with the real binary: a recording whose
 //! middle chunk header is zeroed is recovered past the damage, `glrmon recover` writes
 //! every readable message, names the lost time range and exits 1; `glrmon replay`
 //! replays the chunks after the damage and exits 1.

@@ -449,10 +449,10 @@ mod tests {
         assert_eq!(c.target, Target::Mtbfa(1000.0));
     }
 
-    /// Issue 20: 5 expected episodes are a warning, not a refusal; the interval says how
-    /// loose the answer is, and with fewer than one episode λ is unbounded above.
+    /// 5 expected episodes are a warning, not a refusal: the interval says how loose the
+    /// answer is, and with fewer than one episode λ is unbounded above.
     #[test]
-    fn issue_20_too_few_episodes_give_a_loosely_supported_threshold() {
+    fn too_few_episodes_give_a_loosely_supported_threshold() {
         let glr = weyl_chi2(5_000);
         let c = calibrate(&glr, 1000.0, 0.0, 1).unwrap();
         assert!(!c.well_supported(), "{c:?}");

@@ -177,8 +177,8 @@ pub enum SparseError {
 mod tests {
     use super::StepError;
 
-    /// Issue 21, item 10: `{"y":[1,2]}` on a channel with an input said "field u has 0
-    /// values"; the field is missing.
+    /// `{"y":[1,2]}` on a channel with an input lacks the field u: it is reported
+    /// missing, not as "field u has 0 values".
     #[test]
     fn an_empty_field_is_reported_missing() {
         let missing = StepError::WrongDimension {

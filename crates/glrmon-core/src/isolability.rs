@@ -82,9 +82,10 @@
 //!
 //! The relative tolerance τ = 10⁻⁹ is the detector's default rank tolerance
 //! (`DEFAULT_RANK_TOLERANCE`). Every decision is taken on unit-free numbers, so that no
-//! verdict depends on the units in which the fault magnitudes are expressed (issue 19:
-//! a gas-pipeline outlet leak of θ ≈ −4·10⁴ was called undetectable next to two
-//! inlet faults of θ ≈ 10⁻⁵, because its F_jj was below 10⁻⁹ of theirs):
+//! verdict depends on the units in which the fault magnitudes are expressed (a cut-off
+//! relative to the largest F_jj called a gas-pipeline outlet leak of θ ≈ −4·10⁴
+//! undetectable next to two inlet faults of θ ≈ 10⁻⁵, because its F_jj was below 10⁻⁹
+//! of theirs):
 //!
 //! * a fault is **undetectable** when F_jj = 0 (F_jj ≤ 0): its signature vanishes over
 //!   the window, and the GLR's LDLᵀ factorisation of C_k(r), which keeps pivot j when
@@ -798,7 +799,7 @@ mod tests {
         // F_ii ratio 10¹⁸ > 1/τ: a change of units only, so the small fault is as
         // detectable and as isolable as the large one, as it is for the GLR, whose LDLᵀ
         // keeps a pivot when D_j > τ·C_jj. (This asserted "undetectable, rank 1" while
-        // the cut-off was τ·max_i F_ii: the bug of issue 19, which made `glrmon
+        // the cut-off was τ·max_i F_ii, which made `glrmon
         // validate` call a gas-pipeline leak undetectable for its units alone.)
         let f = DMatrix::from_row_slice(2, 2, &[1e12, 0.0, 0.0, 1e-6]);
         let r = isolability(&f, 0.95).unwrap();

@@ -65,8 +65,9 @@
 //! diagonal and ζ̂ = Uζ; θ̂ = U F̂⁺ζ̂ maps back. Every test is invariant under a change of
 //! fault units (F ↦ SFS, ζ ↦ Sζ for a positive diagonal S) in exact arithmetic, and so
 //! are its rank decisions only when they are taken on F̂: relative to λ_max(F) they
-//! would drop a fault whose units make its F_jj small next to another's (issue 19: a
-//! gas-pipeline leak of θ ≈ −4·10⁴ beside faults of θ ≈ 10⁻⁵ with columns ≈ 4·10⁵).
+//! would drop a fault whose units make its F_jj small next to another's (they once
+//! dropped a gas-pipeline leak of θ ≈ −4·10⁴ beside faults of θ ≈ 10⁻⁵ with columns
+//! ≈ 4·10⁵).
 //! The GLR bank's LDLᵀ decides its rank by the same scale-free measure.
 //!
 //! The rank of F is decided once: F̂ is replaced by its truncation F̃ = GᵀG, where
@@ -436,7 +437,7 @@ impl FisherStatistics {
 /// ≤ tol·λ_max (and all non-positive ones) are treated as zero:
 /// xᵀA⁺x = Σ_{λ_i > tol·λ_max} (v_iᵀUx)²/λ_i, and `dof` is the number of kept eigenvalues.
 /// Equilibrating first makes the rank independent of the units of x's components
-/// (A ↦ SAS, x ↦ Sx for a positive diagonal S change neither; issue 19).
+/// (A ↦ SAS, x ↦ Sx for a positive diagonal S change neither).
 ///
 /// Only the symmetric part (A + Aᵀ)/2 is used. When x ∈ range(A) — as ζ ∈ range(F) for
 /// F = MᵀR⁻¹M, ζ = MᵀR⁻¹Z — the result does not depend on the choice of generalised
@@ -1060,12 +1061,12 @@ mod tests {
         );
     }
 
-    /// Issue 19: a change of fault units F ↦ SFS, ζ ↦ Sζ (S = diag(10⁻⁸, 1, 10⁸), F_ii
+    /// A change of fault units F ↦ SFS, ζ ↦ Sζ (S = diag(10⁻⁸, 1, 10⁸), F_ii
     /// spanning 32 decades) changes no degree of freedom, no test value beyond 1e-9 of
     /// the global statistic, and gives θ̂ ↦ S⁻¹θ̂; the fault of tiny F_ii keeps its
     /// information (it was dropped by the cut-off τ·λ_max(F) of before).
     #[test]
-    fn fault_units_do_not_decide_the_rank_issue_19() {
+    fn fault_units_do_not_decide_the_rank() {
         let mut rng = SplitMix64(0x19);
         let (n, m) = (20, 3);
         let mm = rng.normal_matrix(n, m);
@@ -1266,7 +1267,7 @@ mod tests {
         );
         assert!(nan_x.value.is_nan());
         // Extreme but finite scales do not overflow. Both directions count: the rank is
-        // decided on the equilibrated matrix (issue 19). (This asserted dof 1 when the
+        // decided on the equilibrated matrix. (This asserted dof 1 when the
         // cut-off was τ·λ_max(A), which dropped the 1e-300 direction for its units
         // alone.)
         let huge = pinv_quadratic_form(

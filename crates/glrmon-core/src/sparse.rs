@@ -27,7 +27,7 @@
 //! faults. glrmon also diagnoses spans on request and after false alarms, so it first
 //! asks whether the regression explains anything at all: [`no_fault_test`], the
 //! likelihood-ratio test of θ = 0 on the whitened regression (χ² under no fault), and
-//! [`diagnose_tested`] returns the empty support when it is not significant (issue 19).
+//! [`diagnose_tested`] returns the empty support when it is not significant.
 //!
 //! Everything here works on the sufficient statistics XᵀX (m×m), Xᵀy (m), yᵀy and N,
 //! accumulated sample by sample by [`GramAccumulator`]: memory and the cost of the
@@ -1521,11 +1521,11 @@ mod tests {
         );
     }
 
-    /// Issue 19: without a fault the tested diagnosis says so (empty support) in at
+    /// Without a fault the tested diagnosis says so (empty support) in at
     /// least 1 − α of the regressions; with one (two components of magnitude 1-2 at
     /// unit noise) the test fires and the support holds the true faults.
     #[test]
-    fn issue19_tested_diagnosis_is_empty_without_fault_and_exact_with_one() {
+    fn tested_diagnosis_is_empty_without_fault_and_exact_with_one() {
         let mut rng = Rng::new(2019);
         let (rows, m, level) = (100, 20, 0.01);
         let settings = LassoSettings::default();
@@ -1541,7 +1541,7 @@ mod tests {
                 assert_eq!(d.lambda, d.lasso_path.lambdas()[0]);
                 assert_eq!(d.plateau, (d.lambda, d.lambda));
             }
-            // The paper's rule alone never says "no fault": the bug of issue 19.
+            // The paper's rule alone never says "no fault": what the test is for.
             assert!(!diagnose(&g, &settings).unwrap().support.is_empty());
         }
         // P(empty) = 0.99; 196 is its mean, P(count < 193) ≈ 0.03 under Binomial(200, 0.99).

@@ -1,4 +1,4 @@
-//! Issue 7, trustworthy thresholds, on the §6.1 plant of Zhang & Basseville (2014)
+//! Trustworthy thresholds on the §6.1 plant of Zhang & Basseville (2014)
 //! (n = 2, m = 2 state faults, w = 100, s = 1): the per-onset χ²(2) quantile gives far
 //! more false alarms than its nominal rate, the Bonferroni bound never more, and a
 //! threshold calibrated on one fault-free run gives its target rate on another.

@@ -1,5 +1,5 @@
-//! The fused window pass gives the same bits as the separate passes (issue 9: layout
-//! for the window loop). For small n, m, p one pass over the onsets does the
+//! The fused window pass gives the same bits as the separate passes (a faster layout
+//! of the window loop). For small n, m, p one pass over the onsets does the
 //! signatures, C and d, the dropped-pivot LDLᵀ statistic and Γ's time update in
 //! registers; every onset gets the same operations in the same order as in the passes
 //! (`accumulate`, `maximize`, `time_update`), so every output of every sample must be

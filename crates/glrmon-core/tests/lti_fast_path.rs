@@ -1,4 +1,4 @@
-//! The stationary regime (LTI fast path, issue 9): once the model, the fault columns
+//! The stationary regime (LTI fast path): once the model, the fault columns
 //! and the Riccati recursion are constant, Γ_k(r), S_k(r) and C_k(r) depend on the lag
 //! k − r only (Zhang & Basseville 2014, eqs. (32), (45)-(46)) and are tabulated. Every
 //! test runs a detector with the fast path next to one without it on the same samples

@@ -356,7 +356,7 @@ fn run_s61(theta0: f64, seed: u64, threshold: f64, steps: u64) -> Run {
 /// §6.1, Figures 3-4: impulse faults θ = [4, 0] and [1.5, 0] at r = 201, w = 100. l_k
 /// crosses the threshold within a few samples of 201, stays up while the onset is in the
 /// window, and falls back once it leaves (after ~301). Threshold: χ²(2) upper quantile
-/// at 10⁻⁴/(w − s) (Bonferroni over the window's onsets, see issue 7).
+/// at 10⁻⁴/(w − s) (Bonferroni over the window's onsets, see tests/calibration.rs).
 #[test]
 fn paper2014_s61_impulse_fault_detected_at_201_and_gone_after_301() {
     let threshold = chi2_upper_quantile(2.0, 1e-4 / 99.0).unwrap();

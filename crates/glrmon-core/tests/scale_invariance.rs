@@ -1,4 +1,4 @@
-//! Issue 19, "Scale invariance": the units in which a fault magnitude, an output or an
+//! Scale invariance: the units in which a fault magnitude, an output or an
 //! input is expressed change no decision of the detector (l_k, r̂, rank C_k(r̂)), of the
 //! isolation tests (Zhang & Basseville 2014, eq. (41)) or of the isolability report that
 //! `glrmon validate` prints, and θ̂ follows the change of units. Then the gas-pipeline
@@ -425,7 +425,7 @@ fn check_case(seed: u64, lti: bool, m: usize, kind: &str) {
 /// isolability verdicts, θ̂_j divided by s_j. Fixed seeds, LTI (stationary tables) and
 /// LTV (general recursion), m = 2, 3 and 5.
 #[test]
-fn fault_units_change_no_decision_issue_19() {
+fn fault_units_change_no_decision() {
     for seed in 0..8 {
         check_case(
             1900 + seed,
@@ -439,7 +439,7 @@ fn fault_units_change_no_decision_issue_19() {
 /// (b) Output i times σ_i (y_i, rows of H, J and Φ̃, rows and columns of R): the
 /// whitened innovations and signatures are unchanged, so is everything decided.
 #[test]
-fn output_units_change_no_decision_issue_19() {
+fn output_units_change_no_decision() {
     for seed in 0..8 {
         check_case(
             1910 + seed,
@@ -454,7 +454,7 @@ fn output_units_change_no_decision_issue_19() {
 /// fault, whose column is G[:, 0], has its θ divided by s₀; nothing is decided
 /// differently.
 #[test]
-fn input_units_change_no_decision_issue_19() {
+fn input_units_change_no_decision() {
     for seed in 0..8 {
         check_case(
             1920 + seed,
@@ -594,10 +594,10 @@ fn gas_detector() -> GlrDetector {
 /// fault, θ̂_leak is within one standard error √((F⁻¹)_leak,leak) of −43 980, and the
 /// isolability report of `glrmon validate` calls the leak detectable.
 ///
-/// Issue 19: with rank cut-offs relative to max_a C_aa (C_aa ≈ 10¹² for the inlet
+/// With the earlier rank cut-offs relative to max_a C_aa (C_aa ≈ 10¹² for the inlet
 /// faults, ≈ 10⁻⁴ for the leak) the leak's pivot was dropped, the leak was blamed on
-/// the inlet faults (the user's report: θ̂_leak = −0.07; here rank 2 and
-/// θ̂_leak ≈ −10⁻⁸), and validate called it undetectable.
+/// the inlet faults (a user saw θ̂_leak = −0.07; here rank 2 and θ̂_leak ≈ −10⁻⁸),
+/// and validate called it undetectable.
 #[test]
 fn gas_pipeline_outlet_leak_isolated_in_natural_units_2014_s6_2() {
     let leak_at = 350; // the 700th minute, 2-minute samples

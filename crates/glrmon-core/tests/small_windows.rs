@@ -76,9 +76,9 @@ fn small_windows_fused_equal_the_passes_bit_for_bit() {
     }
 }
 
-/// In the stationary regime every onset's statistic (to 10⁻⁹ relative, the issue-9
-/// bound) and rank (read from the lag tables) agree with the general path's, before
-/// and after a gap that leaves it.
+/// In the stationary regime every onset's statistic (to 10⁻⁹ relative, as in
+/// lti_fast_path.rs) and rank (read from the lag tables) agree with the general path's,
+/// before and after a gap that leaves it.
 #[test]
 fn small_windows_stationary_queries_equal_the_general_path() {
     let lti = scenarios::lti_n3_p2_m3();

@@ -457,10 +457,10 @@ mod tests {
         assert_eq!(bits(&stats.glr), bits(&again.glr));
     }
 
-    /// Issue 20: too few episodes for the target give a loosely supported threshold;
+    /// Too few episodes for the target give a loosely supported threshold;
     /// no admissible sample is the user's error, naming the channel.
     #[test]
-    fn issue_20_too_little_data_warns_and_no_sample_is_an_error_naming_the_channel() {
+    fn too_little_data_warns_and_no_sample_is_an_error_naming_the_channel() {
         let channel = channel();
         let stats = simulated(&channel, 2_000, 1, None).unwrap();
         let c = calibrate_channel(&channel, stats, Target::Mtbfa(1_000.0)).unwrap();

@@ -687,12 +687,12 @@ mod tests {
         assert_eq!(tests[0].faults, ["g0_leak"]);
     }
 
-    /// Issue 19: the run's detection is the crossing itself: the first sample at or
+    /// The run's detection is the crossing itself: the first sample at or
     /// after the onset whose l_k exceeds λ, as the `stat` records of the same run show
     /// it (before, the alarm, and with it the run's onset estimate and isolation, came
     /// `isolation_delay` samples later). The isolation is the update's, that delay on.
     #[test]
-    fn issue_19_a_run_detects_at_the_crossing_and_isolates_at_the_update() {
+    fn a_run_detects_at_the_crossing_and_isolates_at_the_update() {
         let cfg = glrmon_spec::parse(include_str!(
             "../../../config/examples/paper2014-unstable.toml"
         ))

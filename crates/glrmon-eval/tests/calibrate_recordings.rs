@@ -88,7 +88,7 @@ fn two_files_are_separate_segments_with_no_episode_at_the_join() {
     let channel = channel(10.0, 100);
     let first = simulate(&channel, [1.0, 0.5], 11, 2_000);
     let second = simulate(&channel, [5.0, 0.5], 12, 2_000);
-    let dir = temp_dir("issue20-segments");
+    let dir = temp_dir("calibrate-segments");
     let files = [dir.join("first.csv"), dir.join("second.csv")];
     write_csv(&files[0], &channel, &first);
     write_csv(&files[1], &channel, &second);
@@ -197,7 +197,7 @@ fn a_sample_far_threshold_gives_its_fraction_on_an_independent_run() {
 #[test]
 fn a_file_with_no_usable_sample_is_an_error_naming_it() {
     let channel = channel(0.0025, 100);
-    let dir = temp_dir("issue20-empty");
+    let dir = temp_dir("calibrate-empty");
     let good = dir.join("good.csv");
     write_csv(&good, &channel, &simulate(&channel, [1.0, 0.5], 1, 500));
     let bad = dir.join("bad.csv");
@@ -260,7 +260,7 @@ fn the_statistic_does_not_depend_on_the_threshold_in_force() {
 #[test]
 fn a_capture_mode_recording_is_refused_naming_it() {
     let channel = channel(0.0025, 100);
-    let dir = temp_dir("issue20-capture");
+    let dir = temp_dir("calibrate-capture");
     let config = format!(
         "{}\n[recording.capture]\nbefore_seconds = 1.0\nafter_seconds = 1.0\n",
         include_str!("../../../config/demo.toml")

@@ -1,4 +1,4 @@
-//! Issue 20, a known system through the whole chain: recordings in raw units of a
+//! A known system through the whole chain: recordings in raw units of a
 //! 4-state, 2-input, 3-output innovation model with coloured noise (poles 0.9,
 //! 0.7 ± 0.2i, 0.5) → [`identify_channel`] → threshold calibrated on the same recordings
 //! → a monitor of the identified model on fresh data, next to the true model's monitor

@@ -53,7 +53,7 @@
 //! residual covariance, whatever [`DiagnosisEngine::set_whitening`] says for the Lasso),
 //! χ²(rank) under no fault, against its upper quantile at `[channels.diagnosis] alpha`
 //! (default 0.01). When it is not significant the diagnosis has an empty support
-//! (issue 19: the paper's rule never returns one; the paper diagnoses only after a
+//! (the paper's rule never returns one; the paper diagnoses only after a
 //! detection). Over a span chosen without looking at the data (`glrmon diagnose
 //! --from --to`) fault-free spans get an empty support with probability 1 − α. At an
 //! alarm the span starts at the onset r̂ that the GLR picked because it maximised the
@@ -1009,14 +1009,14 @@ window = 20
         channel(&text)
     }
 
-    /// Issue 19: on fault-free data the diagnosis says "no fault" (empty support, no
+    /// On fault-free data the diagnosis says "no fault" (empty support, no
     /// estimate) in about 1 − α of the runs: 200 seeded runs of the plant, span
     /// k = 20..=59 fixed in advance, α = 0.05, so the non-empty count is Binomial(200,
     /// 0.05) (mean 10, sd 3.1): asserted in 2..=20, i.e. ≥ 90 % empty and the test not
     /// trivially silent. Zhang 2021's rule alone returned a non-empty support in every
     /// run (the bug).
     #[test]
-    fn issue19_fault_free_spans_get_the_empty_support_at_rate_1_minus_alpha() {
+    fn fault_free_spans_get_the_empty_support_at_rate_1_minus_alpha() {
         for residual in ["kitanidis", "kalman"] {
             let ch = with_residual(residual);
             assert!((ch.diagnosis.alpha - 0.05).abs() < 1e-15);
@@ -1073,14 +1073,14 @@ window = 20
 alpha = 0.05
 "#;
 
-    /// Issue 19: with a fault of realistic size the test fires and the support holds
+    /// With a fault of realistic size the test fires and the support holds
     /// the fault, in each of 20 seeded runs per fault (span k = 20..=59, onset 20, Kalman
     /// residual): an actuator bias of 0.2 on an input of amplitude 1, and a bias of 0.3
     /// on output 1 (about 2 sd of its innovation). Not claimed: a bias on output 0, whose
     /// signature is nearly collinear with the actuator bias's in this plant (steady
     /// state (I − F)⁻¹G = [5.6, 1.25]); the Lasso then prefers the larger column `act`.
     #[test]
-    fn issue19_injected_faults_give_a_support_holding_them() {
+    fn injected_faults_give_a_support_holding_them() {
         let ch = channel(SMALL);
         assert_eq!(ch.fault_names, ["act", "bias0", "bias1"]);
         for (j, magnitude) in [(0, 0.2), (2, 0.3)] {

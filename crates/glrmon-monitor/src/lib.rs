@@ -1054,12 +1054,12 @@ mod tests {
         );
     }
 
-    /// Issue 19 (alarms arrived `isolation_delay` samples late): the `alarm` record is
+    /// The `alarm` record (it once arrived `isolation_delay` samples late) is
     /// appended by the very sample whose l_k first exceeds λ, right after that
     /// sample's `stat`, with its l_k, r̂ and θ̂; the `isolation` record follows exactly
     /// `isolation_delay` samples later, names the alarm and isolates the injected state.
     #[test]
-    fn issue_19_the_alarm_is_published_at_the_crossing_and_the_isolation_delay_later() {
+    fn the_alarm_is_published_at_the_crossing_and_the_isolation_delay_later() {
         for (fault, magnitude, delay) in [
             ("x0_jump", 4.0, 2u32),
             ("x1_jump", 1.5, 7),
@@ -1220,7 +1220,7 @@ mod tests {
                 let mut bad = s.clone();
                 bad.y = vec![1.0, 2.0];
                 dirty.on_sample(&bad, &mut rd);
-                // Issue 21: `{"y":[..]}` on a channel with an input.
+                // `{"y":[..]}` on a channel with an input: u is missing.
                 let mut no_u = s.clone();
                 no_u.u = Vec::new();
                 dirty.on_sample(&no_u, &mut rd);

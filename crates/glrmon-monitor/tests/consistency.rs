@@ -1,4 +1,4 @@
-//! Issue 7, filter consistency: the block χ² test of εᵀΣ⁻¹ε stays silent on fault-free
+//! Filter consistency: the block χ² test of εᵀΣ⁻¹ε stays silent on fault-free
 //! data from the model, and warns (`consistency` records, not alarms) when the model's
 //! measurement noise R is mis-set by ×4 or ×¼.
 

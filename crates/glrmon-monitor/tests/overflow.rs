@@ -1,5 +1,5 @@
-//! Issue 21, item 1: one accepted sample `{"k":300,"u":[1.0],"y":[1e308,0.0]}` made the
-//! later statistics overflow; the records that followed could not be encoded and
+//! One accepted sample `{"k":300,"u":[1.0],"y":[1e308,0.0]}` used to make the later
+//! statistics overflow; the records that followed could not be encoded and
 //! vanished (an alarm among them). Now such a value is refused at intake (`too_large`),
 //! and statistics that still overflow are caught where they arise (`numerical`, the
 //! filter restarts), so that every record the monitor emits is finite.

@@ -1,4 +1,4 @@
-//! Issue 21, items 2 and 3: sample indices can neither wrap nor poison a channel.
+//! Sample indices can neither wrap nor poison a channel.
 //! Before: k = 2⁶⁴ − 1 wrapped the counter (then k = 0 was accepted, l_k stayed null and
 //! a faulty stream raised no alarm); after one sample with k = 10¹⁵ every later sample
 //! was refused as out of order; a publisher that restarted and numbered from 0 again

@@ -1257,7 +1257,7 @@ mod tests {
         assert_eq!(read(&bytes), Some((n, 0, ReadEnd::Finished)));
     }
 
-    /// Fuzz-style robustness (issue 6, "bad input never costs data"): every truncation
+    /// Fuzz-style robustness (bad input must never cost data): every truncation
     /// point and 1000 random corruptions of a real recording are read without a panic,
     /// an abort or a corrupt message; a truncated file gives a prefix of its messages.
     #[test]
@@ -1299,7 +1299,7 @@ mod tests {
         }
     }
 
-    /// Issue 21 item 7: the recording the salvage tests damage: a first chunk with the
+    /// The recording the salvage tests damage: a first chunk with the
     /// schemas and channels, then 3000 inputs in 10 chunks of 300 (one flush every
     /// 300), logged at 1 ms + k µs; and its messages.
     fn ten_chunks() -> Recording {
@@ -1452,7 +1452,7 @@ mod tests {
         out
     }
 
-    /// Issue 21 item 7: a zeroed chunk header (was 0 of 3000 and "unfinished").
+    /// A zeroed chunk header (salvage once recovered 0 of 3000 inputs, "unfinished").
     #[test]
     fn salvage_resynchronises_after_a_zeroed_chunk_header() {
         let s = middle_chunk_lost(|b, at, _| b[at..at + 9].fill(0));
@@ -1461,7 +1461,7 @@ mod tests {
         assert_eq!(s[0].damage[0].length, s[1].damage[0].length);
     }
 
-    /// Issue 21 item 7: a chunk length of 2^63 (was 1200 of 3000, "unreadable").
+    /// A chunk length of 2^63 (salvage once recovered 1200 of 3000, "unreadable").
     #[test]
     fn salvage_resynchronises_after_an_absurd_chunk_length() {
         middle_chunk_lost(|b, at, _| {

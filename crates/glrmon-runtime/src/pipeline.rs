@@ -504,7 +504,7 @@ mod tests {
     use super::*;
     use crate::{MemorySink, Sink};
 
-    /// Issue 21, item 1: a record that cannot be encoded (a non-finite number) used to be
+    /// A record that cannot be encoded (a non-finite number) used to be
     /// skipped without a trace; it is now replaced by a counted `numerical` error record
     /// that reaches every sink the record would have reached.
     #[test]

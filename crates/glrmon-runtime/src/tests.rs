@@ -207,7 +207,7 @@ fn oversized_payloads_and_unknown_channels_are_refused() {
     assert_eq!(intake.offer(0, p), Offer::Closed);
 }
 
-/// Issue 21, item 6: intake memory is bounded in bytes. One publisher of 1 MiB payloads
+/// Intake memory is bounded in bytes. One publisher of 1 MiB payloads
 /// used to grow the daemon from 140 MB to 2.9 GB (4096 payloads per worker); with the
 /// worker's queue limited to 3 MiB, a stalled worker holds at most 3 MiB of payloads,
 /// the rest are dropped and counted, and the bytes are given back as they are taken.

@@ -1,6 +1,6 @@
 //! Covariances as written and as used: a constant symmetric matrix whose smallest
 //! eigenvalue is only a rounding error below zero is projected onto the nearest positive
-//! semi-definite matrix instead of being refused (issue 19).
+//! semi-definite matrix instead of being refused.
 //!
 //! # Why a tolerance, and why 10⁻⁵
 //!

@@ -411,10 +411,10 @@ isolation = { level_bias = 7.5 }
         );
     }
 
-    /// Issue 20: a per-sample target is written as `sample_far` with the exceedances,
+    /// A per-sample target is written as `sample_far` with the exceedances,
     /// and reads back as such; a file with both targets, or neither, is refused.
     #[test]
-    fn issue_20_a_sample_far_target_is_recorded_and_read_back() {
+    fn a_sample_far_target_is_recorded_and_read_back() {
         let c = Calibration {
             target: Target::SampleFar(0.01),
             exceedances: 40,

@@ -4,8 +4,8 @@
 //! `glrmon/@status/<instance>` and declares liveliness tokens on
 //! `glrmon/@instances/<instance>` and `glrmon/@owners/<channel>/<instance>`. An input
 //! key that intersects any of these would feed glrmon its own output: one bad payload
-//! then produces an error record, which is itself a bad payload, forever (issue 21,
-//! item 8). [`check_input_key`] refuses such keys.
+//! then produces an error record, which is itself a bad payload, forever.
+//! [`check_input_key`] refuses such keys.
 //!
 //! [`intersects`] implements the Zenoh key-expression rules on canonical or
 //! near-canonical expressions: chunks are separated by `/`; `*` matches exactly one

@@ -1,7 +1,7 @@
 //! Upper bounds on every size a configuration sets, and the memory a channel needs.
 //!
 //! A configuration must never make glrmon panic, abort on an allocation or compute for
-//! minutes (issue 21, item 5: `window = 2⁶³−1` overflowed a capacity, `window = 1e9`
+//! minutes (as some did: `window = 2⁶³−1` overflowed a capacity, `window = 1e9`
 //! asked for 8 GB, a diagnosis `history = 1e12` for 184 TB). Each size has a hard limit
 //! below, and on top of them the memory a channel allocates when its monitor is built,
 //! estimated by [`ChannelFootprint::bytes`] from n, p, l, m, w and the diagnosis history,

@@ -399,11 +399,11 @@ fn an_unknown_input_must_leave_an_output_direction() {
     );
 }
 
-/// Issue 19: Zhang & Basseville 2014 §6.2's Q, printed to four decimals, has
+/// Zhang & Basseville 2014 §6.2's Q, printed to four decimals, has
 /// λ_min = −2.5·10⁻⁵ (1.8·10⁻⁷ of λ_max). It is accepted with a warning naming the field,
 /// and the model uses the nearest PSD matrix, within 10⁻⁴ of the printed one.
 #[test]
-fn issue19_paper2014_gas_q_is_projected_with_a_warning() {
+fn paper2014_gas_q_is_projected_with_a_warning() {
     let text = with(
         "Q = 0.01",
         "Q = [[100.2766, -66.1165], [-66.1165, 43.5933]]",
@@ -431,10 +431,10 @@ fn issue19_paper2014_gas_q_is_projected_with_a_warning() {
     assert!(cfg.channels[0].detector().is_ok());
 }
 
-/// Issue 19: the tolerance is for rounding, not for wrong matrices: λ_min = −10⁻²·λ_max
+/// The tolerance is for rounding, not for wrong matrices: λ_min = −10⁻²·λ_max
 /// is refused, and the message names the field, λ_min and the tolerance.
 #[test]
-fn issue19_q_one_percent_indefinite_is_rejected_naming_the_field() {
+fn q_one_percent_indefinite_is_rejected_naming_the_field() {
     let errs = errors(&with("Q = 0.01", "Q = [[1.0, 0.0], [0.0, -0.01]]"));
     let e = errs
         .iter()
@@ -447,10 +447,10 @@ fn issue19_q_one_percent_indefinite_is_rejected_naming_the_field() {
     assert!(e.contains("1e-5"), "{e}");
 }
 
-/// Issue 19: a rounded R that is singular as written is raised to eigenvalues ≥
+/// A rounded R that is singular as written is raised to eigenvalues ≥
 /// 10⁻⁵·λ_max (R must stay positive definite), with a warning.
 #[test]
-fn issue19_rounded_singular_r_is_made_definite_with_a_warning() {
+fn rounded_singular_r_is_made_definite_with_a_warning() {
     let text = BASE
         .replace("H = [[1.0, 0.0]]", "H = [[1.0, 0.0], [0.0, 1.0]]")
         .replace("R = 0.04", "R = [[4.0, 2.0], [2.0, 0.99999]]");

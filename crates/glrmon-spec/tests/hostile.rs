@@ -1,5 +1,6 @@
-//! Issue 21: hostile configurations (items 4, 5, 8, 9, 10). Each must be refused with
-//! the path of the field at fault — never a panic, an abort or a long computation.
+//! Hostile configurations: empty or ragged matrices, absurd sizes, input keys in
+//! glrmon's own key space, unsafe instance names. Each must be refused with the path of
+//! the field at fault — never a panic, an abort or a long computation.
 
 mod common;
 use common::{BASE, with};
@@ -23,7 +24,7 @@ fn assert_error(text: &str, expected: &str) {
     );
 }
 
-/// Item 4: every empty, ragged or mis-shaped matrix is an error naming the matrix.
+/// Every empty, ragged or mis-shaped matrix is an error naming the matrix.
 #[test]
 fn empty_and_ragged_matrices_are_errors_naming_the_field() {
     let cases: &[(&str, &str, &str)] = &[
@@ -89,7 +90,7 @@ fn empty_and_ragged_matrices_are_errors_naming_the_field() {
     for (from, to, field) in cases {
         assert_error(&with(from, to), field);
     }
-    // Two at once, and the issue's own: H = [] with an E.
+    // Two at once, and H = [] with an E, which once reached nalgebra and panicked.
     assert_error(
         &with("H = [[1.0, 0.0]]", "H = []\nE = [[1.0], [0.0]]"),
         "model.H",
@@ -112,9 +113,9 @@ fn many_faults(m: usize) -> String {
     text
 }
 
-/// Item 5: sizes the issue found (2⁶³−1, 1e9, a history of 1e12) and every other size
-/// are refused with the field's path; a channel over the memory budget gets the
-/// estimate in the message.
+/// Sizes that once overflowed or aborted (2⁶³−1, 1e9, a history of 1e12) and every
+/// other size are refused with the field's path; a channel over the memory budget gets
+/// the estimate in the message.
 #[test]
 fn every_size_has_an_upper_bound_named_by_its_field() {
     let w = "window = 50";
@@ -222,7 +223,7 @@ fn every_size_has_an_upper_bound_named_by_its_field() {
     assert!(glrmon_spec::parse(&with(w, "window = 100000")).is_ok());
 }
 
-/// Item 8: an input key that intersects glrmon's own output or status keys.
+/// An input key that intersects glrmon's own output or status keys.
 #[test]
 fn input_keys_in_glrmons_own_key_space_are_refused() {
     for key in [
@@ -255,7 +256,7 @@ fn input_keys_in_glrmons_own_key_space_are_refused() {
     }
 }
 
-/// Item 10: instance names are one safe key chunk.
+/// Instance names are one safe key chunk.
 #[test]
 fn instance_names_are_one_safe_key_chunk() {
     for bad in ["", "a/b/**", "*", "a b", "@x", "é"] {
@@ -305,7 +306,7 @@ mod shapes {
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(2000))]
 
-        /// Item 4, exhaustively over small shapes: whatever the shapes of F, G, H, J, Q,
+        /// Exhaustively over small shapes: whatever the shapes of F, G, H, J, Q,
         /// R, P0, E and S, validation returns (a configuration or errors), never panics.
         #[test]
         fn any_matrix_shapes_are_validated_without_panicking(

@@ -27,7 +27,7 @@ pub struct WindowSettings {
     /// s: the youngest candidate onset is k − s (s < w), so that at least s + 1 samples
     /// carry each candidate's signature.
     pub min_lag: usize,
-    /// τ: relative cut-off for the rank of C_k(r), free of the fault units (issue 19):
+    /// τ: relative cut-off for the rank of C_k(r), free of the fault units:
     /// LDLᵀ pivots D_j ≤ τ·C_jj, or eigenvalues ≤ τ·λ_max of C equilibrated to a unit
     /// diagonal, are treated as zero.
     pub rank_tolerance: f64,

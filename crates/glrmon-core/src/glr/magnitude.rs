@@ -87,7 +87,7 @@ impl WindowBank {
         // C deficient: θ̂ = D^{-1/2}Ĉ⁺D^{-1/2}d with Ĉ = D^{-1/2}CD^{-1/2}, D = diag C,
         // the equilibrated C (unit diagonal; a fault with C_aa = 0 keeps a zero row
         // and column and gets θ̂_a = 0), eigenvalues ≤ τ·λ_max(Ĉ) dropped. Equilibrating
-        // first makes the decision scale-free as the statistic's (issue 19): a fault's
+        // first makes the decision scale-free as the statistic's: a fault's
         // column times s gives its θ̂ divided by s and changes no other entry.
         for a in 0..m {
             let caa = info[tri(a, a) * w + at_index];

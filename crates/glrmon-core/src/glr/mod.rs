@@ -38,7 +38,7 @@
 //! state step fault at lag 0 it is exactly 0). The statistic uses an LDLᵀ factorisation
 //! of C in which pivots D_j ≤ τ·C_jj are dropped (τ = the rank tolerance): D_j/C_jj =
 //! 1 − R_j², R_j the multiple correlation of fault j's signature with the faults kept
-//! before it, so the decision does not depend on the units of the faults (issue 19;
+//! before it, so the decision does not depend on the units of the faults (see
 //! [`statistic`]). For a positive semi-definite C an exactly zero pivot comes with an
 //! exactly zero column of the Schur complement, so the dropped-pivot factorisation is a
 //! generalised inverse C⁻ (C C⁻ C = C); since d ∈ range(C), dᵀC⁻d = dᵀC⁺d is exactly

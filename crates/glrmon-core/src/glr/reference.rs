@@ -217,7 +217,7 @@ impl WindowBank {
             }
             {
                 // Pivot j is kept when D_j > τ·C_jj: the scale-free rule of
-                // `statistic` (issue 19).
+                // `statistic`.
                 let djj = &self.ldl[tri(j, j) * w..(tri(j, j) + 1) * w];
                 let cjj = &self.info[tri(j, j) * w..(tri(j, j) + 1) * w];
                 let inv = &mut self.inv_pivot[j * w..(j + 1) * w];
@@ -407,13 +407,13 @@ mod tests {
     use super::*;
     use crate::linalg::jacobi_eigen;
 
-    /// Issue 19: fault j's column times s_j (C_ab ↦ s_a s_b C_ab, d_a ↦ s_a d_a, s from
+    /// Fault j's column times s_j (C_ab ↦ s_a s_b C_ab, d_a ↦ s_a d_a, s from
     /// 10⁻⁸ to 10⁸) changes no rank and leaves the statistic equal to 1e-9 relative, in
     /// the LDLᵀ of any m and in the one-division form of m = 2, over regular, rank-deficient
     /// and zero C. (With the cut-off τ·max_a C_aa of before, a column scaled by 10⁻⁸ next
     /// to one by 10⁸ lost its pivot.)
     #[test]
-    fn pivot_decisions_ignore_fault_units_issue_19() {
+    fn pivot_decisions_ignore_fault_units() {
         for m in [2, 3, 5] {
             for seed in 1..6 {
                 let mut base = bank_with_random_stats(m, seed);

@@ -5,7 +5,7 @@
 //! with R_j the multiple correlation of fault j's signature with the kept faults
 //! before it, so the test asks whether 1 − R_j² > τ, a number without units. Changing
 //! the units of a fault (its column times s, θ_j divided by s) multiplies C_jj and D_j
-//! by s² and leaves every decision unchanged (issue 19: a cut-off τ·max_a C_aa made a
+//! by s² and leaves every decision unchanged (the earlier cut-off τ·max_a C_aa made a
 //! gas-pipeline leak of θ ≈ −4·10⁴ invisible next to faults of θ ≈ 10⁻⁵ whose columns
 //! are ≈ 4·10⁵). A fault with no signature at all (C_jj = 0, so D_j = 0) is still
 //! dropped: 0 > 0 is false. The cut-off is never negative (τ > 0, and C's diagonal is
@@ -82,7 +82,7 @@ pub(super) fn ldl_statistic<const M: usize, S: Lanes>(
 /// second pivot is c itself). A sum of two non-negative terms over a positive
 /// denominator: no cancellation beyond δ's own, which the LDLᵀ shares. One division
 /// instead of the LDLᵀ's two: division is the slowest operation of the window pass
-/// (issue 9).
+/// (docs/PERFORMANCE.md, second round).
 ///
 /// The pivots are kept by the scale-free rule of the LDLᵀ, D_j > τ·C_jj (module docs):
 /// a when a > τ·a (a > 0), δ/a when δ > τ·a·c (1 − ρ² > τ, ρ the correlation of the
