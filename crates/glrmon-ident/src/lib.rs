@@ -29,4 +29,4 @@ pub use noise::{
 };
 pub use pbsid::Pbsid;
 pub use subspace::Subspace;
-pub use validation::{LjungBox, chi2_survival, ljung_box, nis_mean, nrmse};
+pub use validation::{LjungBox, ljung_box, nis_mean, nrmse};

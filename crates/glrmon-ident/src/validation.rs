@@ -1,6 +1,7 @@
 //! Validation statistics of a predictor's innovations: fit (NRMSE), whiteness
 //! (Ljung–Box) and consistency with Re (NIS).
 
+use glrmon_core::threshold::chi2_sf;
 use nalgebra::{DMatrix, DVector};
 
 /// Normalised root-mean-square error per output column,
@@ -76,7 +77,7 @@ pub fn ljung_box(innovations: &DMatrix<f64>, lags: usize) -> Vec<LjungBox> {
             LjungBox {
                 q,
                 lags: h,
-                p_value: chi2_survival(q, h as f64),
+                p_value: chi2_sf(h as f64, q),
             }
         })
         .collect()
@@ -100,106 +101,9 @@ pub fn nis_mean(innovations: &DMatrix<f64>, re: &DMatrix<f64>) -> Option<f64> {
     Some(z.norm_squared() / n as f64)
 }
 
-/// P(χ²_ν > x), the upper tail of the χ² law with ν degrees of freedom.
-#[must_use]
-pub fn chi2_survival(x: f64, dof: f64) -> f64 {
-    if x.is_nan() || dof <= 0.0 {
-        return f64::NAN;
-    }
-    if x <= 0.0 {
-        return 1.0;
-    }
-    gamma_q(dof / 2.0, x / 2.0)
-}
-
-/// Regularised upper incomplete gamma function Q(a, x) = Γ(a, x)/Γ(a): the series of
-/// P below a + 1, Lentz's continued fraction above (Press et al., *Numerical Recipes*,
-/// 3rd ed., §6.2).
-fn gamma_q(a: f64, x: f64) -> f64 {
-    const EPS: f64 = 1e-15;
-    const MAX_ITER: usize = 10_000;
-    let log_prefactor = a * x.ln() - x - ln_gamma(a);
-    if x < a + 1.0 {
-        let (mut term, mut sum, mut ap) = (1.0 / a, 1.0 / a, a);
-        for _ in 0..MAX_ITER {
-            ap += 1.0;
-            term *= x / ap;
-            sum += term;
-            if term.abs() < sum.abs() * EPS {
-                break;
-            }
-        }
-        (1.0 - sum * log_prefactor.exp()).clamp(0.0, 1.0)
-    } else {
-        let tiny = f64::MIN_POSITIVE / EPS;
-        let mut b = x + 1.0 - a;
-        let mut c = 1.0 / tiny;
-        let mut d = 1.0 / b;
-        let mut h = d;
-        for i in 1..MAX_ITER {
-            let an = -(i as f64) * (i as f64 - a);
-            b += 2.0;
-            d = an * d + b;
-            if d.abs() < tiny {
-                d = tiny;
-            }
-            c = b + an / c;
-            if c.abs() < tiny {
-                c = tiny;
-            }
-            d = 1.0 / d;
-            let delta = d * c;
-            h *= delta;
-            if (delta - 1.0).abs() < EPS {
-                break;
-            }
-        }
-        (log_prefactor.exp() * h).clamp(0.0, 1.0)
-    }
-}
-
-/// ln Γ(x) for x > 0 (Lanczos, g = 7, 9 terms; relative error ~1e-15).
-fn ln_gamma(x: f64) -> f64 {
-    const G: f64 = 7.0;
-    const COEF: [f64; 9] = [
-        0.999_999_999_999_809_9,
-        676.520_368_121_885_1,
-        -1_259.139_216_722_402_8,
-        771.323_428_777_653_1,
-        -176.615_029_162_140_6,
-        12.507_343_278_686_905,
-        -0.138_571_095_265_720_12,
-        9.984_369_578_019_572e-6,
-        1.505_632_735_149_311_6e-7,
-    ];
-    if x < 0.5 {
-        // Reflection: Γ(x)Γ(1 − x) = π / sin(πx).
-        return (std::f64::consts::PI / (std::f64::consts::PI * x).sin()).ln() - ln_gamma(1.0 - x);
-    }
-    let x = x - 1.0;
-    let mut acc = COEF[0];
-    for (i, c) in COEF.iter().enumerate().skip(1) {
-        acc += c / (x + i as f64);
-    }
-    let t = x + G + 0.5;
-    0.5 * (2.0 * std::f64::consts::PI).ln() + (x + 0.5) * t.ln() - t + acc.ln()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn chi2_survival_matches_known_quantiles() {
-        // ν = 2: exp(−x/2) exactly.
-        for x in [0.1, 1.0, 5.0, 30.0] {
-            assert!((chi2_survival(x, 2.0) - (-x / 2.0).exp()).abs() < 1e-13);
-        }
-        // Table values: χ²_1(0.95) = 3.841459, χ²_20(0.99) = 37.56623, χ²_10(0.5) = 9.341818.
-        assert!((chi2_survival(3.841_459, 1.0) - 0.05).abs() < 1e-6);
-        assert!((chi2_survival(37.566_23, 20.0) - 0.01).abs() < 1e-6);
-        assert!((chi2_survival(9.341_818, 10.0) - 0.5).abs() < 1e-6);
-    }
 
     #[test]
     fn ljung_box_rejects_an_ar1_and_accepts_an_uncorrelated_sequence() {
