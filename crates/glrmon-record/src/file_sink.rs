@@ -3,9 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
-use glrmon_runtime::{InputItem, InputOutput, Interest, Output, Sink, SinkError};
+use glrmon_runtime::{InputOutput, Interest, Output, Sink, SinkError};
 
-use crate::log::log_message;
+use crate::messages::{input_topic, record_messages};
 use crate::schema::TopicKind;
 use crate::writer::{FileHeader, FileOptions, McapFile, RecordError};
 
@@ -76,32 +76,16 @@ impl Sink for McapFileSink {
     }
 
     fn write(&mut self, output: &Output) -> Result<(), SinkError> {
-        let Some(kind) = TopicKind::of_record(&output.record) else {
-            return Ok(());
-        };
-        // One rule on every topic: publish time = log time (docs/WIRE.md).
         let log_time = output.log_time_ns;
-        let channel = output.record.channel();
-        self.put(channel, kind, log_time, log_time, &output.json)?;
-        match log_message(&output.record, log_time) {
-            Some(json) => self.put(channel, TopicKind::Log, log_time, log_time, &json),
-            None => Ok(()),
+        for (kind, json) in record_messages(output).into_iter().flatten() {
+            self.put(output.record.channel(), kind, log_time, log_time, &json)?;
         }
+        Ok(())
     }
 
     fn write_input(&mut self, input: &InputOutput) -> Result<(), SinkError> {
-        let kind = match &input.item {
-            InputItem::Sample(_) => TopicKind::Inputs,
-            InputItem::Intake(_) => TopicKind::Intake,
-        };
-        let name = input.name.clone();
-        self.put(
-            &name,
-            kind,
-            input.log_time_ns,
-            input.log_time_ns,
-            &input.json,
-        )
+        let t = input.log_time_ns;
+        self.put(&input.name, input_topic(&input.item), t, t, &input.json)
     }
 
     fn flush(&mut self) -> Result<(), SinkError> {

@@ -20,6 +20,7 @@
 mod config;
 mod file_sink;
 mod log;
+mod messages;
 mod reader;
 mod recorder;
 mod schema;

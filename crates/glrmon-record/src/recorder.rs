@@ -10,9 +10,9 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use glrmon_runtime::{InputItem, InputOutput, Interest, Output, Sink, SinkError};
+use glrmon_runtime::{InputOutput, Interest, Output, Sink, SinkError};
 
-use crate::log::log_message;
+use crate::messages::{input_topic, record_messages};
 use crate::schema::TopicKind;
 use crate::writer::{FileHeader, FileOptions, McapFile, RecordError};
 
@@ -247,41 +247,26 @@ impl Sink for Recorder {
     }
 
     fn write(&mut self, output: &Output) -> Result<(), SinkError> {
-        let Some(kind) = TopicKind::of_record(&output.record) else {
-            return Ok(());
-        };
-        // One rule on every topic: publish time = log time (docs/WIRE.md).
         let log_time = output.log_time_ns;
-        let channel: Arc<str> = Arc::from(output.record.channel());
-        self.send(Msg::Write {
-            channel: channel.clone(),
-            kind,
-            log_time,
-            publish_time: log_time,
-            json: output.json.clone(),
-            alarm: kind == TopicKind::Alarm,
-        })?;
-        match log_message(&output.record, log_time) {
-            Some(json) => self.send(Msg::Write {
-                channel,
-                kind: TopicKind::Log,
+        let mut channel: Option<Arc<str>> = None;
+        for (kind, json) in record_messages(output).into_iter().flatten() {
+            let channel = channel.get_or_insert_with(|| Arc::from(output.record.channel()));
+            self.send(Msg::Write {
+                channel: channel.clone(),
+                kind,
                 log_time,
                 publish_time: log_time,
-                json,
-                alarm: false,
-            }),
-            None => Ok(()),
+                json: json.into_owned(),
+                alarm: kind == TopicKind::Alarm,
+            })?;
         }
+        Ok(())
     }
 
     fn write_input(&mut self, input: &InputOutput) -> Result<(), SinkError> {
-        let kind = match &input.item {
-            InputItem::Sample(_) => TopicKind::Inputs,
-            InputItem::Intake(_) => TopicKind::Intake,
-        };
         self.send(Msg::Write {
             channel: input.name.clone(),
-            kind,
+            kind: input_topic(&input.item),
             log_time: input.log_time_ns,
             publish_time: input.log_time_ns,
             json: input.json.clone(),
@@ -539,6 +524,7 @@ fn utc_stamp(t: SystemTime) -> String {
 mod tests {
     use super::*;
     use crate::{Event, McapReader, ReadEnd};
+    use glrmon_runtime::InputItem;
     use glrmon_wire::{IntakeEvent, Sample};
 
     fn scratch(tag: &str) -> PathBuf {
