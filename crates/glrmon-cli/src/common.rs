@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use glrmon_sim::{Injection, Simulator};
+use glrmon_sim::Simulator;
 use glrmon_spec::Channel;
 
 use crate::flags::FaultArg;
@@ -82,17 +82,14 @@ pub(crate) fn simulator(
     faults: &[FaultArg],
     onset: u64,
 ) -> anyhow::Result<Simulator> {
-    let sim = glrmon_sim::from_channel(channel, seed)?;
-    if faults.is_empty() {
-        return Ok(sim);
-    }
-    let names: Vec<String> = faults.iter().map(|f| f.name.clone()).collect();
-    let magnitudes: Vec<f64> = faults.iter().map(|f| f.magnitude).collect();
-    let magnitude = glrmon_sim::fault_magnitudes(channel, &names, &magnitudes)
-        .map_err(|e| InvalidInput(format!("--fault: {e}")))?;
-    Ok(glrmon_sim::inject(
-        sim,
-        channel,
-        Injection { magnitude, onset },
-    )?)
+    let faults: Vec<(String, f64)> = faults
+        .iter()
+        .map(|f| (f.name.clone(), f.magnitude))
+        .collect();
+    glrmon_sim::faulty_simulator(channel, seed, &faults, onset).map_err(|e| match e {
+        glrmon_sim::ChannelError::UnknownFault { .. } => {
+            InvalidInput(format!("--fault: {e}")).into()
+        }
+        other => other.into(),
+    })
 }

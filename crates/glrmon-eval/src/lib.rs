@@ -8,7 +8,7 @@ pub mod validation;
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_monitor::{IsolationGroup, Monitor};
 use glrmon_report::{DecisionError, FaultEvaluation, MinmaxEvaluation};
-use glrmon_sim::{Injection, SimSample};
+use glrmon_sim::SimSample;
 use glrmon_spec::Channel;
 use glrmon_wire::{Record, Sample};
 use serde::Serialize;
@@ -317,12 +317,11 @@ pub fn simulator(
     magnitude: f64,
     onset: u64,
 ) -> Result<glrmon_sim::Simulator, EvalError> {
-    let sim = glrmon_sim::from_channel(channel, seed).map_err(glrmon_sim::ChannelError::from)?;
-    let magnitude = glrmon_sim::fault_magnitudes(channel, &[fault.to_owned()], &[magnitude])?;
-    Ok(glrmon_sim::inject(
-        sim,
+    Ok(glrmon_sim::faulty_simulator(
         channel,
-        Injection { magnitude, onset },
+        seed,
+        &[(fault.to_owned(), magnitude)],
+        onset,
     )?)
 }
 

@@ -161,6 +161,30 @@ pub fn inject(
     Ok(sim.with_fault(channel.dictionary()?, injection)?)
 }
 
+/// The channel's simulator ([`from_channel`], noise seeded with `seed`) with the
+/// faults named in `faults` injected from `onset` at the given magnitudes (none for an
+/// empty list): the one set-up `glrmon simulate`, `demo`, `evaluate` and calibration
+/// share.
+///
+/// # Errors
+/// [`ChannelError::UnknownFault`] for a name not in the dictionary (the caller's
+/// input), [`ChannelError::Sim`] or [`ChannelError::Model`] when the simulator cannot
+/// be built.
+pub fn faulty_simulator(
+    channel: &Channel,
+    seed: u64,
+    faults: &[(String, f64)],
+    onset: u64,
+) -> Result<Simulator, ChannelError> {
+    let sim = from_channel(channel, seed)?;
+    if faults.is_empty() {
+        return Ok(sim);
+    }
+    let (names, magnitudes): (Vec<String>, Vec<f64>) = faults.iter().cloned().unzip();
+    let magnitude = fault_magnitudes(channel, &names, &magnitudes)?;
+    inject(sim, channel, Injection { magnitude, onset })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

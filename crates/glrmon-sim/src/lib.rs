@@ -22,7 +22,9 @@ use glrmon_core::{
 };
 use nalgebra::{DMatrix, DVector};
 
-pub use channel::{ChannelError, expression_source, fault_magnitudes, from_channel, inject};
+pub use channel::{
+    ChannelError, expression_source, fault_magnitudes, faulty_simulator, from_channel, inject,
+};
 pub use rng::Rng;
 
 /// A fault to inject: which fault of the dictionary, from which sample, how large.
