@@ -80,19 +80,11 @@ pub struct IsolationGroup {
 /// Settings of a channel's monitor.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MonitorSettings {
-    /// Detection threshold and episode hysteresis.
-    pub alarm: AlarmSettings,
-    /// Samples between the alarm (the crossing) and its `isolation` update; 0: the
-    /// alarm's isolation is final.
-    pub isolation_delay: u32,
-    /// Type-I probability of each isolation test; the threshold is the χ²(dim a) upper
-    /// quantile.
-    pub isolation_alpha: f64,
+    /// What a configuration reload may change: thresholds, alarm and isolation
+    /// settings.
+    pub tuning: Tuning,
     /// The isolation tests; empty means one per fault against all others.
     pub groups: Vec<IsolationGroup>,
-    /// Calibrated isolation thresholds by test (group or fault) name, replacing the χ²
-    /// quantile for those tests (found by `glrmon calibrate`).
-    pub isolation_thresholds: Vec<(String, f64)>,
     /// Largest gap (missing samples) filled with predict-only steps; after a longer one
     /// the filter restarts from its initial state at the sample that follows it
     /// (reported as `gap`), so that an outage never leaves a channel dead.
@@ -105,16 +97,20 @@ pub struct MonitorSettings {
 }
 
 /// The settings a configuration reload changes in a running monitor (the part of
-/// [`MonitorSettings`] that does not shape the filter).
+/// [`MonitorSettings`] that does not shape the filter; the configuration's keys are
+/// `glrmon_spec::RELOADABLE_GLR_KEYS`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Tuning {
     /// Detection threshold and episode hysteresis.
     pub alarm: AlarmSettings,
-    /// Samples between the alarm (the crossing) and its `isolation` update.
+    /// Samples between the alarm (the crossing) and its `isolation` update; 0: the
+    /// alarm's isolation is final.
     pub isolation_delay: u32,
-    /// Type-I probability of each isolation test.
+    /// Type-I probability of each isolation test; the threshold is the χ²(dim a) upper
+    /// quantile.
     pub isolation_alpha: f64,
-    /// Calibrated isolation thresholds by test name.
+    /// Calibrated isolation thresholds by test (group or fault) name, replacing the χ²
+    /// quantile for those tests (found by `glrmon calibrate`).
     pub isolation_thresholds: Vec<(String, f64)>,
 }
 
@@ -147,8 +143,6 @@ pub struct MonitorCounters {
     /// Restarts of the filter from its initial state (after a gap longer than
     /// `max_gap`, or a numerical failure).
     pub restarts: u64,
-    /// Rejections by code.
-    pub errors: std::collections::BTreeMap<&'static str, u64>,
 }
 
 /// One channel's monitor.
@@ -223,7 +217,7 @@ impl Monitor {
         let out = StepOutput::new(dims.outputs, detector.faults().len());
         Self {
             channel: channel.to_owned(),
-            alarm: AlarmState::new(settings.alarm),
+            alarm: AlarmState::new(settings.tuning.alarm),
             detector,
             settings,
             groups,
@@ -296,10 +290,7 @@ impl Monitor {
     /// [`glrmon_core::ModelError::Setting`]); not expected after validation.
     pub fn from_channel(channel: &glrmon_spec::Channel) -> Result<Self, glrmon_core::ModelError> {
         let settings = MonitorSettings {
-            alarm: channel.alarm,
-            isolation_delay: channel.isolation_delay,
-            isolation_alpha: channel.isolation_alpha,
-            isolation_thresholds: channel.isolation_thresholds.clone(),
+            tuning: Tuning::from_channel(channel),
             groups: channel
                 .groups
                 .iter()
@@ -337,13 +328,8 @@ impl Monitor {
     /// update); the isolation delay at the next alarm (an update already announced
     /// keeps its sample).
     pub fn retune(&mut self, tuning: &Tuning) {
-        self.settings.alarm = tuning.alarm;
         self.alarm.set_settings(tuning.alarm);
-        self.settings.isolation_delay = tuning.isolation_delay;
-        self.settings.isolation_alpha = tuning.isolation_alpha;
-        self.settings
-            .isolation_thresholds
-            .clone_from(&tuning.isolation_thresholds);
+        self.settings.tuning.clone_from(tuning);
     }
 
     /// The channel's name.
@@ -392,7 +378,7 @@ impl Monitor {
             },
             rank: self.out.rank,
             innovation: self.out.innovation.iter().copied().collect(),
-            threshold: Some(self.settings.alarm.threshold),
+            threshold: Some(self.settings.tuning.alarm.threshold),
         }));
     }
 
@@ -755,7 +741,7 @@ impl Monitor {
         };
         self.counters.alarms += 1;
         self.reported_onset = onset;
-        let delay = u64::from(self.settings.isolation_delay);
+        let delay = u64::from(self.settings.tuning.isolation_delay);
         let update_k = (delay > 0).then(|| k.saturating_add(delay));
         self.pending = update_k.map(|update_k| PendingUpdate {
             alarm_k: k,
@@ -767,7 +753,7 @@ impl Monitor {
             k,
             t,
             glr,
-            threshold: self.settings.alarm.threshold,
+            threshold: self.settings.tuning.alarm.threshold,
             onset,
             magnitude: self.out.magnitude.iter().copied().collect(),
             isolation,
@@ -798,7 +784,7 @@ impl Monitor {
             t,
             alarm_k: p.alarm_k,
             glr,
-            threshold: self.settings.alarm.threshold,
+            threshold: self.settings.tuning.alarm.threshold,
             onset,
             magnitude: self.out.magnitude.iter().copied().collect(),
             isolation,
@@ -842,12 +828,13 @@ impl Monitor {
                 let dof = minmax.dof.max(1) as f64;
                 let threshold = match self
                     .settings
+                    .tuning
                     .isolation_thresholds
                     .iter()
                     .find(|(name, _)| *name == g.name)
                 {
                     Some(&(_, t)) => t,
-                    None => chi2_upper_quantile(dof, self.settings.isolation_alpha).ok()?,
+                    None => chi2_upper_quantile(dof, self.settings.tuning.isolation_alpha).ok()?,
                 };
                 Some(IsolationResult {
                     fault: g.name.clone(),
@@ -915,7 +902,6 @@ impl Monitor {
     }
 
     fn reject(&mut self, records: &mut Vec<Record>, k: Option<u64>, code: ErrorCode, why: String) {
-        *self.counters.errors.entry(code.as_str()).or_insert(0) += 1;
         records.push(Record::Error(ErrorRecord {
             channel: self.channel.clone(),
             k,
@@ -959,11 +945,13 @@ mod tests {
             "unstable",
             Box::new(sc.detector().unwrap()),
             MonitorSettings {
-                alarm: AlarmSettings::with_threshold(threshold),
-                isolation_delay: 2,
-                isolation_alpha: 0.01,
+                tuning: Tuning {
+                    alarm: AlarmSettings::with_threshold(threshold),
+                    isolation_delay: 2,
+                    isolation_alpha: 0.01,
+                    isolation_thresholds: vec![],
+                },
                 groups: vec![],
-                isolation_thresholds: vec![],
                 max_gap: 10,
                 max_reorder: 16,
             },
@@ -1069,7 +1057,7 @@ mod tests {
             let mut sim = sc.faulty_simulator(4, fault, 201, magnitude).unwrap();
             let mut mon = monitor();
             mon.retune(&Tuning {
-                alarm: mon.settings.alarm,
+                alarm: mon.settings.tuning.alarm,
                 isolation_delay: delay,
                 isolation_alpha: 0.01,
                 isolation_thresholds: vec![],
@@ -1133,7 +1121,7 @@ mod tests {
         let mut sim = sc.faulty_simulator(1, "x0_jump", 201, 4.0).unwrap();
         let mut mon = monitor();
         mon.retune(&Tuning {
-            alarm: mon.settings.alarm,
+            alarm: mon.settings.tuning.alarm,
             isolation_delay: 1000,
             isolation_alpha: 0.01,
             isolation_thresholds: vec![],
@@ -1168,7 +1156,7 @@ mod tests {
         let mut sim = sc.faulty_simulator(1, "x0_jump", 201, 4.0).unwrap();
         let mut mon = monitor();
         mon.retune(&Tuning {
-            alarm: mon.settings.alarm,
+            alarm: mon.settings.tuning.alarm,
             isolation_delay: 0,
             isolation_alpha: 0.01,
             isolation_thresholds: vec![],
@@ -1465,11 +1453,11 @@ lasso = { ratio = 1e-2 }
         let c = mon.counters();
         assert_eq!(diagnoses as u64, c.alarms + c.isolation_updates);
         assert_eq!(c.diagnoses, c.alarms + c.isolation_updates);
-        assert!(
-            mon.counters().errors.is_empty(),
-            "{:?}",
-            mon.counters().errors
-        );
+        let errors: Vec<_> = records
+            .iter()
+            .filter(|r| matches!(r, Record::Error(_)))
+            .collect();
+        assert!(errors.is_empty(), "{errors:?}");
     }
 
     #[test]

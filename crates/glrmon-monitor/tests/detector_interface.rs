@@ -9,7 +9,7 @@ use glrmon_core::{
     AlarmSettings, Column, Detector, Dims, Fault, FaultDictionary, ModelError, Onset, Sample,
     StepError, StepOutput,
 };
-use glrmon_monitor::{Monitor, MonitorSettings};
+use glrmon_monitor::{Monitor, MonitorSettings, Tuning};
 use glrmon_wire::{ErrorCode, Record};
 
 #[derive(Debug)]
@@ -109,11 +109,13 @@ fn monitor() -> Monitor {
         "cusum",
         Box::new(Cusum::new(2.0)),
         MonitorSettings {
-            alarm: AlarmSettings::with_threshold(5.0),
-            isolation_delay: 2,
-            isolation_alpha: 0.01,
+            tuning: Tuning {
+                alarm: AlarmSettings::with_threshold(5.0),
+                isolation_delay: 2,
+                isolation_alpha: 0.01,
+                isolation_thresholds: vec![],
+            },
             groups: vec![],
-            isolation_thresholds: vec![],
             max_gap: 10,
             max_reorder: 16,
         },

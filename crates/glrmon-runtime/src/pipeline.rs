@@ -376,6 +376,18 @@ impl ChannelPipeline {
         &mut self.monitor
     }
 
+    /// Every `error` record of the channel so far: the monitor's rejections and the
+    /// payloads or rows refused before it.
+    #[must_use]
+    pub fn error_total(&self) -> u64 {
+        self.stats
+            .errors
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .values()
+            .sum()
+    }
+
     /// The channel's counters; `errors` counts every `error` record by code.
     #[must_use]
     pub fn stats(&self) -> &Arc<ChannelStats> {

@@ -168,14 +168,16 @@ fn replay_csv(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
     let (sinks, lines) = output_sinks(args, zone, &header)?;
     let mut fanout = Fanout::new(sinks, 1);
     let mut pipeline = ChannelPipeline::new(0, monitor, fanout.plan());
-    let CsvReplayed { rows, rejected } =
+    let CsvReplayed { rows, .. } =
         glrmon_input::replay_csv(csv, &mut pipeline, &mut fanout).map_err(replay_error)?;
     close(fanout)?;
     let c = pipeline.monitor().counters();
-    let errors: u64 = c.errors.values().sum::<u64>() + rejected;
     eprintln!(
-        "glrmon replay: channel \"{}\": {rows} rows, {} samples, {} alarms, {errors} errors",
-        channel.name, c.samples, c.alarms,
+        "glrmon replay: channel \"{}\": {rows} rows, {} samples, {} alarms, {} errors",
+        channel.name,
+        c.samples,
+        c.alarms,
+        pipeline.error_total(),
     );
     if lines_on_stderr(args) {
         for line in &take_lines(&lines) {
@@ -253,7 +255,7 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
         input,
         inputs,
         unknown,
-        rejected,
+        ..
     } = glrmon_input::replay_mcap(
         input,
         &mut channels,
@@ -275,10 +277,11 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
     );
     for (name, pipeline) in order.iter().zip(&channels) {
         let c = pipeline.monitor().counters();
-        let errors: u64 = c.errors.values().sum::<u64>() + rejected.get(name).copied().unwrap_or(0);
         eprintln!(
-            "  channel \"{name}\": {} samples, {} alarms, {errors} errors",
-            c.samples, c.alarms
+            "  channel \"{name}\": {} samples, {} alarms, {} errors",
+            c.samples,
+            c.alarms,
+            pipeline.error_total()
         );
     }
     for (name, n) in &unknown {
