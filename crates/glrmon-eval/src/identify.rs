@@ -120,61 +120,12 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
     let first = tables
         .first()
         .ok_or_else(|| IdentifyError::TooShort("none".into()))?;
-    let inputs = match &request.inputs {
-        Some(list) => list.clone(),
-        None => numbered(&first.1.names, 'u'),
-    };
-    let outputs = match &request.outputs {
-        Some(list) => list.clone(),
-        None => numbered(&first.1.names, 'y'),
-    };
-    if outputs.is_empty() {
-        return Err(IdentifyError::Columns {
-            file: first.0.clone(),
-            why: format!(
-                "no output column: name them with --outputs (columns: {})",
-                first.1.names.join(", ")
-            ),
-        });
-    }
-    if let Some(name) = inputs.iter().find(|n| outputs.contains(n)) {
-        return Err(IdentifyError::Columns {
-            file: first.0.clone(),
-            why: format!("column \"{name}\" is both an input and an output"),
-        });
-    }
-    let mut runs = Vec::new();
-    let mut experiments = Vec::new();
-    let mut periods = Vec::new();
-    for (file, table) in &tables {
-        let used = table.samples() >= MIN_RUN_SAMPLES;
-        runs.push(RunInfo {
-            file: file.clone(),
-            start: table.start.clone(),
-            samples: table.samples(),
-            used,
-        });
-        if !used {
-            continue;
-        }
-        let column = |name: &String| {
-            table.column(name).ok_or_else(|| IdentifyError::Columns {
-                file: file.clone(),
-                why: format!("no column \"{name}\" (columns: {})", table.names.join(", ")),
-            })
-        };
-        let n = table.samples();
-        let mut u = DMatrix::zeros(n, inputs.len());
-        for (j, name) in inputs.iter().enumerate() {
-            u.column_mut(j).copy_from_slice(column(name)?);
-        }
-        let mut y = DMatrix::zeros(n, outputs.len());
-        for (j, name) in outputs.iter().enumerate() {
-            y.column_mut(j).copy_from_slice(column(name)?);
-        }
-        experiments.push(Experiment::new(u, y));
-        periods.extend(table.period);
-    }
+    let (inputs, outputs) = signal_columns(request, first)?;
+    let Experiments {
+        runs,
+        experiments,
+        mut periods,
+    } = experiments(&tables, &inputs, &outputs)?;
     if experiments.is_empty() {
         let sizes: Vec<String> = runs.iter().map(|r| r.samples.to_string()).collect();
         return Err(IdentifyError::TooShort(sizes.join(", ")));
@@ -192,26 +143,7 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
         .iter()
         .map(|&i| outputs[i].clone())
         .collect();
-    let dropped = identification
-        .warnings
-        .iter()
-        .map(|w| {
-            let name = match w.signal {
-                Signal::Input => &inputs[w.column],
-                Signal::Output => &outputs[w.column],
-            };
-            match w.kind {
-                WarningKind::Constant { value } => {
-                    format!("{name} is constant ({value}): left out of the model")
-                }
-                WarningKind::NearlyConstant { std, level } => format!(
-                    "{name} is nearly constant (std {std:.3e} at level {level:.3e}): left out \
-                     of the model"
-                ),
-                _ => format!("{name}: left out of the model"),
-            }
-        })
-        .collect::<Vec<_>>();
+    let dropped = left_out(&identification, &inputs, &outputs);
     // The operating point written is the samples-weighted mean of the experiments'.
     let total: f64 = experiments.iter().map(|e| e.samples() as f64).sum();
     let pooled = |pick: &dyn Fn(&glrmon_ident::OperatingPoint) -> &nalgebra::DVector<f64>,
@@ -269,6 +201,115 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
         dropped,
         sigma_mismatch,
     })
+}
+
+/// The input and output column names: the request's, else the numbered `u…`, `y…`
+/// of the first run.
+fn signal_columns(
+    request: &IdentifyRequest,
+    first: &(PathBuf, Table),
+) -> Result<(Vec<String>, Vec<String>), IdentifyError> {
+    let inputs = match &request.inputs {
+        Some(list) => list.clone(),
+        None => numbered(&first.1.names, 'u'),
+    };
+    let outputs = match &request.outputs {
+        Some(list) => list.clone(),
+        None => numbered(&first.1.names, 'y'),
+    };
+    if outputs.is_empty() {
+        return Err(IdentifyError::Columns {
+            file: first.0.clone(),
+            why: format!(
+                "no output column: name them with --outputs (columns: {})",
+                first.1.names.join(", ")
+            ),
+        });
+    }
+    if let Some(name) = inputs.iter().find(|n| outputs.contains(n)) {
+        return Err(IdentifyError::Columns {
+            file: first.0.clone(),
+            why: format!("column \"{name}\" is both an input and an output"),
+        });
+    }
+    Ok((inputs, outputs))
+}
+
+/// Every run with its size and whether it is long enough to identify from, the
+/// experiments of those that are (never joined to one another), and their periods.
+struct Experiments {
+    runs: Vec<RunInfo>,
+    experiments: Vec<Experiment>,
+    periods: Vec<f64>,
+}
+
+/// The [`Experiments`] of the runs `tables`, with these input and output columns.
+fn experiments(
+    tables: &[(PathBuf, Table)],
+    inputs: &[String],
+    outputs: &[String],
+) -> Result<Experiments, IdentifyError> {
+    let mut runs = Vec::new();
+    let mut experiments = Vec::new();
+    let mut periods = Vec::new();
+    for (file, table) in tables {
+        let used = table.samples() >= MIN_RUN_SAMPLES;
+        runs.push(RunInfo {
+            file: file.clone(),
+            start: table.start.clone(),
+            samples: table.samples(),
+            used,
+        });
+        if !used {
+            continue;
+        }
+        let column = |name: &String| {
+            table.column(name).ok_or_else(|| IdentifyError::Columns {
+                file: file.clone(),
+                why: format!("no column \"{name}\" (columns: {})", table.names.join(", ")),
+            })
+        };
+        let n = table.samples();
+        let mut u = DMatrix::zeros(n, inputs.len());
+        for (j, name) in inputs.iter().enumerate() {
+            u.column_mut(j).copy_from_slice(column(name)?);
+        }
+        let mut y = DMatrix::zeros(n, outputs.len());
+        for (j, name) in outputs.iter().enumerate() {
+            y.column_mut(j).copy_from_slice(column(name)?);
+        }
+        experiments.push(Experiment::new(u, y));
+        periods.extend(table.period);
+    }
+    Ok(Experiments {
+        runs,
+        experiments,
+        periods,
+    })
+}
+
+/// Why each left-out column is out of the model, by its name.
+fn left_out(identification: &Identification, inputs: &[String], outputs: &[String]) -> Vec<String> {
+    identification
+        .warnings
+        .iter()
+        .map(|w| {
+            let name = match w.signal {
+                Signal::Input => &inputs[w.column],
+                Signal::Output => &outputs[w.column],
+            };
+            match w.kind {
+                WarningKind::Constant { value } => {
+                    format!("{name} is constant ({value}): left out of the model")
+                }
+                WarningKind::NearlyConstant { std, level } => format!(
+                    "{name} is nearly constant (std {std:.3e} at level {level:.3e}): left out \
+                     of the model"
+                ),
+                _ => format!("{name}: left out of the model"),
+            }
+        })
+        .collect::<Vec<_>>()
 }
 
 /// The runs of `file`; for a recording, channel `channel`'s if it has one, else its

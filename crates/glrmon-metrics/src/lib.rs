@@ -74,6 +74,30 @@ impl MetricsSource {
     pub fn render(&self) -> String {
         let mut o = String::new();
         let inst = label(&self.instance);
+        self.render_channels(&mut o, &inst);
+        self.render_instance(&mut o, &inst);
+        let r = &self.runtime;
+        histogram(
+            &mut o,
+            "glrmon_processing_seconds",
+            "From a payload's receipt to its records handed to the output stage.",
+            &inst,
+            &r.processing,
+        );
+        histogram(
+            &mut o,
+            "glrmon_delivery_seconds",
+            "From a payload's receipt to its alarm, end, diagnosis or error record written by every sink.",
+            &inst,
+            &r.delivery,
+        );
+        process::render(&mut o);
+        o
+    }
+
+    /// The per-channel families: samples, drops, alarms, the active flag, rejections
+    /// by code.
+    fn render_channels(&self, o: &mut String, inst: &str) {
         let family = |o: &mut String, name: &str, kind: &str, help: &str| {
             let _ = writeln!(o, "# HELP {name} {help}\n# TYPE {name} {kind}");
             name.to_owned()
@@ -109,7 +133,7 @@ impl MetricsSource {
             ),
         ];
         for (name, kind, help, get) in per_channel {
-            let n = family(&mut o, name, kind, help);
+            let n = family(o, name, kind, help);
             for c in &channels {
                 lines.push(format!(
                     "{n}{{glrmon_instance={inst},channel={}}} {}",
@@ -122,7 +146,7 @@ impl MetricsSource {
             lines.clear();
         }
         let n = family(
-            &mut o,
+            o,
             "glrmon_rejected_total",
             "counter",
             "Rejected input by error code (docs/WIRE.md).",
@@ -137,6 +161,11 @@ impl MetricsSource {
                 );
             }
         }
+    }
+
+    /// The instance's families: queues, workers, readiness, Zenoh, uptime, recording,
+    /// the build.
+    fn render_instance(&self, o: &mut String, inst: &str) {
         let r = &self.runtime;
         let mut gauge = |name: &str, help: &str, kind: &str, v: String| {
             let _ = writeln!(
@@ -230,22 +259,6 @@ impl MetricsSource {
             label(VERSION),
             label(GIT_HASH)
         );
-        histogram(
-            &mut o,
-            "glrmon_processing_seconds",
-            "From a payload's receipt to its records handed to the output stage.",
-            &inst,
-            &r.processing,
-        );
-        histogram(
-            &mut o,
-            "glrmon_delivery_seconds",
-            "From a payload's receipt to its alarm, end, diagnosis or error record written by every sink.",
-            &inst,
-            &r.delivery,
-        );
-        process::render(&mut o);
-        o
     }
 }
 
