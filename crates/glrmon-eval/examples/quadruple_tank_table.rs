@@ -110,64 +110,8 @@ fn main() {
             path
         })
         .collect();
-    let started = std::time::Instant::now();
-    let identified = identify_channel(&IdentifyRequest {
-        channel: "tank".into(),
-        files: files.clone(),
-        inputs: None,
-        outputs: None,
-        settings: glrmon_ident::IdentSettings::default(),
-        window: 50,
-        notes: vec![],
-    })
-    .expect("identify");
-    let identify_time = started.elapsed().as_secs_f64();
-    let mut channel = glrmon_spec::parse(&identified.config)
-        .expect("config")
-        .channels[0]
-        .clone();
-    let mut stats = Statistics::default();
-    for f in &files {
-        stats.append(recorded(&channel, f, None).expect("statistics"));
-    }
-    let cal = calibrate_channel(&channel, stats, Target::Mtbfa(MTBFA)).expect("calibrate");
-    channel.alarm.threshold = cal.alarm.threshold;
-    let v = &identified.identification.validation;
-    println!(
-        "Identified from 3 × {SAMPLES} fault-free samples in {identify_time:.2} s: order {}, \
-         held-out NRMSE {:.3?}, NIS mean {:.3} (expected 4); threshold λ = {:.2} for one \
-         false-alarm episode per {MTBFA} samples.\n",
-        identified.identification.model.order(),
-        v.nrmse.as_slice(),
-        v.nis_mean.unwrap_or(f64::NAN),
-        channel.alarm.threshold
-    );
-
-    // Fault-free: false-alarm episodes and the fraction of samples above λ.
-    let (mut episodes, mut above, mut counted) = (0u64, 0usize, 0usize);
-    for seed in 0..runs {
-        let rec = TankRun {
-            seed: 5000 + seed,
-            ..base.clone()
-        }
-        .simulate()
-        .expect("tank");
-        let out = monitor(&channel, &samples(&rec));
-        episodes += count_episodes(&out.glr, channel.alarm);
-        above += out
-            .glr
-            .iter()
-            .filter(|l| **l > channel.alarm.threshold)
-            .count();
-        counted += out.glr.iter().filter(|l| !l.is_nan()).count();
-    }
-    println!(
-        "Fault-free: {runs} runs × {SAMPLES} samples: {episodes} false-alarm episodes \
-         (one per {:.0} samples; target {MTBFA}), {:.2} % of samples above λ.\n",
-        counted as f64 / episodes.max(1) as f64,
-        100.0 * above as f64 / counted as f64
-    );
-
+    let channel = identify_and_calibrate(&files);
+    fault_free(&channel, runs, &base);
     println!(
         "| fault (from k = {ONSET}) | magnitude | detected | median delay | false alarms before | isolated alone | θ̂ median |"
     );
@@ -198,59 +142,137 @@ fn main() {
             )
         }))
         .collect();
-    for (index, (name, fault, magnitude, unit)) in faults.into_iter().enumerate() {
-        let (mut detected, mut delays, mut early, mut alone, mut theta) =
-            (0, Vec::new(), 0, 0, Vec::new());
-        let mut isolated_as: std::collections::BTreeMap<String, u32> = Default::default();
-        for seed in 0..runs {
-            let rec = TankRun {
-                seed: 10_000 * (index as u64 + 1) + seed,
-                faults: vec![fault],
-                ..base.clone()
-            }
-            .simulate()
-            .expect("tank");
-            let out = monitor(&channel, &samples(&rec));
-            early += out.alarms.iter().filter(|a| a.0 < ONSET).count();
-            let Some((k, isolated, magnitudes)) = out
-                .alarms
-                .iter()
-                .find(|a| a.0 >= ONSET && a.0 < ONSET + HORIZON)
-            else {
-                continue;
-            };
-            detected += 1;
-            delays.push((k - ONSET) as f64);
-            *isolated_as
-                .entry(if isolated.is_empty() {
-                    "none".into()
-                } else {
-                    isolated.join("+")
-                })
-                .or_default() += 1;
-            if isolated.len() == 1 && isolated[0] == name {
-                alone += 1;
-            }
-            if let Some(i) = channel.fault_names.iter().position(|f| *f == name) {
-                theta.push(magnitudes[i]);
-            }
-        }
-        let delay = median(delays);
-        let isolation = if matches!(fault.kind, TankFaultKind::Leak { .. }) {
-            let top = isolated_as.iter().max_by_key(|(_, n)| **n);
-            top.map_or("—".into(), |(f, n)| format!("(as {f}: {n}/{detected})"))
-        } else {
-            format!("{alone}/{detected}")
-        };
-        let theta = if theta.is_empty() {
-            "—".into()
-        } else {
-            format!("{:.3} {unit}", median(theta))
-        };
-        println!(
-            "| {name} | {magnitude} {unit} | {detected}/{runs} | {delay} samples ({} s) | {early} | {isolation} | {theta} |",
-            delay * base.sample_period
-        );
+    for (index, fault) in faults.iter().enumerate() {
+        fault_row(&channel, runs, &base, index, fault);
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The channel identified from `files` and calibrated on them for one false-alarm
+/// episode per [`MTBFA`] samples, with a line saying so.
+fn identify_and_calibrate(files: &[PathBuf]) -> Channel {
+    let started = std::time::Instant::now();
+    let identified = identify_channel(&IdentifyRequest {
+        channel: "tank".into(),
+        files: files.to_vec(),
+        inputs: None,
+        outputs: None,
+        settings: glrmon_ident::IdentSettings::default(),
+        window: 50,
+        notes: vec![],
+    })
+    .expect("identify");
+    let identify_time = started.elapsed().as_secs_f64();
+    let mut channel = glrmon_spec::parse(&identified.config)
+        .expect("config")
+        .channels[0]
+        .clone();
+    let mut stats = Statistics::default();
+    for f in files {
+        stats.append(recorded(&channel, f, None).expect("statistics"));
+    }
+    let cal = calibrate_channel(&channel, stats, Target::Mtbfa(MTBFA)).expect("calibrate");
+    channel.alarm.threshold = cal.alarm.threshold;
+    let v = &identified.identification.validation;
+    println!(
+        "Identified from 3 × {SAMPLES} fault-free samples in {identify_time:.2} s: order {}, \
+         held-out NRMSE {:.3?}, NIS mean {:.3} (expected 4); threshold λ = {:.2} for one \
+         false-alarm episode per {MTBFA} samples.\n",
+        identified.identification.model.order(),
+        v.nrmse.as_slice(),
+        v.nis_mean.unwrap_or(f64::NAN),
+        channel.alarm.threshold
+    );
+    channel
+}
+
+/// False-alarm episodes and the fraction of samples above λ on `runs` fault-free runs.
+fn fault_free(channel: &Channel, runs: u64, base: &TankRun) {
+    let (mut episodes, mut above, mut counted) = (0u64, 0usize, 0usize);
+    for seed in 0..runs {
+        let rec = TankRun {
+            seed: 5000 + seed,
+            ..base.clone()
+        }
+        .simulate()
+        .expect("tank");
+        let out = monitor(channel, &samples(&rec));
+        episodes += count_episodes(&out.glr, channel.alarm);
+        above += out
+            .glr
+            .iter()
+            .filter(|l| **l > channel.alarm.threshold)
+            .count();
+        counted += out.glr.iter().filter(|l| !l.is_nan()).count();
+    }
+    println!(
+        "Fault-free: {runs} runs × {SAMPLES} samples: {episodes} false-alarm episodes \
+         (one per {:.0} samples; target {MTBFA}), {:.2} % of samples above λ.\n",
+        counted as f64 / episodes.max(1) as f64,
+        100.0 * above as f64 / counted as f64
+    );
+}
+
+/// One row of the table: a fault (its name, profile, magnitude and unit) injected in
+/// `runs` runs.
+fn fault_row(
+    channel: &Channel,
+    runs: u64,
+    base: &TankRun,
+    index: usize,
+    (name, fault, magnitude, unit): &(String, TankFault, f64, &str),
+) {
+    let fault = *fault;
+    let (mut detected, mut delays, mut early, mut alone, mut theta) =
+        (0, Vec::new(), 0, 0, Vec::new());
+    let mut isolated_as: std::collections::BTreeMap<String, u32> = Default::default();
+    for seed in 0..runs {
+        let rec = TankRun {
+            seed: 10_000 * (index as u64 + 1) + seed,
+            faults: vec![fault],
+            ..base.clone()
+        }
+        .simulate()
+        .expect("tank");
+        let out = monitor(channel, &samples(&rec));
+        early += out.alarms.iter().filter(|a| a.0 < ONSET).count();
+        let Some((k, isolated, magnitudes)) = out
+            .alarms
+            .iter()
+            .find(|a| a.0 >= ONSET && a.0 < ONSET + HORIZON)
+        else {
+            continue;
+        };
+        detected += 1;
+        delays.push((k - ONSET) as f64);
+        *isolated_as
+            .entry(if isolated.is_empty() {
+                "none".into()
+            } else {
+                isolated.join("+")
+            })
+            .or_default() += 1;
+        if isolated.len() == 1 && isolated[0] == *name {
+            alone += 1;
+        }
+        if let Some(i) = channel.fault_names.iter().position(|f| f == name) {
+            theta.push(magnitudes[i]);
+        }
+    }
+    let delay = median(delays);
+    let isolation = if matches!(fault.kind, TankFaultKind::Leak { .. }) {
+        let top = isolated_as.iter().max_by_key(|(_, n)| **n);
+        top.map_or("—".into(), |(f, n)| format!("(as {f}: {n}/{detected})"))
+    } else {
+        format!("{alone}/{detected}")
+    };
+    let theta = if theta.is_empty() {
+        "—".into()
+    } else {
+        format!("{:.3} {unit}", median(theta))
+    };
+    println!(
+        "| {name} | {magnitude} {unit} | {detected}/{runs} | {delay} samples ({} s) | {early} | {isolation} | {theta} |",
+        delay * base.sample_period
+    );
 }

@@ -93,38 +93,7 @@ async fn main() {
     let rss1 = rss_kib();
 
     // Data: bench-A simulated; every `faulty_every`-th channel gets a sensor bias of 1.0.
-    let sc = glrmon_sim::scenarios::bench_a();
-    let mut payloads: Vec<Vec<(u64, Vec<u8>)>> = Vec::with_capacity(channels);
-    for (i, c) in cfg.channels.iter().enumerate() {
-        let mut sim = if i % faulty_every == 0 {
-            sc.faulty_simulator(i as u64, "sensor_bias", onset, 1.0)
-                .expect("sim")
-        } else {
-            sc.simulator(i as u64).expect("sim")
-        };
-        let all: Vec<Sample> = (0..samples)
-            .map(|_| {
-                let x = sim.next_sample();
-                Sample {
-                    k: Some(x.k),
-                    t: None,
-                    u: x.u,
-                    y: x.y,
-                    p: x.p,
-                }
-            })
-            .collect();
-        payloads.push(
-            all.chunks(batch)
-                .map(|b| {
-                    let mut buf = Vec::new();
-                    encode_samples(&c.name, b, &mut buf).expect("encode");
-                    (b.last().and_then(|s| s.k).unwrap_or(0), buf)
-                })
-                .collect(),
-        );
-    }
-
+    let payloads = payloads(&cfg, samples, batch, faulty_every, onset);
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
@@ -196,24 +165,7 @@ async fn main() {
         })
         .await
         .expect("alarm subscriber");
-    let mut publishers = Vec::new();
-    for key in &keys {
-        let p = plant
-            .declare_publisher(key.clone())
-            .congestion_control(zenoh::qos::CongestionControl::Block)
-            .await
-            .expect("publisher");
-        while !p
-            .matching_status()
-            .await
-            .map(|m| m.matching())
-            .unwrap_or(false)
-        {
-            tokio::time::sleep(Duration::from_millis(1)).await;
-        }
-        publishers.push(p);
-    }
-
+    let publishers = publishers(&plant, &keys).await;
     // Publish round-robin over channels, one batch at a time.
     let mut sent_at: HashMap<(usize, u64), Instant> = HashMap::new();
     let start = Instant::now();
@@ -243,30 +195,7 @@ async fn main() {
     }
     let published = start.elapsed();
     let stats = runtime.stats();
-    // Done when the counters stop moving (every payload processed, dropped or rejected).
-    let progress = || -> u64 {
-        stats
-            .iter()
-            .map(|s| {
-                s.samples.load(Ordering::Relaxed)
-                    + s.dropped.load(Ordering::Relaxed)
-                    + s.errors
-                        .lock()
-                        .map(|e| e.values().sum::<u64>())
-                        .unwrap_or(0)
-            })
-            .sum()
-    };
-    let mut last = (progress(), Instant::now());
-    let mut finished = Instant::now();
-    while last.1.elapsed() < Duration::from_millis(500) {
-        tokio::time::sleep(Duration::from_millis(1)).await;
-        let now = progress();
-        if now != last.0 {
-            last = (now, Instant::now());
-            finished = Instant::now();
-        }
-    }
+    let finished = settled(&stats).await;
     let elapsed = finished.duration_since(start);
     let processed: u64 = stats
         .iter()
@@ -277,17 +206,7 @@ async fn main() {
         .map(|s| s.dropped.load(Ordering::Relaxed))
         .sum();
     let alarms = received.lock().unwrap().clone();
-    let mut lat: Vec<f64> = alarms
-        .iter()
-        .filter_map(|(ch, k, at)| {
-            let i: usize = ch.trim_start_matches("ch").parse().ok()?;
-            // The batch holding sample k was published at sent_at[(i, last k of that batch)].
-            let last = ((k / batch as u64) + 1) * batch as u64 - 1;
-            let sent = sent_at.get(&(i, last.min(samples - 1)))?;
-            Some(at.duration_since(*sent).as_secs_f64() * 1e3)
-        })
-        .collect();
-    lat.sort_by(f64::total_cmp);
+    let lat = latencies_ms(&alarms, &sent_at, batch as u64, samples);
     let pct = |p: f64| {
         lat.get(((lat.len() as f64 - 1.0) * p).round() as usize)
             .copied()
@@ -312,18 +231,142 @@ async fn main() {
     let (_, sinks) = runtime.shutdown(Duration::from_secs(60));
     drop(sinks);
     if let Some(stats) = recorder_stats {
-        let files = stats.finished.lock().unwrap().clone();
-        let bytes: u64 = files
-            .iter()
-            .filter_map(|f| std::fs::metadata(f).ok())
-            .map(|m| m.len())
-            .sum();
-        println!(
-            "recorded {} messages in {} file(s), {:.1} MB ({:.1} bytes per message)",
-            stats.messages.load(Ordering::Relaxed),
-            files.len(),
-            bytes as f64 / 1e6,
-            bytes as f64 / stats.messages.load(Ordering::Relaxed).max(1) as f64
+        report_recording(&stats);
+    }
+}
+
+/// Each channel's samples as JSON batches of `batch`, with the last k of each batch;
+/// every `faulty_every`-th channel has a sensor bias of 1.0 from `onset`.
+fn payloads(
+    cfg: &glrmon_spec::Config,
+    samples: u64,
+    batch: usize,
+    faulty_every: usize,
+    onset: u64,
+) -> Vec<Vec<(u64, Vec<u8>)>> {
+    let channels = cfg.channels.len();
+    let sc = glrmon_sim::scenarios::bench_a();
+    let mut payloads: Vec<Vec<(u64, Vec<u8>)>> = Vec::with_capacity(channels);
+    for (i, c) in cfg.channels.iter().enumerate() {
+        let mut sim = if i % faulty_every == 0 {
+            sc.faulty_simulator(i as u64, "sensor_bias", onset, 1.0)
+                .expect("sim")
+        } else {
+            sc.simulator(i as u64).expect("sim")
+        };
+        let all: Vec<Sample> = (0..samples)
+            .map(|_| {
+                let x = sim.next_sample();
+                Sample {
+                    k: Some(x.k),
+                    t: None,
+                    u: x.u,
+                    y: x.y,
+                    p: x.p,
+                }
+            })
+            .collect();
+        payloads.push(
+            all.chunks(batch)
+                .map(|b| {
+                    let mut buf = Vec::new();
+                    encode_samples(&c.name, b, &mut buf).expect("encode");
+                    (b.last().and_then(|s| s.k).unwrap_or(0), buf)
+                })
+                .collect(),
         );
     }
+    payloads
+}
+
+/// A publisher per key, each waiting until the daemon's subscriber matches it.
+async fn publishers(
+    plant: &zenoh::Session,
+    keys: &[String],
+) -> Vec<zenoh::pubsub::Publisher<'static>> {
+    let mut publishers = Vec::new();
+    for key in keys {
+        let p = plant
+            .declare_publisher(key.clone())
+            .congestion_control(zenoh::qos::CongestionControl::Block)
+            .await
+            .expect("publisher");
+        while !p
+            .matching_status()
+            .await
+            .map(|m| m.matching())
+            .unwrap_or(false)
+        {
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
+        publishers.push(p);
+    }
+    publishers
+}
+
+/// When the channels' counters stopped moving (every payload processed, dropped or
+/// rejected), after 500 ms without change.
+async fn settled(stats: &[Arc<glrmon_runtime::ChannelStats>]) -> Instant {
+    let progress = || -> u64 {
+        stats
+            .iter()
+            .map(|s| {
+                s.samples.load(Ordering::Relaxed)
+                    + s.dropped.load(Ordering::Relaxed)
+                    + s.errors
+                        .lock()
+                        .map(|e| e.values().sum::<u64>())
+                        .unwrap_or(0)
+            })
+            .sum()
+    };
+    let mut last = (progress(), Instant::now());
+    let mut finished = Instant::now();
+    while last.1.elapsed() < Duration::from_millis(500) {
+        tokio::time::sleep(Duration::from_millis(1)).await;
+        let now = progress();
+        if now != last.0 {
+            last = (now, Instant::now());
+            finished = Instant::now();
+        }
+    }
+    finished
+}
+
+/// Each alarm's latency in ms, from the publication of the batch holding its sample.
+fn latencies_ms(
+    alarms: &[(String, u64, Instant)],
+    sent_at: &HashMap<(usize, u64), Instant>,
+    batch: u64,
+    samples: u64,
+) -> Vec<f64> {
+    let mut lat: Vec<f64> = alarms
+        .iter()
+        .filter_map(|(ch, k, at)| {
+            let i: usize = ch.trim_start_matches("ch").parse().ok()?;
+            // The batch holding sample k was published at sent_at[(i, last k of that batch)].
+            let last = ((k / batch) + 1) * batch - 1;
+            let sent = sent_at.get(&(i, last.min(samples - 1)))?;
+            Some(at.duration_since(*sent).as_secs_f64() * 1e3)
+        })
+        .collect();
+    lat.sort_by(f64::total_cmp);
+    lat
+}
+
+/// What the recorder wrote.
+fn report_recording(stats: &glrmon_record::RecorderStats) {
+    let files = stats.finished.lock().unwrap().clone();
+    let bytes: u64 = files
+        .iter()
+        .filter_map(|f| std::fs::metadata(f).ok())
+        .map(|m| m.len())
+        .sum();
+    println!(
+        "recorded {} messages in {} file(s), {:.1} MB ({:.1} bytes per message)",
+        stats.messages.load(Ordering::Relaxed),
+        files.len(),
+        bytes as f64 / 1e6,
+        bytes as f64 / stats.messages.load(Ordering::Relaxed).max(1) as f64
+    );
 }
