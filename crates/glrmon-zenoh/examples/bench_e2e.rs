@@ -113,33 +113,7 @@ async fn main() {
         stat_every: 0,
         ..RuntimeSettings::default()
     };
-    let mut sinks: Vec<Box<dyn glrmon_runtime::Sink>> =
-        vec![Box::new(ZenohSink::new(daemon.clone()))];
-    // `--record DIR`: also record every input and stat to MCAP, as `glrmon run` does.
-    let record_dir = {
-        let args: Vec<String> = std::env::args().collect();
-        args.iter()
-            .position(|a| a == "--record")
-            .and_then(|i| args.get(i + 1).cloned())
-    };
-    let mut recorder_stats = None;
-    if let Some(dir) = &record_dir {
-        let recorder = glrmon_record::Recorder::start(
-            glrmon_record::RecorderSettings {
-                directory: dir.into(),
-                prefix: "bench".into(),
-                ..glrmon_record::RecorderSettings::default()
-            },
-            glrmon_record::FileHeader {
-                config: cfg.source.clone(),
-                channels: cfg.channels.iter().map(|c| c.name.clone()).collect(),
-                extra: std::collections::BTreeMap::new(),
-            },
-        )
-        .expect("recorder");
-        recorder_stats = Some(recorder.stats());
-        sinks.push(Box::new(recorder));
-    }
+    let (sinks, recorder_stats) = sinks(&daemon, &cfg);
     let runtime = Runtime::start(monitors, sinks, &settings, Arc::new(Quiet));
     let keys: Vec<String> = cfg.channels.iter().map(|c| c.key.clone()).collect();
     let _source = ZenohSource::declare(&daemon, &keys, &runtime.intake())
@@ -369,4 +343,43 @@ fn report_recording(stats: &glrmon_record::RecorderStats) {
         bytes as f64 / 1e6,
         bytes as f64 / stats.messages.load(Ordering::Relaxed).max(1) as f64
     );
+}
+
+/// The Zenoh publisher sink and, with `--record DIR`, a recorder of every input and
+/// stat to MCAP, as `glrmon run` has.
+fn sinks(
+    daemon: &zenoh::Session,
+    cfg: &glrmon_spec::Config,
+) -> (
+    Vec<Box<dyn glrmon_runtime::Sink>>,
+    Option<Arc<glrmon_record::RecorderStats>>,
+) {
+    let mut sinks: Vec<Box<dyn glrmon_runtime::Sink>> =
+        vec![Box::new(ZenohSink::new(daemon.clone()))];
+    // `--record DIR`: also record every input and stat to MCAP, as `glrmon run` does.
+    let record_dir = {
+        let args: Vec<String> = std::env::args().collect();
+        args.iter()
+            .position(|a| a == "--record")
+            .and_then(|i| args.get(i + 1).cloned())
+    };
+    let mut recorder_stats = None;
+    if let Some(dir) = &record_dir {
+        let recorder = glrmon_record::Recorder::start(
+            glrmon_record::RecorderSettings {
+                directory: dir.into(),
+                prefix: "bench".into(),
+                ..glrmon_record::RecorderSettings::default()
+            },
+            glrmon_record::FileHeader {
+                config: cfg.source.clone(),
+                channels: cfg.channels.iter().map(|c| c.name.clone()).collect(),
+                extra: std::collections::BTreeMap::new(),
+            },
+        )
+        .expect("recorder");
+        recorder_stats = Some(recorder.stats());
+        sinks.push(Box::new(recorder));
+    }
+    (sinks, recorder_stats)
 }
