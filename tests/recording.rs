@@ -202,11 +202,53 @@ fn validate(schema: &serde_json::Value, v: &serde_json::Value, at: &str) -> Resu
                 | "required"
                 | "additionalProperties"
                 | "items"
+                | "minItems"
+                | "maxItems"
                 | "enum"
+                | "const"
+                | "minimum"
+                | "oneOf"
                 | "description"
                 | "title"
+                | "format"
+                | "$schema"
         ) {
             return Err(format!("{at}: unsupported schema keyword {key}"));
+        }
+    }
+    if let Some(alternatives) = obj.get("oneOf").and_then(Value::as_array) {
+        let matching = alternatives
+            .iter()
+            .filter(|s| validate(s, v, at).is_ok())
+            .count();
+        if matching != 1 {
+            return Err(format!(
+                "{at}: {v} matches {matching} alternatives of oneOf"
+            ));
+        }
+    }
+    if let Some(c) = obj.get("const")
+        && c != v
+    {
+        return Err(format!("{at}: {v} is not {c}"));
+    }
+    if let (Some(min), Some(x)) = (obj.get("minimum").and_then(Value::as_f64), v.as_f64())
+        && x < min
+    {
+        return Err(format!("{at}: {v} is below {min}"));
+    }
+    if let Some(arr) = v.as_array() {
+        let len = arr.len() as u64;
+        if obj
+            .get("minItems")
+            .and_then(Value::as_u64)
+            .is_some_and(|n| len < n)
+            || obj
+                .get("maxItems")
+                .and_then(Value::as_u64)
+                .is_some_and(|n| len > n)
+        {
+            return Err(format!("{at}: {len} items is out of bounds"));
         }
     }
     if let Some(t) = obj.get("type") {
@@ -281,7 +323,29 @@ fn the_schema_validator_rejects_what_it_should() {
     assert!(ok(r#"{"k":1.5,"y":[]}"#).is_err(), "float for integer");
     assert!(ok(r#"{"y":["a"]}"#).is_err(), "string item");
     assert!(ok(r#"{"y":[],"z":1}"#).is_err(), "extra field");
-    let odd: serde_json::Value = serde_json::from_str(r#"{"minimum":0}"#).unwrap();
+    let pair: serde_json::Value = serde_json::from_str(
+        r#"{"type":"array","items":{"type":"integer","minimum":0},"minItems":2,"maxItems":2}"#,
+    )
+    .unwrap();
+    assert!(validate(&pair, &serde_json::json!([0, 1]), "").is_ok());
+    assert!(
+        validate(&pair, &serde_json::json!([0]), "").is_err(),
+        "too short"
+    );
+    assert!(
+        validate(&pair, &serde_json::json!([0, -1]), "").is_err(),
+        "below minimum"
+    );
+    let tagged: serde_json::Value = serde_json::from_str(
+        r#"{"oneOf":[{"properties":{"type":{"const":"a"}},"required":["type"]},{"properties":{"type":{"const":"b"}},"required":["type"]}]}"#,
+    )
+    .unwrap();
+    assert!(validate(&tagged, &serde_json::json!({"type": "b"}), "").is_ok());
+    assert!(
+        validate(&tagged, &serde_json::json!({"type": "c"}), "").is_err(),
+        "no alternative"
+    );
+    let odd: serde_json::Value = serde_json::from_str(r#"{"uniqueItems":true}"#).unwrap();
     assert!(
         validate(&odd, &serde_json::json!(1), "").is_err(),
         "unknown keyword"

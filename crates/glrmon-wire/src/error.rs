@@ -8,6 +8,7 @@
 
 use std::fmt;
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// The bounded set of snake_case error codes used as the `error_type` counter label and
@@ -29,7 +30,9 @@ use serde::{Deserialize, Serialize};
 /// assert_eq!(serde_json::to_string(&ErrorCode::Gap).unwrap(), "\"gap\"");
 /// assert!(ErrorCode::ALL.iter().all(|c| !c.as_str().is_empty()));
 /// ```
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 #[non_exhaustive]
 pub enum ErrorCode {
@@ -128,7 +131,9 @@ impl fmt::Display for ErrorCode {
 /// `stage` of an `error` record.
 ///
 /// Serialized as `"receiving"`, `"processing"` or `"sending"`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Stage {
     /// Decoding a payload from a source (Zenoh, CSV, MCAP).

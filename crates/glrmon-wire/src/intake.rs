@@ -4,6 +4,7 @@
 //! them, these events, so that a replay feeds each monitor exactly what the live run fed
 //! it: the same samples, the same gaps where payloads were dropped, the same rejections.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::{EncodeError, ErrorCode};
@@ -20,8 +21,9 @@ use crate::{EncodeError, ErrorCode};
 /// assert_eq!(out, br#"{"type":"dropped","count":3}"#);
 /// # Ok::<(), glrmon_wire::EncodeError>(())
 /// ```
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+#[schemars(title = "glrmon intake event")]
 pub enum IntakeEvent {
     /// `count` payloads were dropped at intake (a full queue) just before the next
     /// payload: the monitor sees the next sample after a gap.

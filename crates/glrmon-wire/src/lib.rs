@@ -2,6 +2,7 @@
 
 mod error;
 mod intake;
+mod json_schema;
 mod key;
 mod record;
 mod sample;
@@ -12,6 +13,7 @@ pub use error::{
     EncodeErrorKind, ErrorCode, SizeLimit, Stage,
 };
 pub use intake::{IntakeEvent, decode_intake, encode_intake};
+pub use json_schema::{intake_schema, record_schema, sample_schema};
 pub use key::{
     DEFAULT_INPUT_PREFIX, RESULT_PREFIX, default_input_key, parse_result_key, result_key,
     validate_channel_name,

@@ -4,15 +4,20 @@
 
 use std::collections::BTreeMap;
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
 use crate::error::{DecodeError, DecodeErrorKind, EncodeError, EncodeErrorKind, ErrorCode, Stage};
+use crate::json_schema::record_schema;
 use crate::key::result_key;
 use crate::sample::{is_out_of_range, write_json};
 
-/// Per-sample detection statistic (`type: "stat"`), on Zenoh decimated as configured.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// Per-sample detection statistics (`type: "stat"`): the windowed GLR statistic l_k, the
+/// onset r̂ and magnitude θ̂ that maximise it, and the innovation ε_k; on Zenoh decimated
+/// as configured.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "glrmon stat")]
 pub struct Stat {
     /// Channel name.
     pub channel: String,
@@ -38,7 +43,7 @@ pub struct Stat {
 }
 
 /// Minmax / sensitivity isolation test for one fault at an alarm.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct IsolationResult {
     /// Fault name from the channel's dictionary.
     pub fault: String,
@@ -59,7 +64,8 @@ pub struct IsolationResult {
 /// that sample; when `update_k` is set, an [`IsolationUpdate`] (`type: "isolation"`)
 /// with `alarm_k` = `k` refines them at sample `update_k` if the episode is still on
 /// then (an `alarm_end` before `update_k` means none will come).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "glrmon alarm")]
 pub struct Alarm {
     /// Channel name.
     pub channel: String,
@@ -95,7 +101,8 @@ pub struct Alarm {
 /// with the samples since. It is not a new alarm: `alarm_k` names the alarm (its `k`,
 /// the crossing) it refines, and `glr` may lie between λ·(1 − h) and λ (the episode's
 /// hysteresis band).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "glrmon isolation")]
 pub struct IsolationUpdate {
     /// Channel name.
     pub channel: String,
@@ -122,7 +129,8 @@ pub struct IsolationUpdate {
 }
 
 /// The end of an alarm episode (`type: "alarm_end"`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "glrmon alarm end")]
 pub struct AlarmEnd {
     /// Channel name.
     pub channel: String,
@@ -139,8 +147,11 @@ pub struct AlarmEnd {
     pub peak_glr: f64,
 }
 
-/// A sparse diagnosis over a span of samples (`type: "diagnosis"`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// A sparse diagnosis over a span of samples (`type: "diagnosis"`, Zhang 2021): the faults
+/// the Lasso selects, their magnitudes refitted on that support, and the regularisation
+/// path.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "glrmon diagnosis")]
 pub struct Diagnosis {
     /// Channel name.
     pub channel: String,
@@ -159,7 +170,10 @@ pub struct Diagnosis {
     /// The range of λ over which the support stays the same, `[low, high]`. Both ends
     /// must be finite: an unbounded end is clamped by the caller (e.g. to λ_max).
     pub plateau: [f64; 2],
-    /// Residual used: [`Diagnosis::RESIDUAL_KALMAN`] or [`Diagnosis::RESIDUAL_KITANIDIS`].
+    /// Residual used: `kalman` (the Kalman innovations of the fault-free model,
+    /// [`Diagnosis::RESIDUAL_KALMAN`]) or `kitanidis` (the Kitanidis filter's residuals,
+    /// decoupled from the unknown inputs, [`Diagnosis::RESIDUAL_KITANIDIS`]).
+    #[schemars(extend("enum" = [Diagnosis::RESIDUAL_KALMAN, Diagnosis::RESIDUAL_KITANIDIS]))]
     pub residual: String,
     /// Support size at each λ along the regularisation path (Zhang 2021, Fig. 2).
     pub path_support_sizes: Vec<usize>,
@@ -182,7 +196,8 @@ impl Diagnosis {
 /// A change of the filter-consistency verdict (`type: "consistency"`): the block mean of
 /// the normalised innovation squared εᵀΣ⁻¹ε left, or came back into, its χ² band. A
 /// warning that the model no longer fits the plant, distinct from fault alarms.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "glrmon consistency")]
 pub struct Consistency {
     /// Channel name.
     pub channel: String,
@@ -192,6 +207,7 @@ pub struct Consistency {
     pub t: Option<f64>,
     /// `too_large` (innovations larger than the model says: Q, R or the model too
     /// optimistic), `too_small` (too pessimistic) or `consistent` (back in the band).
+    #[schemars(extend("enum" = ["consistent", "too_large", "too_small"]))]
     pub state: String,
     /// Mean of εᵀΣ⁻¹ε over the block.
     pub nis_mean: f64,
@@ -204,7 +220,8 @@ pub struct Consistency {
 }
 
 /// A counted rejection or failure (`type: "error"`).
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "glrmon error")]
 pub struct ErrorRecord {
     /// Channel name.
     pub channel: String,
@@ -272,24 +289,34 @@ impl ErrorRecord {
 /// Decoding ignores unknown fields, so a consumer built against this version reads
 /// records from a newer glrmon that added fields; the enum is `#[non_exhaustive]` so that
 /// a new record type is not a breaking change either. Fields of type `Option` may be
-/// absent or `null`; all others are required.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// absent or `null`; all others are required. [`record_schema`] gives each type's JSON
+/// Schema.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "type", rename_all = "snake_case")]
 #[non_exhaustive]
+// Each `#[schemars(description = "")]` below keeps the variant's doc comment out of its
+// schema: a record type's schema is described by its struct's.
 pub enum Record {
     /// `"stat"`.
+    #[schemars(description = "")]
     Stat(Stat),
     /// `"alarm"`.
+    #[schemars(description = "")]
     Alarm(Alarm),
     /// `"isolation"`.
+    #[schemars(description = "")]
     Isolation(IsolationUpdate),
     /// `"alarm_end"`.
+    #[schemars(description = "")]
     AlarmEnd(AlarmEnd),
     /// `"diagnosis"`.
+    #[schemars(description = "")]
     Diagnosis(Diagnosis),
     /// `"error"`.
+    #[schemars(description = "")]
     Error(ErrorRecord),
     /// `"consistency"`.
+    #[schemars(description = "")]
     Consistency(Consistency),
 }
 
@@ -549,7 +576,8 @@ fn syntax_error(err: &serde_json::Error) -> DecodeError {
 
 /// Turns serde's error into a located one. serde's derive reports "invalid type: string,
 /// expected f64" without saying which field, so on this (rare) path the payload is parsed
-/// again as a `Value` and checked against the schema below, which names the field.
+/// again as a `Value` and checked against the record's JSON Schema ([`record_schema`]),
+/// which names the field.
 fn record_error(payload: &[u8], err: &serde_json::Error) -> DecodeError {
     if err.classify() != serde_json::error::Category::Data {
         return syntax_error(err);
@@ -574,7 +602,7 @@ fn record_error(payload: &[u8], err: &serde_json::Error) -> DecodeError {
     }
     match locate(&obj) {
         Some((field, kind)) => DecodeError::new(channel, Some(field), kind),
-        // Only reachable if the schema below drifted from the structs; the test
+        // Only reachable if the schema accepts what serde refused; the test
         // `schema_matches_serialized_fields` guards against that.
         None => DecodeError::new(
             channel,
@@ -584,235 +612,148 @@ fn record_error(payload: &[u8], err: &serde_json::Error) -> DecodeError {
     }
 }
 
-/// The JSON type of one record field, for locating decode errors.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Ty {
-    U64,
-    OptU64,
-    Usize,
-    F64,
-    OptF64,
-    Str,
-    Bool,
-    VecF64,
-    MatrixF64,
-    VecUsize,
-    VecStr,
-    MapF64,
-    Pair,
-    Isolation,
-    Code,
-    Stage,
-}
-
-impl Ty {
-    const fn optional(self) -> bool {
-        matches!(self, Ty::OptU64 | Ty::OptF64)
-    }
-
-    const fn expected(self) -> &'static str {
-        match self {
-            Ty::U64 | Ty::Usize => "a non-negative integer",
-            Ty::OptU64 => "a non-negative integer or null",
-            Ty::F64 => "a number",
-            Ty::OptF64 => "a number or null",
-            Ty::Str => "a string",
-            Ty::Bool => "a boolean",
-            Ty::VecF64 => "an array of numbers",
-            Ty::MatrixF64 => "an array of arrays of numbers",
-            Ty::VecUsize => "an array of non-negative integers",
-            Ty::VecStr => "an array of strings",
-            Ty::MapF64 => "an object of numbers",
-            Ty::Pair => "an array of 2 numbers",
-            Ty::Isolation => "an array of isolation objects",
-            Ty::Code => "an error code (invalid_json, wrong_type, …, numerical)",
-            Ty::Stage => "one of receiving, processing, sending",
-        }
-    }
-}
-
-type Schema = &'static [(&'static str, Ty)];
-
-const STAT_SCHEMA: Schema = &[
-    ("channel", Ty::Str),
-    ("k", Ty::U64),
-    ("t", Ty::OptF64),
-    ("glr", Ty::OptF64),
-    ("onset", Ty::OptU64),
-    ("magnitude", Ty::VecF64),
-    ("rank", Ty::Usize),
-    ("innovation", Ty::VecF64),
-    ("threshold", Ty::OptF64),
-];
-const ALARM_SCHEMA: Schema = &[
-    ("channel", Ty::Str),
-    ("k", Ty::U64),
-    ("t", Ty::OptF64),
-    ("glr", Ty::F64),
-    ("threshold", Ty::F64),
-    ("onset", Ty::U64),
-    ("magnitude", Ty::VecF64),
-    ("isolation", Ty::Isolation),
-    ("faults", Ty::VecStr),
-    ("update_k", Ty::OptU64),
-];
-const ISOLATION_UPDATE_SCHEMA: Schema = &[
-    ("channel", Ty::Str),
-    ("k", Ty::U64),
-    ("t", Ty::OptF64),
-    ("alarm_k", Ty::U64),
-    ("glr", Ty::F64),
-    ("threshold", Ty::F64),
-    ("onset", Ty::U64),
-    ("magnitude", Ty::VecF64),
-    ("isolation", Ty::Isolation),
-    ("faults", Ty::VecStr),
-];
-const ISOLATION_SCHEMA: Schema = &[
-    ("fault", Ty::Str),
-    ("minmax", Ty::F64),
-    ("sensitivity", Ty::F64),
-    ("threshold", Ty::F64),
-    ("isolated", Ty::Bool),
-];
-const ALARM_END_SCHEMA: Schema = &[
-    ("channel", Ty::Str),
-    ("k", Ty::U64),
-    ("t", Ty::OptF64),
-    ("onset", Ty::U64),
-    ("duration", Ty::U64),
-    ("peak_glr", Ty::F64),
-];
-const DIAGNOSIS_SCHEMA: Schema = &[
-    ("channel", Ty::Str),
-    ("k", Ty::U64),
-    ("from", Ty::U64),
-    ("to", Ty::U64),
-    ("support", Ty::VecStr),
-    ("estimate", Ty::MapF64),
-    ("lambda", Ty::F64),
-    ("plateau", Ty::Pair),
-    ("residual", Ty::Str),
-    ("path_support_sizes", Ty::VecUsize),
-    ("faults", Ty::VecStr),
-    ("path_lambda", Ty::VecF64),
-    ("path_coefficients", Ty::MatrixF64),
-];
-const ERROR_SCHEMA: Schema = &[
-    ("channel", Ty::Str),
-    ("k", Ty::OptU64),
-    ("code", Ty::Code),
-    ("message", Ty::Str),
-    ("stage", Ty::Stage),
-];
-
-const CONSISTENCY_SCHEMA: Schema = &[
-    ("channel", Ty::Str),
-    ("k", Ty::U64),
-    ("t", Ty::OptF64),
-    ("state", Ty::Str),
-    ("nis_mean", Ty::F64),
-    ("expected", Ty::F64),
-    ("band", Ty::Pair),
-    ("window", Ty::U64),
-];
-
-fn schema(kind: &str) -> Option<Schema> {
-    match kind {
-        "consistency" => Some(CONSISTENCY_SCHEMA),
-        "stat" => Some(STAT_SCHEMA),
-        "alarm" => Some(ALARM_SCHEMA),
-        "isolation" => Some(ISOLATION_UPDATE_SCHEMA),
-        "alarm_end" => Some(ALARM_END_SCHEMA),
-        "diagnosis" => Some(DIAGNOSIS_SCHEMA),
-        "error" => Some(ERROR_SCHEMA),
-        _ => None,
-    }
-}
-
 type Located = (String, DecodeErrorKind);
 
+/// The first field of `obj` that its record's schema refuses, and why.
 fn locate(obj: &Map<String, Value>) -> Option<Located> {
-    const EXPECT_KIND: &str =
-        "one of stat, alarm, isolation, alarm_end, diagnosis, error, consistency";
-    let kind = match obj.get("type") {
+    let schema = match obj.get("type") {
         None => return Some(("type".to_owned(), DecodeErrorKind::MissingField)),
-        Some(Value::String(kind)) => kind,
-        Some(_) => return Some(("type".to_owned(), wrong_type(EXPECT_KIND))),
+        Some(Value::String(kind)) => record_schema(kind),
+        Some(_) => None,
     };
-    let Some(fields) = schema(kind) else {
-        return Some(("type".to_owned(), wrong_type(EXPECT_KIND)));
-    };
-    locate_in(obj, "", fields)
+    match schema {
+        Some(schema) => locate_in(obj, "", schema),
+        None => {
+            let expected = format!("one of {}", RECORD_KINDS.join(", "));
+            Some(("type".to_owned(), wrong_type(&expected)))
+        }
+    }
 }
 
-fn locate_in(obj: &Map<String, Value>, prefix: &str, fields: Schema) -> Option<Located> {
-    fields.iter().find_map(|&(name, ty)| {
-        let path = format!("{prefix}{name}");
-        match obj.get(name) {
-            None | Some(Value::Null) if ty.optional() => None,
-            None => Some((path, DecodeErrorKind::MissingField)),
-            Some(value) => locate_value(value, path, ty),
-        }
+/// The first property of `obj` that the object schema `schema` refuses, else the first it
+/// requires that is missing (in declaration order, as serde reports it), each named
+/// `prefix` + its name.
+fn locate_in(obj: &Map<String, Value>, prefix: &str, schema: &Value) -> Option<Located> {
+    let properties = schema["properties"].as_object()?;
+    let refused = properties.iter().find_map(|(name, property)| {
+        let value = obj.get(name)?;
+        locate_value(value, format!("{prefix}{name}"), property)
+    });
+    refused.or_else(|| {
+        let required = schema["required"].as_array()?;
+        let missing = required
+            .iter()
+            .filter_map(Value::as_str)
+            .find(|name| !obj.contains_key(*name))?;
+        Some((format!("{prefix}{missing}"), DecodeErrorKind::MissingField))
     })
 }
 
-fn locate_value(value: &Value, path: String, ty: Ty) -> Option<Located> {
-    let ok = match ty {
-        Ty::U64 | Ty::OptU64 => value.as_u64().is_some(),
-        Ty::Usize => value.as_u64().is_some_and(|v| usize::try_from(v).is_ok()),
-        Ty::F64 | Ty::OptF64 => value.is_number(),
-        Ty::Str => value.is_string(),
-        Ty::Bool => value.is_boolean(),
-        Ty::VecF64 => return locate_elements(value, path, ty, Ty::F64),
-        Ty::MatrixF64 => return locate_elements(value, path, ty, Ty::VecF64),
-        Ty::VecUsize => return locate_elements(value, path, ty, Ty::Usize),
-        Ty::VecStr => return locate_elements(value, path, ty, Ty::Str),
-        Ty::Pair => match value.as_array() {
-            Some(pair) if pair.len() != 2 => {
+/// Where in `value` (at `path`) the schema `schema` refuses it: `path` itself, or an item
+/// or property of it.
+fn locate_value(value: &Value, path: String, schema: &Value) -> Option<Located> {
+    if value.is_null() && allows(schema, "null") {
+        return None;
+    }
+    let refused = || Some((path.clone(), wrong_type(&expected(schema))));
+    match value {
+        Value::Array(items) if allows(schema, "array") => {
+            let len = |key: &str| schema[key].as_u64().and_then(|n| usize::try_from(n).ok());
+            if let (Some(min), Some(max)) = (len("minItems"), len("maxItems"))
+                && min == max
+                && items.len() != min
+            {
                 return Some((
                     path,
                     DecodeErrorKind::WrongDimension {
-                        expected: 2,
-                        got: pair.len(),
+                        expected: min,
+                        got: items.len(),
                     },
                 ));
             }
-            _ => return locate_elements(value, path, ty, Ty::F64),
+            items
+                .iter()
+                .enumerate()
+                .find_map(|(i, item)| locate_value(item, format!("{path}[{i}]"), &schema["items"]))
+        }
+        Value::Object(map) if allows(schema, "object") => match &schema["additionalProperties"] {
+            entry @ Value::Object(_) => map
+                .iter()
+                .find_map(|(name, v)| locate_value(v, format!("{path}.{name}"), entry)),
+            _ => locate_in(map, &format!("{path}."), schema),
         },
-        Ty::MapF64 => match value.as_object() {
-            Some(map) => {
-                return map
-                    .iter()
-                    .find_map(|(name, v)| locate_value(v, format!("{path}.{name}"), Ty::F64));
-            }
-            None => false,
+        Value::Number(n) if allows(schema, "integer") => {
+            let fits = match schema["format"].as_str() {
+                Some("uint") => n.as_u64().is_some_and(|v| usize::try_from(v).is_ok()),
+                _ if schema["minimum"] == 0 => n.is_u64(),
+                _ => n.is_u64() || n.is_i64(),
+            };
+            if fits { None } else { refused() }
+        }
+        Value::Number(_) if allows(schema, "number") => None,
+        Value::Bool(_) if allows(schema, "boolean") => None,
+        Value::String(_) if allows(schema, "string") => match schema["enum"].as_array() {
+            Some(values) if !values.contains(value) => refused(),
+            _ => None,
         },
-        Ty::Isolation => match value.as_array() {
-            Some(items) => {
-                return items
-                    .iter()
-                    .enumerate()
-                    .find_map(|(i, item)| match item.as_object() {
-                        Some(obj) => locate_in(obj, &format!("{path}[{i}]."), ISOLATION_SCHEMA),
-                        None => Some((format!("{path}[{i}]"), wrong_type("an isolation object"))),
-                    });
-            }
-            None => false,
-        },
-        Ty::Code => ErrorCode::deserialize(value).is_ok(),
-        Ty::Stage => Stage::deserialize(value).is_ok(),
-    };
-    (!ok).then(|| (path, wrong_type(ty.expected())))
+        _ => refused(),
+    }
 }
 
-fn locate_elements(value: &Value, path: String, ty: Ty, element: Ty) -> Option<Located> {
-    match value.as_array() {
-        Some(items) => items
-            .iter()
-            .enumerate()
-            .find_map(|(i, item)| locate_value(item, format!("{path}[{i}]"), element)),
-        None => Some((path, wrong_type(ty.expected()))),
+/// Whether `schema`'s `type` (one name or a list) includes `ty`.
+fn allows(schema: &Value, ty: &str) -> bool {
+    match &schema["type"] {
+        Value::String(t) => t == ty,
+        Value::Array(types) => types.iter().any(|t| t == ty),
+        _ => false,
+    }
+}
+
+/// What `schema` accepts, in words: "a number or null", "an array of 2 numbers", …
+fn expected(schema: &Value) -> String {
+    let text = noun(schema, false);
+    if allows(schema, "null") {
+        format!("{text} or null")
+    } else {
+        text
+    }
+}
+
+/// The kind of value `schema` accepts besides `null`, as one (`a number`) or many
+/// (`numbers`).
+fn noun(schema: &Value, plural: bool) -> String {
+    let pick = |one: &str, many: &str| if plural { many } else { one }.to_owned();
+    if let Some(values) = schema["enum"].as_array() {
+        let names: Vec<&str> = values.iter().filter_map(Value::as_str).collect();
+        return format!("one of {}", names.join(", "));
+    }
+    let ty = ["integer", "number", "string", "boolean", "array", "object"]
+        .into_iter()
+        .find(|ty| allows(schema, ty));
+    match ty {
+        Some("integer") if schema["minimum"] == 0 => {
+            pick("a non-negative integer", "non-negative integers")
+        }
+        Some("integer") => pick("an integer", "integers"),
+        Some("number") => pick("a number", "numbers"),
+        Some("string") => pick("a string", "strings"),
+        Some("boolean") => pick("a boolean", "booleans"),
+        Some("array") => {
+            let items = noun(&schema["items"], true);
+            match (schema["minItems"].as_u64(), schema["maxItems"].as_u64()) {
+                (Some(min), Some(max)) if min == max => {
+                    format!("{} {min} {items}", pick("an array of", "arrays of"))
+                }
+                _ => format!("{} {items}", pick("an array of", "arrays of")),
+            }
+        }
+        Some(_) if schema["additionalProperties"].is_object() => format!(
+            "{} {}",
+            pick("an object of", "objects of"),
+            noun(&schema["additionalProperties"], true)
+        ),
+        Some(_) => pick("an object", "objects"),
+        None => pick("a valid value", "valid values"),
     }
 }
 
@@ -1413,47 +1354,90 @@ mod tests {
         );
     }
 
-    /// The error-locating schema lists exactly the fields each record serializes, and
-    /// a wrong-typed value in any of them is located there.
+    /// Each record's JSON Schema lists exactly the fields it serializes, requires those
+    /// that are not `Option`s (which may be absent or `null`), and locates a wrongly typed
+    /// or missing value in any of them.
     #[test]
     fn schema_matches_serialized_fields() {
         for record in all_records() {
+            let kind = record.kind_str();
             let Value::Object(obj) = serde_json::from_str::<Value>(&json(&record)).unwrap() else {
                 panic!("record is not an object");
             };
-            let fields = schema(record.kind_str()).unwrap();
-            let mut want: Vec<&str> = fields.iter().map(|(name, _)| *name).collect();
-            let mut got: Vec<&str> = obj
-                .keys()
-                .map(String::as_str)
-                .filter(|k| *k != "type")
-                .collect();
+            let schema = record_schema(kind).unwrap();
+            assert_eq!(schema["properties"]["type"]["const"], kind);
+            let properties = schema["properties"].as_object().unwrap();
+            let mut want: Vec<&String> = properties.keys().collect();
+            let mut got: Vec<&String> = obj.keys().collect();
             want.sort_unstable();
             got.sort_unstable();
-            assert_eq!(got, want, "{}", record.kind_str());
+            assert_eq!(got, want, "{kind}");
 
-            for &(name, ty) in fields {
+            for (name, property) in properties.iter().filter(|(name, _)| *name != "type") {
+                let required = schema["required"]
+                    .as_array()
+                    .unwrap()
+                    .contains(&Value::from(name.as_str()));
+                assert_eq!(required, !allows(property, "null"), "{kind}.{name}");
+
                 let mut bad = obj.clone();
-                let wrong = if ty == Ty::Str {
+                let wrong = if allows(property, "string") {
                     Value::from(7)
                 } else {
                     Value::from("x")
                 };
-                bad.insert(name.to_owned(), wrong);
+                bad.insert(name.clone(), wrong);
                 let text = Value::Object(bad).to_string();
                 let err = decode_record(text.as_bytes()).unwrap_err();
-                assert_eq!(err.field.as_deref(), Some(name), "{text}: {err}");
+                assert_eq!(err.field.as_deref(), Some(name.as_str()), "{text}: {err}");
                 assert_eq!(err.code(), ErrorCode::WrongType);
 
-                if !ty.optional() {
-                    let mut missing = obj.clone();
-                    missing.remove(name);
-                    let text = Value::Object(missing).to_string();
-                    let err = decode_record(text.as_bytes()).unwrap_err();
-                    assert_eq!(err.field.as_deref(), Some(name), "{text}: {err}");
-                    assert_eq!(err.code(), ErrorCode::MissingField);
+                let mut missing = obj.clone();
+                missing.remove(name);
+                let text = Value::Object(missing).to_string();
+                match decode_record(text.as_bytes()) {
+                    Err(err) => {
+                        assert!(required, "{text}: {err}");
+                        assert_eq!(err.field.as_deref(), Some(name.as_str()), "{text}: {err}");
+                        assert_eq!(err.code(), ErrorCode::MissingField);
+                    }
+                    Ok(_) => assert!(!required, "{text}"),
                 }
             }
+        }
+    }
+
+    /// A wrongly typed value is reported with what its field accepts, in words.
+    #[test]
+    fn decode_errors_say_what_the_field_expects() {
+        for (record, field, expected) in [
+            (Record::from(diagnosis()), "k", "a non-negative integer"),
+            (diagnosis().into(), "plateau", "an array of 2 numbers"),
+            (
+                diagnosis().into(),
+                "path_coefficients",
+                "an array of arrays of numbers",
+            ),
+            (diagnosis().into(), "estimate", "an object of numbers"),
+            (diagnosis().into(), "residual", "one of kalman, kitanidis"),
+            (alarm().into(), "t", "a number or null"),
+            (alarm().into(), "isolation", "an array of objects"),
+            (alarm().into(), "faults", "an array of strings"),
+            (
+                error().into(),
+                "stage",
+                "one of receiving, processing, sending",
+            ),
+        ] {
+            let mut value: Value = serde_json::from_str(&json(&record)).unwrap();
+            value[field] = Value::from(true);
+            let err = decode_record(value.to_string().as_bytes()).unwrap_err();
+            assert_eq!(
+                err.to_string(),
+                format!(
+                    r#"channel "pump3": field {field} has the wrong type: expected {expected}"#
+                )
+            );
         }
     }
 

@@ -14,6 +14,7 @@
 use std::borrow::Cow;
 use std::fmt;
 
+use schemars::JsonSchema;
 use serde::Serialize;
 use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, SeqAccess, Visitor};
 
@@ -299,17 +300,31 @@ pub(crate) fn write_json<T: Serialize + ?Sized>(
     })
 }
 
-/// The serialized form of a [`Sample`]. Private, so that nothing serializes a sample
-/// without the finiteness check (serde_json would write NaN as `null`).
-#[derive(Serialize)]
-struct SampleJson<'a> {
+/// A plant sample, as the monitor decoded it (docs/WIRE.md).
+//
+// The serialized form of a `Sample`. Private, so that nothing serializes a sample without
+// the finiteness check (serde_json would write NaN as `null`). Its JSON Schema
+// (`sample_schema`) describes what is written, which never holds `null`: hence the
+// serialize contract there and `with` below; `deny_unknown_fields` as `decode_samples`
+// refuses unknown fields.
+#[derive(Serialize, JsonSchema)]
+#[schemars(title = "glrmon sample", deny_unknown_fields)]
+pub(crate) struct SampleJson<'a> {
+    /// Sample index k; absent when the publisher gave none (the monitor then numbers
+    /// samples from 0 in order of arrival).
     #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "u64")]
     k: Option<u64>,
+    /// Time in seconds (any epoch; carried through to results, never used in the math).
     #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "f64")]
     t: Option<f64>,
+    /// Known inputs u_k; absent when the model has none.
     #[serde(skip_serializing_if = "<[f64]>::is_empty")]
     u: &'a [f64],
+    /// Measured outputs y_k.
     y: &'a [f64],
+    /// Scheduling or other known exogenous signals p_k; absent when the model has none.
     #[serde(skip_serializing_if = "<[f64]>::is_empty")]
     p: &'a [f64],
 }
