@@ -1,0 +1,290 @@
+//! A validated channel: its model, fault dictionary, GLR, diagnosis and simulation
+//! settings, as the monitor, the simulator and the tools use them.
+
+use std::fmt;
+
+use glrmon_core::sparse::LassoSettings;
+use glrmon_core::{
+    AlarmSettings, Column, Dims, Fault, FaultDictionary, Lpv, LpvMatrix, ModelError, Onset,
+    SignalScaling, WindowSettings,
+};
+use nalgebra::{DMatrix, DVector};
+
+use crate::expr::{Expr, ExprColumn};
+use crate::{DetectorKind, PayloadFormat};
+
+/// How a fault column is computed.
+#[derive(Debug, Clone)]
+pub(crate) enum ColumnPlan {
+    Zero,
+    Constant(DVector<f64>),
+    InputBias(usize),
+    GainLoss(usize),
+    Exprs(Vec<Expr>),
+}
+
+#[derive(Debug, Clone)]
+pub(crate) struct FaultPlan {
+    pub(crate) name: String,
+    pub(crate) onset: Onset,
+    pub(crate) state: ColumnPlan,
+    pub(crate) output: ColumnPlan,
+}
+
+/// How the detection threshold was set.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ThresholdSource {
+    /// Given explicitly.
+    Explicit,
+    /// χ²(m) upper quantile at α/(w − s) for a per-sample false-alarm probability α.
+    Bonferroni {
+        /// α.
+        false_alarm: f64,
+    },
+    /// χ²(m) upper quantile at α: right for one onset, optimistic for the window.
+    Chi2 {
+        /// α.
+        false_alarm: f64,
+    },
+    /// Found by `glrmon calibrate` on fault-free data.
+    Calibrated {
+        /// What it was calibrated for: a mean number of samples between false-alarm
+        /// episodes, or a fraction of samples above λ.
+        target: glrmon_core::calibration::Target,
+        /// Samples used.
+        samples: u64,
+        /// Episodes at λ on them (for a per-sample target, clusters of exceedances).
+        episodes: u64,
+        /// Samples above λ among them, when recorded.
+        exceedances: Option<u64>,
+        /// 95 % confidence interval of λ.
+        interval: [f64; 2],
+    },
+}
+
+/// PI controller of a simulated channel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Controller {
+    /// Output measured.
+    pub output: usize,
+    /// Input driven.
+    pub input: usize,
+    /// Setpoint.
+    pub setpoint: f64,
+    /// Proportional gain.
+    pub kp: f64,
+    /// Integral gain.
+    pub ki: f64,
+}
+
+/// How `glrmon simulate` drives a channel: expressions of k (random functions allowed).
+#[derive(Debug, Clone, Default)]
+pub struct SimulationPlan {
+    /// U_k, one per input (missing ones are 0).
+    pub inputs: Vec<Expr>,
+    /// p(k), one per signal (missing ones are 0).
+    pub signals: Vec<Expr>,
+    /// d_k entering through E.
+    pub unknown_input: Vec<Expr>,
+    /// Optional PI controller.
+    pub controller: Option<Controller>,
+}
+
+/// The residual generator of sparse diagnosis (Zhang 2021, §III).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ResidualKind {
+    /// The Kalman filter's updated output error ỹ_{k|k} (Zhang 2021, §III-A, eqs. (4)-(7)):
+    /// assumes no unknown input.
+    Kalman,
+    /// The Kitanidis filter's output error ỹ_k (Zhang 2021, §III-B, eqs. (24)-(27)):
+    /// decoupled from the unknown input E d_k; needs E and Assumption (iv).
+    Kitanidis,
+}
+
+impl ResidualKind {
+    /// `"kalman"` or `"kitanidis"`, as in the configuration and the `diagnosis` record.
+    #[must_use]
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            ResidualKind::Kalman => "kalman",
+            ResidualKind::Kitanidis => "kitanidis",
+        }
+    }
+}
+
+impl fmt::Display for ResidualKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Sparse diagnosis settings of a channel (`[channels.diagnosis]`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DiagnosisSettings {
+    /// Whether the monitor runs a diagnosis at every alarm.
+    pub enabled: bool,
+    /// The residual generator.
+    pub residual: ResidualKind,
+    /// Largest number of samples in the regression (`None`: from r̂ to the alarm).
+    pub span: Option<usize>,
+    /// Samples of filter quantities kept for the regression (at least 2).
+    pub history: usize,
+    /// The Lasso path (Zhang 2021, eq. (39)).
+    pub lasso: LassoSettings,
+    /// Level α of the no-fault test before the λ rule, in (0, 1] (1: no test).
+    pub alpha: f64,
+}
+
+/// Default level of the sparse diagnosis's no-fault test: as `glr.isolation_alpha`.
+pub const DEFAULT_DIAGNOSIS_ALPHA: f64 = 0.01;
+
+/// The CSV column names of a channel's inputs, outputs and signals.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Columns {
+    /// The column read into u_i, for each input.
+    pub u: Vec<String>,
+    /// The column read into y_i, for each output.
+    pub y: Vec<String>,
+    /// The column read into p_i, for each scheduling signal.
+    pub p: Vec<String>,
+    /// The names were given (`[channels.columns]`): a file's other columns are skipped.
+    /// Otherwise they are the numbered names and an unknown column is an error.
+    pub named: bool,
+}
+
+impl Columns {
+    /// `u0…u{l−1}`, `y0…`, `p0…`: the default names.
+    #[must_use]
+    pub fn numbered(dims: Dims) -> Self {
+        let names =
+            |prefix: char, count: usize| (0..count).map(|i| format!("{prefix}{i}")).collect();
+        Self {
+            u: names('u', dims.inputs),
+            y: names('y', dims.outputs),
+            p: names('p', dims.signals),
+            named: false,
+        }
+    }
+}
+
+/// A validated channel.
+#[derive(Debug, Clone)]
+pub struct Channel {
+    /// Unique name.
+    pub name: String,
+    /// Input key expression.
+    pub key: String,
+    /// How its payloads are encoded.
+    pub payload: PayloadFormat,
+    /// Sample period in seconds, if given.
+    pub period: Option<f64>,
+    /// Dimensions.
+    pub dims: Dims,
+    /// The model.
+    pub model: Lpv,
+    /// Unknown-input matrix E (n×q, constant or LPV), if given.
+    pub unknown_input: Option<LpvMatrix>,
+    /// Cross-covariance S = E(W_kV_kᵀ) (n×p) of the noises, if given.
+    pub cross_covariance: Option<DMatrix<f64>>,
+    /// Raw plant units → model units (`[channels.scaling]`), applied on intake.
+    pub scaling: Option<SignalScaling>,
+    /// The CSV column names of the signals (`[channels.columns]`).
+    pub columns: Columns,
+    /// X̂_0.
+    pub x0: DVector<f64>,
+    /// P_0.
+    pub p0: DMatrix<f64>,
+    /// GLR window.
+    pub window: WindowSettings,
+    /// Detection threshold and hysteresis.
+    pub alarm: AlarmSettings,
+    /// How the threshold was set.
+    pub threshold_source: ThresholdSource,
+    /// Samples between crossing and isolation.
+    pub isolation_delay: u32,
+    /// Type-I probability of each isolation test.
+    pub isolation_alpha: f64,
+    /// Isolation groups `(name, fault indices)`.
+    pub groups: Vec<(String, Vec<usize>)>,
+    /// Calibrated isolation thresholds by test name (`[channels.glr.calibrated]
+    /// isolation`), replacing the χ² quantile of those tests.
+    pub isolation_thresholds: Vec<(String, f64)>,
+    /// The detection method ([`Channel::detector`] builds it).
+    pub detector_kind: DetectorKind,
+    /// Largest gap filled by predict-only steps.
+    pub max_gap: u64,
+    /// How many indices before the last processed one a sample is refused as late;
+    /// further back is a sequence reset.
+    pub max_reorder: u64,
+    /// Fault names in dictionary order.
+    pub fault_names: Vec<String>,
+    /// Simulation settings.
+    pub simulation: SimulationPlan,
+    /// Sparse diagnosis settings.
+    pub diagnosis: DiagnosisSettings,
+    /// The filter-consistency test, when enabled.
+    pub consistency: Option<glrmon_core::consistency::ConsistencySettings>,
+    pub(crate) faults: Vec<FaultPlan>,
+    /// The configuration path of each fault, in dictionary order (`channels[0] "x":
+    /// faults[1]`, or `… faults[0] (y2)` for an expanded shortcut).
+    pub(crate) fault_paths: Vec<String>,
+}
+
+impl Channel {
+    /// A fresh fault dictionary (expression columns keep per-channel history, so each
+    /// detector or simulator gets its own).
+    ///
+    /// # Errors
+    /// As [`FaultDictionary::new`] (not expected after validation).
+    pub fn dictionary(&self) -> Result<FaultDictionary, ModelError> {
+        let d = self.dims;
+        let column = |plan: &ColumnPlan| match plan {
+            ColumnPlan::Zero => Column::Zero,
+            ColumnPlan::Constant(v) => Column::Constant(v.clone()),
+            ColumnPlan::InputBias(i) => Column::InputBias { input: *i },
+            ColumnPlan::GainLoss(i) => Column::GainLoss { input: *i },
+            ColumnPlan::Exprs(e) => {
+                Column::Custom(Box::new(ExprColumn::new(e.clone(), d.inputs, d.signals)))
+            }
+        };
+        let faults = self
+            .faults
+            .iter()
+            .map(|f| Fault {
+                name: f.name.clone(),
+                onset: f.onset,
+                state: column(&f.state),
+                output: column(&f.output),
+            })
+            .collect();
+        FaultDictionary::new(d, faults)
+    }
+
+    /// The degrees of freedom of the detector's whitened innovation: p, or p − q with
+    /// q unknown inputs, which the detector decouples (Zhang 2021 §III-B).
+    #[must_use]
+    pub fn innovation_dof(&self) -> usize {
+        self.dims.outputs - self.unknown_input.as_ref().map_or(0, |e| e.shape().1)
+    }
+
+    /// The configuration path of fault `index` (dictionary order), e.g.
+    /// `channels[0] "pump3": faults[1]`, for messages that name the field at fault.
+    #[must_use]
+    pub fn fault_path(&self, index: usize) -> Option<&str> {
+        self.fault_paths.get(index).map(String::as_str)
+    }
+
+    /// Whether the model's matrices (and E, if any) are constant (LTI).
+    #[must_use]
+    pub fn model_is_constant(&self) -> bool {
+        use glrmon_core::StateSpace as _;
+        self.model.is_constant()
+            && (self.unknown_input.as_ref()).is_none_or(|e| e.terms().is_empty())
+    }
+
+    /// The onset profiles of the faults, in dictionary order.
+    #[must_use]
+    pub fn onsets(&self) -> Vec<Onset> {
+        self.faults.iter().map(|f| f.onset).collect()
+    }
+}

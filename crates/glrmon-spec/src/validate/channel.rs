@@ -1,0 +1,228 @@
+//! A channel's validation: [`Validator::channel`] runs the steps in order, which is
+//! the order their problems are reported in, and assembles the [`Channel`].
+
+use glrmon_core::consistency::{Consistency, ConsistencySettings};
+use glrmon_core::{AlarmSettings, Dims, Lpv, LpvMatrix, WindowSettings};
+use nalgebra::DMatrix;
+
+use super::model::Matrices;
+use super::{Validator, join};
+use crate::names::validate_name;
+use crate::schema::{self, ChannelSpec, ConsistencySpec, GlrSpec};
+use crate::{Channel, PayloadFormat, limits, locate};
+
+impl Validator {
+    /// A channel, or `None` when it has an error. The model comes first: the shapes
+    /// every later step checks derive from it. The steps up to the fault dictionary
+    /// report together; the memory budget and the model as a whole need them error-free.
+    pub(super) fn channel(&mut self, prefix: &str, spec: &ChannelSpec) -> Option<Channel> {
+        let before = self.errors.len();
+        if let Err(e) = validate_name(&spec.name) {
+            self.error(join(prefix, "name"), e);
+        }
+        self.glr_ranges(prefix, &spec.glr);
+        let m = self.model(prefix, &spec.model)?;
+        let diagnosis = self.diagnosis(prefix, spec, &m.h, m.e.as_ref().map(LpvMatrix::base));
+        let dims = self.dims(prefix, spec.signals, &m)?;
+        let scaling = spec
+            .scaling
+            .as_ref()
+            .and_then(|sc| self.scaling(prefix, sc, dims));
+        let columns = self.columns(prefix, spec.columns.as_ref(), dims);
+        let (faults, fault_paths) =
+            self.faults(prefix, spec, dims, (&m.g, &m.j), scaling.as_ref(), &columns);
+        if self.errors.len() > before {
+            return None;
+        }
+        let (window, history) = (spec.glr.window, diagnosis.history);
+        if !self.memory_budget(prefix, dims, faults.len(), window, history) {
+            return None;
+        }
+        let Matrices {
+            f,
+            g,
+            h,
+            j,
+            q,
+            r,
+            e,
+            cross,
+            p0,
+            x0,
+        } = m;
+        let lpv = match Lpv::new(f, g, h, j, q, r, dims.signals) {
+            Ok(model) => model,
+            Err(err) => {
+                self.error(join(prefix, "model"), err.to_string());
+                return None;
+            }
+        };
+        self.observability(prefix, &lpv);
+        let glr = &spec.glr;
+        let innovation_dof = dims.outputs - e.as_ref().map_or(0, |e| e.shape().1).min(dims.outputs);
+        let detection = self.glr(prefix, glr, &faults, innovation_dof);
+        let simulation = self.simulation(prefix, spec, dims, e.as_ref().map(LpvMatrix::base));
+        let consistency = self.consistency(prefix, spec.consistency, innovation_dof);
+        let warm_up = self.warm_up(prefix, glr);
+        let payload = self.payload(prefix, spec.payload.as_deref());
+        if self.errors.len() > before {
+            return None;
+        }
+        let n = dims.states;
+        Some(Channel {
+            name: spec.name.clone(),
+            payload,
+            key: spec
+                .key
+                .clone()
+                .unwrap_or_else(|| format!("plant/{}", spec.name)),
+            period: spec.period,
+            dims,
+            model: lpv,
+            unknown_input: e,
+            cross_covariance: cross,
+            scaling,
+            columns,
+            x0,
+            p0: p0
+                .map(|m| m.base().clone())
+                .unwrap_or_else(|| DMatrix::identity(n, n)),
+            window: WindowSettings {
+                window: glr.window,
+                min_lag: glr.min_lag,
+                rank_tolerance: detection.rank_tolerance,
+                warm_up,
+                ..WindowSettings::default()
+            },
+            alarm: AlarmSettings {
+                threshold: detection.threshold,
+                hysteresis: glr.hysteresis,
+                clear_samples: glr.clear_samples.max(1),
+            },
+            threshold_source: detection.threshold_source,
+            isolation_delay: glr.isolation_delay.unwrap_or(n as u32),
+            isolation_alpha: glr.isolation_alpha,
+            detector_kind: detection.detector_kind,
+            isolation_thresholds: glr
+                .calibrated
+                .as_ref()
+                .map(|c| c.isolation.iter().map(|(k, v)| (k.clone(), *v)).collect())
+                .unwrap_or_default(),
+            groups: detection.groups,
+            max_gap: glr.max_gap,
+            max_reorder: glr.max_reorder,
+            fault_names: faults.iter().map(|f| f.name.clone()).collect(),
+            fault_paths,
+            simulation,
+            diagnosis,
+            consistency,
+            faults,
+        })
+    }
+
+    /// The memory the channel needs (GLR window bank, diagnosis history) within
+    /// [`limits::CHANNEL_MEMORY_BUDGET`]; over it, the larger of the two is blamed.
+    fn memory_budget(
+        &mut self,
+        prefix: &str,
+        dims: Dims,
+        faults: usize,
+        window: usize,
+        history: usize,
+    ) -> bool {
+        let footprint = limits::ChannelFootprint {
+            states: dims.states,
+            outputs: dims.outputs,
+            inputs: dims.inputs,
+            faults,
+            window,
+            history,
+        };
+        let bytes = footprint.bytes();
+        if bytes > limits::CHANNEL_MEMORY_BUDGET {
+            let (field, what) = if footprint.history_bytes() > footprint.window_bytes() {
+                ("diagnosis.history", "lower diagnosis.history")
+            } else {
+                ("glr.window", "lower glr.window (or use fewer faults)")
+            };
+            self.error(
+                join(prefix, field),
+                format!(
+                    "makes the channel need about {} ({}), more than the budget of {} per \
+                     channel: {what}",
+                    limits::human_bytes(bytes),
+                    footprint.breakdown(),
+                    limits::human_bytes(limits::CHANNEL_MEMORY_BUDGET),
+                ),
+            );
+            return false;
+        }
+        true
+    }
+
+    /// The filter-consistency test (`[channels.consistency]`), when enabled;
+    /// `innovation_dof` is the dimension of the innovation it tests.
+    fn consistency(
+        &mut self,
+        prefix: &str,
+        c: ConsistencySpec,
+        innovation_dof: usize,
+    ) -> Option<ConsistencySettings> {
+        if c.window > limits::MAX_CONSISTENCY_WINDOW {
+            self.error(
+                join(prefix, "consistency.window"),
+                format!(
+                    "{} samples is more than {} (limits::MAX_CONSISTENCY_WINDOW)",
+                    c.window,
+                    limits::MAX_CONSISTENCY_WINDOW
+                ),
+            );
+        }
+        if c.enabled {
+            let settings = ConsistencySettings {
+                window: c.window,
+                alpha: c.alpha,
+            };
+            match Consistency::new(innovation_dof.max(1), settings) {
+                Ok(_) => Some(settings),
+                Err(e) => {
+                    let field = if c.window == 0 { "window" } else { "alpha" };
+                    self.error(join(prefix, &format!("consistency.{field}")), e.to_string());
+                    None
+                }
+            }
+        } else {
+            None
+        }
+    }
+
+    /// `glr.warm_up`: a number of samples, or `"window"` for w.
+    fn warm_up(&mut self, prefix: &str, glr: &GlrSpec) -> u64 {
+        match &glr.warm_up {
+            None => 0,
+            Some(schema::WarmUpSpec::Samples(n)) => *n,
+            Some(schema::WarmUpSpec::Keyword(w)) if w == "window" => glr.window as u64,
+            Some(schema::WarmUpSpec::Keyword(other)) => {
+                self.error(
+                    join(prefix, "glr.warm_up"),
+                    format!("\"{other}\" is not \"window\" or a number of samples"),
+                );
+                0
+            }
+        }
+    }
+
+    /// `payload`: how the channel's samples are encoded.
+    fn payload(&mut self, prefix: &str, name: Option<&str>) -> PayloadFormat {
+        match name {
+            None => PayloadFormat::default(),
+            Some(name) => PayloadFormat::from_name(name).unwrap_or_else(|| {
+                self.error(
+                    join(prefix, "payload"),
+                    locate::not_one_of(name, &PayloadFormat::NAMES),
+                );
+                PayloadFormat::default()
+            }),
+        }
+    }
+}
