@@ -15,8 +15,8 @@
 //! Φ_k) uniform in [−17.3, 17.3], five faults of magnitude 1.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use glrmon_core::kitanidis::{KitanidisResidual, ResidualRow, ResidualSample};
 use glrmon_core::model::{Dims, SystemMatrices};
+use glrmon_core::sparse::residual::{KitanidisResidual, ResidualRow, ResidualSample};
 use glrmon_core::sparse::{GramAccumulator, LassoSettings, diagnose};
 use glrmon_sim::Rng;
 use nalgebra::{DMatrix, DVector};

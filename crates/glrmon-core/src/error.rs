@@ -102,7 +102,7 @@ fn wrong_dimension(field: &str, expected: usize, got: usize) -> String {
 }
 
 /// Threshold of the Assumption (iv) check of Zhang 2021
-/// ([`crate::kitanidis::unknown_input_rank`], reported by
+/// ([`crate::sparse::residual::unknown_input_rank`], reported by
 /// [`SparseError::UnknownInputRank`]): C_{k+1}E_k has full column rank when every
 /// singular value of C_{k+1}Ê_k exceeds 1e-9·‖C_{k+1}‖_F, Ê_k being E_k with its
 /// columns scaled to unit norm (the filter depends only on the range of E_k, and the
@@ -110,7 +110,7 @@ fn wrong_dimension(field: &str, expected: usize, got: usize) -> String {
 pub const UNKNOWN_INPUT_RANK_TOLERANCE: f64 = 1e-9;
 
 /// Errors of the sparse isolation ([`crate::sparse`]) and of its residual generators
-/// ([`crate::kitanidis`]). A failing call leaves the state of its receiver unchanged.
+/// ([`crate::sparse::residual`]). A failing call leaves the state of its receiver unchanged.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum SparseError {
@@ -138,7 +138,7 @@ pub enum SparseError {
     },
     /// Assumption (iv) of Zhang 2021 fails: C_{k+1}E_k does not have full column rank,
     /// so the Kitanidis filter cannot reject the unknown input (see
-    /// [`crate::kitanidis::unknown_input_rank`]).
+    /// [`crate::sparse::residual::unknown_input_rank`]).
     #[error(
         "Assumption (iv) of Zhang 2021 fails: C_{{k+1}}E_k ({outputs}×{unknown_inputs}) has \
          numerical rank {rank}, not full column rank {unknown_inputs} (smallest singular value \

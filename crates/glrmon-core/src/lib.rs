@@ -1,26 +1,21 @@
 #![doc = include_str!("../README.md")]
 #![warn(missing_docs)]
 
+// By concept: the plant's model and faults; the filters that whiten it; the detectors
+// (a residual and its decision statistic) with the GLR's window bank; thresholds and
+// their calibration; isolation (minmax tests, isolability, Fisher information); sparse
+// diagnosis (residual filters and Lasso); alarm episodes.
 pub mod alarm;
-pub mod calibration;
-pub mod consistency;
-pub mod decoupling;
 pub mod detector;
 pub mod error;
-pub mod fault;
-mod glr;
-pub mod information;
-pub mod innovation;
-pub mod isolability;
+pub mod filter;
 pub mod isolation;
-pub mod kitanidis;
 mod linalg;
-mod simd;
-pub use simd::{VectorLevel, fused_multiply_add};
 pub mod model;
-pub mod scaling;
+mod simd;
 pub mod sparse;
 pub mod threshold;
+mod window;
 
 pub use alarm::{AlarmSettings, AlarmState, AlarmTransition};
 pub use detector::{
@@ -28,9 +23,10 @@ pub use detector::{
     WindowSettings,
 };
 pub use error::{ModelError, StepError};
-pub use fault::{Column, ColumnFn, Fault, FaultDictionary, Onset};
-pub use glr::DEFAULT_RANK_TOLERANCE;
-pub use innovation::InnovationFilter;
+pub use filter::innovation::InnovationFilter;
 pub use isolation::{FisherStatistics, TestStatistic};
+pub use model::fault::{Column, ColumnFn, Fault, FaultDictionary, Onset};
+pub use model::scaling::SignalScaling;
 pub use model::{Dims, Lpv, LpvMatrix, Signals, StateSpace, SystemMatrices};
-pub use scaling::SignalScaling;
+pub use simd::{VectorLevel, fused_multiply_add};
+pub use window::DEFAULT_RANK_TOLERANCE;

@@ -5,7 +5,7 @@
 
 use glrmon_core::StepOutput;
 use glrmon_core::alarm::AlarmSettings;
-use glrmon_core::calibration::{calibrate, count_episodes};
+use glrmon_core::threshold::calibration::{calibrate, count_episodes};
 use glrmon_core::threshold::chi2_upper_quantile;
 
 /// l_k (NaN before an onset is admissible) over `n` fault-free samples.

@@ -7,8 +7,10 @@
 //! Exact arithmetic gives exactly equal statistics; floating point gives them to
 //! rounding, so values are compared to 10⁻⁹ relative and decisions for equality.
 
-use glrmon_core::information::window_information;
-use glrmon_core::isolability::{DEFAULT_CORRELATION_LIMIT, IsolabilityReport, isolability};
+use glrmon_core::isolation::information::window_information;
+use glrmon_core::isolation::isolability::{
+    DEFAULT_CORRELATION_LIMIT, IsolabilityReport, isolability,
+};
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{
     Column, ColumnFn, Dims, Fault, FaultDictionary, FisherStatistics, GlrDetector, Onset, Sample,

@@ -12,7 +12,7 @@
 
 use std::path::PathBuf;
 
-use glrmon_core::calibration::{Target, count_episodes};
+use glrmon_core::threshold::calibration::{Target, count_episodes};
 use glrmon_eval::calibrate::{Statistics, calibrate_channel, recorded};
 use glrmon_eval::identify::{IdentifyRequest, identify_channel};
 use glrmon_monitor::Monitor;

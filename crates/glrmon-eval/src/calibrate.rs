@@ -8,8 +8,8 @@
 //! gets a fresh monitor, as a new run of the plant gets a fresh start live, and a NaN
 //! between their l_k keeps an episode from spanning two of them. [`calibrate_channel`]
 //! then finds the detection threshold for a [`Target`] (a mean time between false-alarm
-//! episodes, [`glrmon_core::calibration::calibrate`], or a per-sample false-alarm
-//! fraction, [`glrmon_core::calibration::calibrate_sample_far`]) and each isolation
+//! episodes, [`glrmon_core::threshold::calibration::calibrate`], or a per-sample false-alarm
+//! fraction, [`glrmon_core::threshold::calibration::calibrate_sample_far`]) and each isolation
 //! test's threshold for the channel's type-I probability α ([`calibrate_isolation`]).
 //!
 //! l_k does not depend on the threshold in force: the monitor restarts its detector at a
@@ -18,7 +18,7 @@
 //! is the exception, as its inputs were kept only around alarms: [`recorded`] refuses it.
 //!
 //! ```
-//! use glrmon_core::calibration::Target;
+//! use glrmon_core::threshold::calibration::Target;
 //!
 //! let cfg = glrmon_spec::parse(include_str!("../../../config/demo.toml")).unwrap();
 //! let channel = cfg.pick_channel(Some("unstable")).unwrap();
@@ -31,7 +31,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use glrmon_core::calibration::{
+use glrmon_core::threshold::calibration::{
     Calibration, CalibrationError, Quantile, Target, calibrate, calibrate_sample_far,
     count_episodes, upper_quantile,
 };

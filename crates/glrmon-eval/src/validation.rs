@@ -5,9 +5,9 @@ use std::fmt::Write as _;
 
 use glrmon_core::Onset;
 use glrmon_core::StepError;
-use glrmon_core::calibration::Target;
-use glrmon_core::information::{InformationError, warmup_samples, window_information};
-use glrmon_core::isolability::{DEFAULT_CORRELATION_LIMIT, isolability};
+use glrmon_core::isolation::information::{InformationError, warmup_samples, window_information};
+use glrmon_core::isolation::isolability::{DEFAULT_CORRELATION_LIMIT, isolability};
+use glrmon_core::threshold::calibration::Target;
 use glrmon_spec::{Channel, DetectorKind, ThresholdSource};
 use nalgebra::DMatrix;
 
@@ -314,9 +314,10 @@ fn settings(channel: &Channel) -> String {
     }
     match channel.consistency {
         Some(c) => {
-            let band = glrmon_core::consistency::Consistency::new(channel.innovation_dof(), c)
-                .map(|t| t.band())
-                .unwrap_or((f64::NAN, f64::NAN));
+            let band =
+                glrmon_core::filter::consistency::Consistency::new(channel.innovation_dof(), c)
+                    .map(|t| t.band())
+                    .unwrap_or((f64::NAN, f64::NAN));
             let _ = writeln!(
                 s,
                 "  model consistency: blocks of {} samples, mean of εᵀΣ⁻¹ε expected {} within [{:.3}, {:.3}] (α = {:e})",

@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use glrmon_core::calibration::Target;
+use glrmon_core::threshold::calibration::Target;
 use glrmon_eval::calibrate::{
     CalibrateError, Statistics, calibrate_channel, recorded, recorded_files, simulated, statistics,
 };
@@ -154,7 +154,8 @@ fn a_sample_far_threshold_gives_its_fraction_on_an_independent_run() {
     let fraction = above(c.threshold);
     // The independent run's own band at its measured fraction.
     let check =
-        glrmon_core::calibration::calibrate_sample_far(&independent.glr, fraction, 100).unwrap();
+        glrmon_core::threshold::calibration::calibrate_sample_far(&independent.glr, fraction, 100)
+            .unwrap();
     let band = (
         c.rate_interval.0 - (fraction - check.rate_interval.0),
         c.rate_interval.1 + (check.rate_interval.1 - fraction),
@@ -239,7 +240,7 @@ fn the_statistic_does_not_depend_on_the_threshold_in_force() {
         c.alarm.threshold = threshold;
         let stats = one_run(&c, &samples.iter().collect::<Vec<_>>());
         (
-            glrmon_core::calibration::count_episodes(&stats.glr, c.alarm),
+            glrmon_core::threshold::calibration::count_episodes(&stats.glr, c.alarm),
             stats,
         )
     };

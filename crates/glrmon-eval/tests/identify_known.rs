@@ -6,7 +6,7 @@
 //! rate on fresh fault-free data is the one calibrated for, and sensor and actuator
 //! biases are detected with delays close to the true model's.
 
-use glrmon_core::calibration::{Target, count_episodes};
+use glrmon_core::threshold::calibration::{Target, count_episodes};
 use glrmon_eval::calibrate::{Statistics, calibrate_channel, recorded};
 use glrmon_eval::identify::{IdentifyRequest, identify_channel};
 use glrmon_ident::IdentSettings;

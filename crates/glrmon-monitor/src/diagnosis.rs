@@ -26,7 +26,7 @@
 //! b_j(k − r)Φ̃_k[:, j] (Zhang & Basseville 2014, eqs. (4), (51): step, impulse, ramp;
 //! known profiles from the first sample). [`DiagnosisEngine::diagnose`] therefore
 //! replays the recursion of the residual signature (Zhang 2021, eqs. (7)/(27), with
-//! the output-fault extension derived in [`glrmon_core::kitanidis`])
+//! the output-fault extension derived in [`glrmon_core::sparse::residual`])
 //!
 //! ```text
 //! Υ_{k|k−1} = F_{k−1}Υ_{k−1} + Ψ_{k−1}(r)
@@ -83,7 +83,7 @@
 
 use std::collections::BTreeMap;
 
-use glrmon_core::kitanidis::{
+use glrmon_core::sparse::residual::{
     KalmanResidual, KitanidisResidual, ResidualRow, ResidualSample, residual_weight,
 };
 use glrmon_core::sparse::{self, GramAccumulator, SparseError};

@@ -57,7 +57,7 @@ pub mod diagnosis;
 
 pub use diagnosis::{DiagnosisEngine, DiagnosisError, SpanDiagnosis};
 
-use glrmon_core::consistency::Consistency;
+use glrmon_core::filter::consistency::Consistency;
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{
     AlarmSettings, AlarmState, AlarmTransition, Detector, SignalScaling, StepError, StepOutput,
@@ -258,7 +258,7 @@ impl Monitor {
         self.stat_records = enabled;
     }
 
-    /// Adds the filter-consistency test (see [`glrmon_core::consistency`]): a
+    /// Adds the filter-consistency test (see [`glrmon_core::filter::consistency`]): a
     /// `consistency` record whenever a block's verdict changes.
     #[must_use]
     pub fn with_consistency(mut self, consistency: Consistency) -> Self {

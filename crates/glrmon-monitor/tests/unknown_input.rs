@@ -4,7 +4,7 @@
 //! came at k = 4 with l = 13 400 against λ = 96 and never ended.
 
 use glrmon_core::AlarmSettings;
-use glrmon_core::calibration::{calibrate, count_episodes};
+use glrmon_core::threshold::calibration::{calibrate, count_episodes};
 use glrmon_wire::Record;
 
 /// Example 1's plant, unknown input and noises, with three step faults instead of the 50

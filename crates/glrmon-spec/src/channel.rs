@@ -50,7 +50,7 @@ pub enum ThresholdSource {
     Calibrated {
         /// What it was calibrated for: a mean number of samples between false-alarm
         /// episodes, or a fraction of samples above λ.
-        target: glrmon_core::calibration::Target,
+        target: glrmon_core::threshold::calibration::Target,
         /// Samples used.
         samples: u64,
         /// Episodes at λ on them (for a per-sample target, clusters of exceedances).
@@ -223,7 +223,7 @@ pub struct Channel {
     /// Sparse diagnosis settings.
     pub diagnosis: DiagnosisSettings,
     /// The filter-consistency test, when enabled.
-    pub consistency: Option<glrmon_core::consistency::ConsistencySettings>,
+    pub consistency: Option<glrmon_core::filter::consistency::ConsistencySettings>,
     pub(crate) faults: Vec<FaultPlan>,
     /// The configuration path of each fault, in dictionary order (`channels[0] "x":
     /// faults[1]`, or `… faults[0] (y2)` for an expanded shortcut).

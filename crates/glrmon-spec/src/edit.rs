@@ -3,7 +3,7 @@
 //! blank lines, quoting), and the result is validated before it is returned.
 //!
 //! ```
-//! use glrmon_core::calibration::{Calibration, Target};
+//! use glrmon_core::threshold::calibration::{Calibration, Target};
 //!
 //! let text = r#"# the tank
 //! [[channels]]
@@ -33,7 +33,7 @@
 //! assert_eq!(cfg.channels[0].alarm.threshold, 12.5);
 //! ```
 
-use glrmon_core::calibration::{Calibration, Target};
+use glrmon_core::threshold::calibration::{Calibration, Target};
 use nalgebra::DMatrix;
 
 use crate::SpecErrors;

@@ -2,14 +2,14 @@
 //! between false alarms or a per-sample false-alarm fraction, found on fault-free data
 //! (recordings, each an independent run, or data simulated from the channel's model)
 //! with the channel's own monitor, so that gaps, restarts and the hysteresis count as
-//! they do live. See [`glrmon_core::calibration`].
+//! they do live. See [`glrmon_core::threshold::calibration`].
 
 use std::io::IsTerminal as _;
 use std::path::{Path, PathBuf};
 
 use clap::Args;
 
-use glrmon_core::calibration::{Calibration, MIN_EVENTS, Target};
+use glrmon_core::threshold::calibration::{Calibration, MIN_EVENTS, Target};
 use glrmon_eval::calibrate::{
     CalibrateError, ChannelCalibration, IsolationCalibration, Statistics, calibrate_channel,
 };

@@ -132,8 +132,11 @@ pub(crate) fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     if let Some(e) = &channel.unknown_input
         && channel.diagnosis.residual == ResidualKind::Kitanidis
     {
-        glrmon_core::kitanidis::unknown_input_rank(channel.model.matrices()[2].base(), e.base())
-            .map_err(|e| InvalidInput(format!("channel \"{}\": {e}", channel.name)))?;
+        glrmon_core::sparse::residual::unknown_input_rank(
+            channel.model.matrices()[2].base(),
+            e.base(),
+        )
+        .map_err(|e| InvalidInput(format!("channel \"{}\": {e}", channel.name)))?;
     }
     // First pass: the file's extent, so that the span and the history are known.
     let extent = for_each_sample(&args.input, &channel, |_, _| Ok(true))?

@@ -2,10 +2,10 @@
 //! innovation εᵀΣ⁻¹ε ~ χ²(p − q) under no fault, instead of the windowed GLR.
 
 use crate::error::{ModelError, StepError};
-use crate::fault::FaultDictionary;
-use crate::innovation::InnovationFilter;
+use crate::filter::innovation::InnovationFilter;
 use crate::isolation::FisherStatistics;
 use crate::model::Dims;
+use crate::model::fault::FaultDictionary;
 
 use super::{Detector, GlrDetector, Sample, StepOutput};
 

@@ -5,14 +5,14 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::decoupling::RangeComplement;
 use crate::error::{ModelError, StepError};
-use crate::fault::FaultDictionary;
-use crate::glr::{DEFAULT_RANK_TOLERANCE, StepInputs, WindowBank};
-use crate::innovation::InnovationFilter;
+use crate::filter::decoupling::RangeComplement;
+use crate::filter::innovation::InnovationFilter;
 use crate::isolation::FisherStatistics;
 use crate::linalg::gemm;
+use crate::model::fault::FaultDictionary;
 use crate::model::{Dims, LpvMatrix, Signals, StateSpace, SystemMatrices};
+use crate::window::{DEFAULT_RANK_TOLERANCE, StepInputs, WindowBank};
 
 use super::{Detector, Sample, StepOutput};
 
@@ -64,7 +64,7 @@ impl Default for WindowSettings {
 /// # Examples
 /// ```
 /// use glrmon_core::detector::{GlrDetector, Sample, StepOutput, WindowSettings};
-/// use glrmon_core::fault::{Column, Fault, FaultDictionary, Onset};
+/// use glrmon_core::model::fault::{Column, Fault, FaultDictionary, Onset};
 /// use glrmon_core::model::{Lpv, StateSpace};
 /// use nalgebra::{DMatrix, DVector};
 ///
@@ -274,7 +274,7 @@ impl GlrDetector {
     /// The same detector for a plant with an unknown input E_kd_k (E n×q, constant or
     /// LPV over the scheduling signals): the GLR runs on the innovation decoupled from
     /// d, with the signatures of the Kitanidis filter's Υ̃ recursion (Zhang 2021,
-    /// §III-B, Prop. 2, eq. (27); [`crate::decoupling`]), so that no d_k can raise an
+    /// §III-B, Prop. 2, eq. (27); [`crate::filter::decoupling`]), so that no d_k can raise an
     /// alarm. A state fault's component in range(E_k) cannot be told from d and is
     /// removed; a fault entirely in it has no signature (not detectable). A missing
     /// sample cannot be bridged ([`GlrDetector::predict_only`] refuses it): d moves the
@@ -390,7 +390,7 @@ impl GlrDetector {
     ///
     /// ```
     /// use glrmon_core::detector::{GlrDetector, Sample, StepOutput, WindowSettings};
-    /// use glrmon_core::fault::{Column, Fault, FaultDictionary, Onset};
+    /// use glrmon_core::model::fault::{Column, Fault, FaultDictionary, Onset};
     /// use glrmon_core::model::{Lpv, StateSpace};
     /// use glrmon_core::StepError;
     /// use nalgebra::{DMatrix, DVector};
@@ -514,7 +514,12 @@ impl GlrDetector {
         self.finish_measured(sample);
     }
 
-    fn write_output(&mut self, k: u64, best: Option<crate::glr::WindowMax>, out: &mut StepOutput) {
+    fn write_output(
+        &mut self,
+        k: u64,
+        best: Option<crate::window::WindowMax>,
+        out: &mut StepOutput,
+    ) {
         out.k = k;
         // Withheld during the warm-up (this sample is measured sample input_count + 1).
         let best = best.filter(|_| self.input_count + 1 >= self.settings.warm_up);

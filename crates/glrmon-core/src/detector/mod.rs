@@ -24,10 +24,10 @@ pub use glr::{DEFAULT_STEADY_TOLERANCE, GlrDetector, WindowSettings};
 use nalgebra::DVector;
 
 use crate::error::{ModelError, StepError};
-use crate::fault::FaultDictionary;
-use crate::innovation::InnovationFilter;
+use crate::filter::innovation::InnovationFilter;
 use crate::isolation::FisherStatistics;
 use crate::model::Dims;
+use crate::model::fault::FaultDictionary;
 
 /// A channel's fault detector: the residual generator of a model-based method and the
 /// decision statistic it computes on each sample.

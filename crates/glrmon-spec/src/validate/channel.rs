@@ -1,7 +1,7 @@
 //! A channel's validation: [`Validator::channel`] runs the steps in order, which is
 //! the order their problems are reported in, and assembles the [`Channel`].
 
-use glrmon_core::consistency::{Consistency, ConsistencySettings};
+use glrmon_core::filter::consistency::{Consistency, ConsistencySettings};
 use glrmon_core::{AlarmSettings, Dims, Lpv, LpvMatrix, WindowSettings};
 use nalgebra::DMatrix;
 

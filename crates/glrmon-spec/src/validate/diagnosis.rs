@@ -3,7 +3,7 @@
 //! Lasso path.
 
 use glrmon_core::LpvMatrix;
-use glrmon_core::kitanidis::unknown_input_rank;
+use glrmon_core::sparse::residual::unknown_input_rank;
 use glrmon_core::sparse::{LassoSettings, PlateauScale};
 use nalgebra::DMatrix;
 

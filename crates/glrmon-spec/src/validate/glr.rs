@@ -2,7 +2,7 @@
 //! threshold (explicit, calibrated, or from a false-alarm probability) and the
 //! isolation groups and calibrated isolation thresholds.
 
-use glrmon_core::calibration::Target;
+use glrmon_core::threshold::calibration::Target;
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{DEFAULT_RANK_TOLERANCE, Onset};
 

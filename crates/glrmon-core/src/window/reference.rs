@@ -3,8 +3,8 @@
 use super::lanes::mul_add;
 use super::statistic::quad2;
 use super::{WindowBank, WindowMax, forcing, tri};
-use crate::fault::Onset;
 use crate::linalg::at;
+use crate::model::fault::Onset;
 
 impl WindowBank {
     /// Per-slot profile factors b_j(k − r) at step k, one loop per profile kind so that

@@ -224,7 +224,7 @@ pub enum IsolabilityError {
 /// # Examples
 ///
 /// ```
-/// use glrmon_core::isolability::{isolability, DEFAULT_CORRELATION_LIMIT};
+/// use glrmon_core::isolation::isolability::{isolability, DEFAULT_CORRELATION_LIMIT};
 /// use nalgebra::DMatrix;
 ///
 /// // Three faults; "b" and "c" have nearly proportional signatures (ρ = 0.998),

@@ -58,6 +58,8 @@
 //! cdf(quantile(p)) is only that close to p even though the quantile is within an ulp or
 //! two of the exact one.
 
+pub mod calibration;
+
 use std::f64::consts::{LN_2, PI};
 
 /// ln √(2π).

@@ -1,5 +1,5 @@
 //! The Fisher information of a fault dictionary over one GLR window, measured on a run
-//! of the detector: the input F of the [isolability report](crate::isolability).
+//! of the detector: the input F of the [isolability report](crate::isolation::isolability).
 //!
 //! For onset r and current sample k, Zhang & Basseville 2014, eq. (32):
 //!
@@ -19,7 +19,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::detector::{GlrDetector, Sample, StepOutput};
 use crate::error::StepError;
-use crate::fault::Onset;
+use crate::model::fault::Onset;
 
 /// Samples the detector runs before the window read by [`window_information`], for a
 /// window of w samples: max(5w, 500), enough for the Riccati recursion of a detectable
@@ -143,7 +143,7 @@ where
 mod tests {
     use super::*;
     use crate::detector::WindowSettings;
-    use crate::fault::{Column, Fault, FaultDictionary};
+    use crate::model::fault::{Column, Fault, FaultDictionary};
     use crate::model::{Lpv, StateSpace};
 
     const A: f64 = 0.9;

@@ -71,7 +71,7 @@ pub struct Block {
 ///
 /// # Examples
 /// ```
-/// use glrmon_core::consistency::{Consistency, ConsistencySettings, Verdict};
+/// use glrmon_core::filter::consistency::{Consistency, ConsistencySettings, Verdict};
 /// let mut c = Consistency::new(1, ConsistencySettings { window: 100, alpha: 1e-6 })?;
 /// let mut last = None;
 /// for _ in 0..100 {

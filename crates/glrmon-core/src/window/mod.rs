@@ -65,8 +65,8 @@
 //! paths ([`statistic`]), as is the maximum of eq. (36) ([`argmax`]); [`magnitude`]
 //! computes θ̂ (eq. (34)) at r̂.
 
-use crate::fault::Onset;
 use crate::linalg::at;
+use crate::model::fault::Onset;
 use crate::simd::VectorLevel as Level;
 
 /// Defines `$avx2` and `$avx512`: the method `$body` (an `#[inline(always)]` method of

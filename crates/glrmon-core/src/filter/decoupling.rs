@@ -28,7 +28,7 @@
 //! that error and of new noise, is orthogonal to every earlier z (checked empirically in
 //! the tests). The GLR of the 2014 paper then runs on z_k unchanged, with the
 //! signatures of the 2021 paper's Υ̃ recursion (Prop. 2, eq. (27), with the output-fault
-//! term of [`crate::kitanidis`]) in place of Γ:
+//! term of [`crate::sparse::residual`]) in place of Γ:
 //!
 //! ```text
 //! Γ_{k+1}(r) = F_k(I − K̄_kH_k)Γ_k(r) + Ψ_k(r) − F_kK̄_kΦ_k(r)      (eq. (46) with K̄ for K)
@@ -372,10 +372,10 @@ mod tests {
 
     use crate::StepError;
     use crate::detector::{GlrDetector, Sample, StepOutput, WindowSettings};
-    use crate::fault::{Column, Fault, FaultDictionary, Onset};
-    use crate::innovation::InnovationFilter;
-    use crate::kitanidis::{KitanidisResidual, ResidualRow, ResidualSample};
+    use crate::filter::innovation::InnovationFilter;
+    use crate::model::fault::{Column, Fault, FaultDictionary, Onset};
     use crate::model::{Lpv, LpvMatrix, StateSpace, SystemMatrices};
+    use crate::sparse::residual::{KitanidisResidual, ResidualRow, ResidualSample};
     use crate::sparse::test_rng::Rng;
     use nalgebra::DVector;
 

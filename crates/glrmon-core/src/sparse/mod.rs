@@ -5,7 +5,7 @@
 //! Zhang 2021 (*Dynamic system fault diagnosis under sparseness assumption*, IEEE TSP)
 //! stacks, for samples k = 1, …, N, the residual ỹ_k of a Kalman or Kitanidis filter
 //! and its fault-effect matrix Υ_k^r (p×m, the "residual signature": C_kΥ̃_k in the
-//! paper; see [`crate::kitanidis`]) into (eqs. (36)-(38))
+//! paper; see [`crate::sparse::residual`]) into (eqs. (36)-(38))
 //!
 //! ```text
 //! X = [Υ_1^r; Υ_2^r; …; Υ_N^r],   y = [ỹ_1; ỹ_2; …; ỹ_N],   y = Xθ + e
@@ -35,6 +35,8 @@
 //!
 //! Letters: m is the number of faults (the 2021 paper's p), p the number of outputs
 //! (the 2021 paper's m); see docs/NOTATION.md.
+
+pub mod residual;
 
 use nalgebra::{DMatrix, DVector};
 
@@ -227,7 +229,7 @@ impl GramAccumulator {
 
     /// Adds one weighted sample: (Υ_k^r)ᵀW_kΥ_k^r to XᵀX, (Υ_k^r)ᵀW_kỹ_k to Xᵀy and ỹ_kᵀW_kỹ_k
     /// to yᵀy, with W_k (p×p) symmetric positive semi-definite — e.g. the
-    /// pseudo-inverse of the residual covariance from [`crate::kitanidis`], which
+    /// pseudo-inverse of the residual covariance from [`crate::sparse::residual`], which
     /// whitens the residual (generalized least squares). Not in Zhang 2021, whose
     /// eq. (39) is unweighted ([`GramAccumulator::push`]). W = LLᵀ is equivalent to
     /// pushing the rows LᵀΥ_k^r and Lᵀỹ_k. Allocation-free after the first call with a
@@ -1034,7 +1036,7 @@ pub fn diagnose_tested(
 }
 
 /// Deterministic random numbers for the tests of this module and of
-/// [`crate::kitanidis`]: splitmix64 and Box-Muller.
+/// [`crate::sparse::residual`]: splitmix64 and Box-Muller.
 #[cfg(test)]
 pub(crate) mod test_rng {
     use nalgebra::DMatrix;

@@ -147,7 +147,7 @@ impl Fault {
 ///
 /// # Examples
 /// ```
-/// use glrmon_core::fault::{Column, Fault, FaultDictionary, Onset};
+/// use glrmon_core::model::fault::{Column, Fault, FaultDictionary, Onset};
 /// use glrmon_core::model::Dims;
 /// use nalgebra::DVector;
 /// let dims = Dims { states: 2, inputs: 1, outputs: 1, signals: 0 };

@@ -5,8 +5,8 @@ use super::lanes::Lanes;
 use super::lanes::{Avx2Lanes, Lanes8};
 use super::statistic::{ldl_statistic, quad2};
 use super::{StepInputs, WindowBank, WindowMax, forcing, tri};
-use crate::fault::Onset;
 use crate::linalg::at;
+use crate::model::fault::Onset;
 
 /// The fused step at one vector width: an entry compiled with `$feature` that finds the
 /// kernel of the bank's (n, m, p) (`for_fused_dims!`) and runs it around

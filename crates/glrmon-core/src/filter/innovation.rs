@@ -20,13 +20,13 @@
 //!
 //! With an unknown input E_kd_k ([`InnovationFilter::with_unknown_input`]) the gain is
 //! the Kitanidis gain and the whitening also removes the directions H_kE_{k−1} that d
-//! can reach ([`crate::decoupling`], Zhang 2021 §III-B): the whitened quantities keep p
+//! can reach ([`crate::filter::decoupling`], Zhang 2021 §III-B): the whitened quantities keep p
 //! rows, the first q of them zero.
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::decoupling::Decoupling;
 use crate::error::{ModelError, StepError};
+use crate::filter::decoupling::Decoupling;
 use crate::linalg::{
     Shape, cholesky_in_place, copy_n, gemm, gemv, solve_lower_in_place,
     solve_right_lower_transpose_in_place, symmetrize, with_shape,
@@ -160,7 +160,7 @@ impl InnovationFilter {
     /// The same filter for a plant with an unknown input E_kd_k of `unknown_inputs`
     /// (q) columns: from the second sample on, the gain is Kitanidis' (Zhang 2021, eqs.
     /// (24c)-(24g)) and the whitened innovation has p − q degrees of freedom
-    /// ([`crate::decoupling`]). E_k is given after each time update with
+    /// ([`crate::filter::decoupling`]). E_k is given after each time update with
     /// [`InnovationFilter::set_unknown_input`].
     ///
     /// # Errors
@@ -209,7 +209,7 @@ impl InnovationFilter {
 
     /// x ← W_k x for the `cols` output-fault columns of x (p×cols, Φ_k): L_k⁻¹x, and
     /// with an unknown input the projection that zeroes the directions H_kE_{k−1}
-    /// ([`crate::decoupling`]), as ε_k and H_k are whitened. A column the projection
+    /// ([`crate::filter::decoupling`]), as ε_k and H_k are whitened. A column the projection
     /// leaves below [`crate::error::UNKNOWN_INPUT_RANK_TOLERANCE`] of its norm lies in
     /// those directions and becomes exactly zero (not rounding noise, which the
     /// scale-free rank decisions would count).

@@ -96,6 +96,9 @@
 //!   detection and isolation*, §3.2 (sensitivity tests, statistical rejection/minmax,
 //!   mixed approach).
 
+pub mod information;
+pub mod isolability;
+
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 
 /// Default relative eigenvalue cut-off τ: eigenvalues ≤ τ·λ_max of an equilibrated

@@ -45,7 +45,7 @@
 //! k + 1 needs H_{k+1}E_k (eqs. (24c)-(24g)). The filters start from a prior
 //! X̂_{0|−1} = x̄_0, P_{0|−1} = P̄_0 *for the first sample's state* and update it with
 //! the first measurement (a plain Kalman update: no unknown input precedes the first
-//! sample), like [`crate::innovation::InnovationFilter`]. The paper instead sets
+//! sample), like [`crate::filter::innovation::InnovationFilter`]. The paper instead sets
 //! x̂_{0|0} = x̄_0 without using y_0 and builds the regression from k = 1, …, N: the
 //! recursions are the same, only the initialisation differs (here y_0 is used too,
 //! and its residual also obeys Props. 1-2).
@@ -71,7 +71,7 @@ pub use crate::error::UNKNOWN_INPUT_RANK_TOLERANCE;
 ///
 /// # Examples
 /// ```
-/// use glrmon_core::kitanidis::unknown_input_rank;
+/// use glrmon_core::sparse::residual::unknown_input_rank;
 /// use nalgebra::DMatrix;
 /// // Zhang 2021, Example 1 (eq. (42)): C E = [−1; 0] has rank 1.
 /// let c = DMatrix::from_row_slice(2, 3, &[1.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
@@ -977,7 +977,7 @@ impl KalmanResidual {
 ///
 /// # Examples
 /// ```
-/// use glrmon_core::kitanidis::{KitanidisResidual, ResidualRow, ResidualSample};
+/// use glrmon_core::sparse::residual::{KitanidisResidual, ResidualRow, ResidualSample};
 /// use glrmon_core::model::{Dims, SystemMatrices};
 /// use glrmon_core::sparse::GramAccumulator;
 /// use nalgebra::{DMatrix, DVector};
@@ -1568,7 +1568,7 @@ mod tests {
     }
 
     /// ỹ_{k|k} = R_kΣ_k⁻¹ε_k with ε_k the innovation of the existing
-    /// [`InnovationFilter`](crate::innovation::InnovationFilter); and with s = 0 the
+    /// [`InnovationFilter`](crate::filter::innovation::InnovationFilter); and with s = 0 the
     /// Kitanidis filter is this Kalman filter.
     #[test]
     fn kalman_residual_is_r_sigma_inverse_innovation_and_kitanidis_q0_is_kalman() {
@@ -1581,7 +1581,8 @@ mod tests {
         let mut kal = KalmanResidual::new(sc.x0_mean.clone(), sc.p0.clone(), p, m).unwrap();
         let mut kit = KitanidisResidual::new(sc.x0_mean.clone(), sc.p0.clone(), p, m, 0).unwrap();
         let mut inn =
-            crate::innovation::InnovationFilter::new(sc.x0_mean.clone(), sc.p0.clone(), p).unwrap();
+            crate::filter::innovation::InnovationFilter::new(sc.x0_mean.clone(), sc.p0.clone(), p)
+                .unwrap();
         let (mut r1, mut r2) = (ResidualRow::zeros(p, m), ResidualRow::zeros(p, m));
         for k in 0..steps {
             let s = ResidualSample {
