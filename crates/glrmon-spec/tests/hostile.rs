@@ -335,3 +335,28 @@ mod shapes {
         }
     }
 }
+
+/// A huge F (1e300 with three states) once made validation run forever: the powers
+/// H F^i of the observability check overflowed, and the SVD of a matrix with infinite
+/// entries does not terminate. Validation now returns within seconds, and says it
+/// could not check observability only when even scaled blocks overflow.
+#[test]
+fn a_huge_f_is_validated_in_bounded_time() {
+    for scale in ["1e300", "1e308"] {
+        let text = format!(
+            "[[channels]]\nname = \"c\"\n[channels.model]\n\
+             F = [[{scale}, 1.0, 0.0], [0.0, {scale}, 1.0], [0.0, 0.0, {scale}]]\n\
+             H = [[1.0, 0.0, 0.0]]\nQ = 0.01\nR = 0.04\n\
+             [[channels.faults]]\nkind = \"all_sensors\"\n"
+        );
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send(glrmon_spec::parse(&text).map(|c| c.warnings.len()));
+        });
+        let result = rx.recv_timeout(std::time::Duration::from_secs(60));
+        assert!(
+            result.is_ok(),
+            "F = {scale}: validation did not return in 60 s"
+        );
+    }
+}

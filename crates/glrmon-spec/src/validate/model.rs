@@ -369,12 +369,21 @@ impl Validator {
         let [f, _, h, ..] = model.matrices();
         let (f, h) = (f.base(), h.base());
         let n = f.nrows();
-        let p = h.nrows();
-        let mut o = DMatrix::zeros(p * n, n);
-        let mut block = h.clone();
-        for i in 0..n {
-            o.view_mut((i * p, 0), (p, n)).copy_from(&block);
-            block = &block * f;
+        let mut o = observability_matrix(f, h, false);
+        if !o.iter().all(|x| x.is_finite()) {
+            // The powers of a large F overflow, and an SVD of a matrix with infinite
+            // entries does not terminate: each block H F^i scaled to a largest entry
+            // of 1 has the same rank.
+            o = observability_matrix(f, h, true);
+        }
+        if !o.iter().all(|x| x.is_finite()) {
+            self.warn(
+                join(prefix, "model"),
+                "the observability of (F, H) could not be checked: the products H F^i \
+                 overflow"
+                    .into(),
+            );
+            return;
         }
         let sv = o.singular_values();
         let smax = sv.max();
@@ -388,4 +397,20 @@ impl Validator {
             );
         }
     }
+}
+
+/// [H; HF; …; HF^(n−1)], each block scaled to a largest entry of 1 if `scaled`.
+fn observability_matrix(f: &DMatrix<f64>, h: &DMatrix<f64>, scaled: bool) -> DMatrix<f64> {
+    let (n, p) = (f.nrows(), h.nrows());
+    let mut o = DMatrix::zeros(p * n, n);
+    let mut block = h.clone();
+    for i in 0..n {
+        o.view_mut((i * p, 0), (p, n)).copy_from(&block);
+        block = &block * f;
+        let largest = block.amax();
+        if scaled && largest > 0.0 && largest.is_finite() {
+            block /= largest;
+        }
+    }
+    o
 }
