@@ -22,7 +22,7 @@ pub enum DetectorKind {
 }
 
 impl DetectorKind {
-    /// Every kind, in the order the configuration reference lists them.
+    /// Every kind, in declaration order (a kind's index is its discriminant).
     pub const ALL: [Self; 2] = [Self::Glr, Self::Chi2];
 
     /// The names the configuration accepts, as [`DetectorKind::ALL`].
@@ -31,10 +31,7 @@ impl DetectorKind {
     /// The configuration's name of the kind.
     #[must_use]
     pub fn name(self) -> &'static str {
-        match self {
-            Self::Glr => "glr",
-            Self::Chi2 => "chi2",
-        }
+        Self::NAMES[self as usize]
     }
 
     /// The kind named `name` in a configuration.

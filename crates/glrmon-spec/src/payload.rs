@@ -12,7 +12,7 @@ pub enum PayloadFormat {
 }
 
 impl PayloadFormat {
-    /// Every format.
+    /// Every format, in declaration order (a format's index is its discriminant).
     pub const ALL: [Self; 1] = [Self::Json];
 
     /// The names the configuration accepts, as [`PayloadFormat::ALL`].
@@ -21,9 +21,7 @@ impl PayloadFormat {
     /// The configuration's name of the format.
     #[must_use]
     pub fn name(self) -> &'static str {
-        match self {
-            Self::Json => "json",
-        }
+        Self::NAMES[self as usize]
     }
 
     /// The format named `name` in a configuration.
