@@ -7,6 +7,7 @@ mod key;
 mod record;
 mod sample;
 pub mod status;
+pub mod text;
 
 pub use error::{
     ChannelNameError, ChannelNameErrorKind, DecodeError, DecodeErrorKind, EncodeError,
