@@ -1,10 +1,15 @@
 //! Human-readable one-line rendering of alarms, as `glrmon watch` prints them.
+//!
+//! Every string of a record (channel, fault names, code text, message) may come from any
+//! Zenoh peer, so each passes through [`Escaped`]: a line is always one line, and never
+//! drives the terminal.
 
 use std::fmt::Write as _;
 use std::sync::OnceLock;
 
 use glrmon_report::clock::{Zone, format_time, is_wall_clock};
 
+use glrmon_wire::text::Escaped;
 use glrmon_wire::{
     Alarm, AlarmEnd, Consistency, Diagnosis, ErrorRecord, IsolationResult, IsolationUpdate, Record,
 };
@@ -32,10 +37,10 @@ const MAX_LISTED: usize = 5;
 /// the others with the largest minmax statistics, up to [`MAX_LISTED`] in all, and
 /// says how many it left out.
 fn isolation_fields(isolation: &[IsolationResult], faults: &[String], magnitude: &[f64]) -> String {
-    let isolated: Vec<&str> = isolation
+    let isolated: Vec<String> = isolation
         .iter()
         .filter(|i| i.isolated)
-        .map(|i| i.fault.as_str())
+        .map(|i| Escaped(&i.fault).to_string())
         .collect();
     let mut listed: Vec<usize> = (0..faults.len().min(magnitude.len())).collect();
     let mut tests: Vec<&IsolationResult> = isolation.iter().collect();
@@ -57,7 +62,12 @@ fn isolation_fields(isolation: &[IsolationResult], faults: &[String], magnitude:
     let mut mag = String::new();
     for (n, &i) in listed.iter().enumerate() {
         let sep = if n == 0 { "" } else { ", " };
-        let _ = write!(mag, "{sep}{} {}", faults[i], self::magnitude(magnitude[i]));
+        let _ = write!(
+            mag,
+            "{sep}{} {}",
+            Escaped(&faults[i]),
+            self::magnitude(magnitude[i])
+        );
     }
     let mut minmax = String::new();
     for (n, t) in tests.iter().enumerate() {
@@ -65,7 +75,9 @@ fn isolation_fields(isolation: &[IsolationResult], faults: &[String], magnitude:
         let _ = write!(
             minmax,
             "{sep}{} {:.1}/{:.1}",
-            t.fault, t.minmax, t.threshold
+            Escaped(&t.fault),
+            t.minmax,
+            t.threshold
         );
     }
     let more = if left_out > 0 {
@@ -85,7 +97,7 @@ fn alarm_line(a: &Alarm) -> String {
         .map_or_else(String::new, |u| format!(" update_k={u}"));
     format!(
         "ALARM {} k={} onset={} glr={:.1} (threshold {:.1}) {}{update}{}",
-        a.channel,
+        Escaped(&a.channel),
         a.k,
         a.onset,
         a.glr,
@@ -98,7 +110,7 @@ fn alarm_line(a: &Alarm) -> String {
 fn update_line(u: &IsolationUpdate) -> String {
     format!(
         "ISOL  {} k={} alarm_k={} onset={} glr={:.1} (threshold {:.1}) {}{}",
-        u.channel,
+        Escaped(&u.channel),
         u.k,
         u.alarm_k,
         u.onset,
@@ -112,7 +124,7 @@ fn update_line(u: &IsolationUpdate) -> String {
 fn end_line(e: &AlarmEnd) -> String {
     format!(
         "END   {} k={} onset={} duration={} peak_glr={:.1}{}",
-        e.channel,
+        Escaped(&e.channel),
         e.k,
         e.onset,
         e.duration,
@@ -125,8 +137,9 @@ fn diagnosis_line(d: &Diagnosis) -> String {
     let est: Vec<String> = d
         .estimate
         .iter()
-        .map(|(k, v)| format!("{k} {v:.3}"))
+        .map(|(k, v)| format!("{} {v:.3}", Escaped(k)))
         .collect();
+    let support: Vec<String> = d.support.iter().map(|f| Escaped(f).to_string()).collect();
     // An empty support is the diagnosis's "no fault" (the χ² test of θ = 0).
     let none = if d.support.is_empty() {
         " (no fault)"
@@ -135,12 +148,12 @@ fn diagnosis_line(d: &Diagnosis) -> String {
     };
     format!(
         "DIAG  {} k={} span={}..{} residual={} support=[{}]{none} estimate=[{}] lambda={:.3e}",
-        d.channel,
+        Escaped(&d.channel),
         d.k,
         d.from,
         d.to,
-        d.residual,
-        d.support.join(", "),
+        Escaped(&d.residual),
+        support.join(", "),
         est.join(", "),
         d.lambda
     )
@@ -149,9 +162,9 @@ fn diagnosis_line(d: &Diagnosis) -> String {
 fn consistency_line(c: &Consistency) -> String {
     format!(
         "MODEL {} k={} consistency={} nis_mean={:.3} band=[{:.3}, {:.3}] expected={} window={}{}",
-        c.channel,
+        Escaped(&c.channel),
         c.k,
-        c.state,
+        Escaped(&c.state),
         c.nis_mean,
         c.band[0],
         c.band[1],
@@ -165,9 +178,9 @@ fn error_line(e: &ErrorRecord) -> String {
     let k = e.k.map_or_else(|| "-".to_owned(), |k| k.to_string());
     format!(
         "ERROR {} k={k} {}: {}",
-        e.channel,
+        Escaped(&e.channel),
         e.code.as_str(),
-        e.message
+        Escaped(&e.message)
     )
 }
 
@@ -316,5 +329,40 @@ mod tests {
              (+26 more faults: --json lists all) t=2026-12-02T06:09:06.296Z"
         );
         assert!(text.len() < 400, "{} characters", text.len());
+    }
+
+    /// A forged record from any peer: its channel, fault names and message reach the
+    /// line only as visible escapes, so the line stays one line and sends nothing to the
+    /// terminal.
+    #[test]
+    fn hostile_strings_of_a_record_are_escaped() {
+        let a = Alarm {
+            channel: "p\u{1b}]0;pwned\u{7}".into(),
+            k: 1,
+            t: None,
+            glr: 30.0,
+            threshold: 20.0,
+            onset: 1,
+            magnitude: vec![1.0],
+            isolation: Vec::new(),
+            faults: vec!["leak\n2026-12-03T10:00:00Z  INFO ALARM pump3".into()],
+            update_k: None,
+        };
+        let text = line(&Record::Alarm(a)).unwrap();
+        assert_eq!(
+            text,
+            r"ALARM p\x1b]0;pwned\x07 k=1 onset=1 glr=30.0 (threshold 20.0) isolated=[] magnitude=[leak\n2026-12-03T10:00:00Z  INFO ALARM pump3 1.000] minmax=[]"
+        );
+        let e = ErrorRecord {
+            channel: "\u{202e}pmup".into(),
+            k: None,
+            code: glrmon_wire::ErrorCode::UnknownField,
+            message: "field \u{1b}[2J\r is not a field".into(),
+            stage: glrmon_wire::Stage::Receiving,
+        };
+        assert_eq!(
+            line(&Record::Error(e)).unwrap(),
+            r"ERROR \u{202e}pmup k=- unknown_field: field \x1b[2J\r is not a field"
+        );
     }
 }
