@@ -5,8 +5,11 @@ use std::fmt::Write as _;
 
 use nalgebra::{DMatrix, DVector};
 
+use glrmon_core::threshold::chi2_quantile;
+
 use crate::data::{Experiment, PreprocessSettings, Scaling, Warning, preprocess};
 use crate::error::IdentError;
+use crate::feedback::{DEFAULT_FEEDBACK_LAGS, DEFAULT_FEEDBACK_LEVEL, FeedbackTest, feedback_test};
 use crate::model::InnovationModel;
 use crate::pbsid::Pbsid;
 use crate::subspace::{Subspace, min_samples};
@@ -43,9 +46,18 @@ pub enum Criterion {
 /// 1034–1048), at the price of a truncation bias of order ‖(A − KC)^p‖ for past window p.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Method {
+    /// The data decide: [`feedback_test`] (a Granger test of y → u at
+    /// [`IdentSettings::feedback_level`]) on the preprocessed experiments; feedback →
+    /// [`Method::Pbsid`], none → [`Method::Moesp`]. When PBSID refuses the data (too
+    /// short for its past window, or an input without excitation besides the feedback),
+    /// PO-MOESP is used and [`MethodChoice::fallback`] says why. The default: a user
+    /// rarely knows whether a plant's recordings were taken in closed loop, and
+    /// PO-MOESP's model of closed-loop data is biased (larger, coloured innovations,
+    /// false alarms above the calibrated rate).
+    #[default]
+    Auto,
     /// PO-MOESP ([`Subspace`]; Verhaegen 1994, Van Overschee & De Moor 1996 ch. 4):
     /// open-loop data (inputs independent of the noise).
-    #[default]
     Moesp,
     /// Predictor-based subspace identification, PBSID-opt ([`Pbsid`]; Chiuso 2007, §5;
     /// van der Veen et al. 2013, §4.3): the choice for data recorded under feedback
@@ -57,10 +69,116 @@ pub enum Method {
     /// noise-free linear controller of low order makes it a linear function of the past
     /// window, and [`Pbsid::new`] refuses the collinear data (an error, not a wrong model).
     ///
-    /// Not the default: on the open-loop tests it is as accurate as PO-MOESP, but its
+    /// Not chosen for open-loop data: there it is as accurate as PO-MOESP, but its
     /// default past window (20) needs more samples per experiment (2p = 40 instead of
     /// 2i = 20), and it is about 1.7× slower on wide systems (22 outputs, 9 inputs).
     Pbsid,
+}
+
+impl Method {
+    /// The method's name as the command line spells it.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Moesp => "moesp",
+            Self::Pbsid => "pbsid",
+        }
+    }
+
+    /// The method's name in a sentence.
+    #[must_use]
+    pub fn title(self) -> &'static str {
+        match self {
+            Self::Auto => "automatic",
+            Self::Moesp => "PO-MOESP",
+            Self::Pbsid => "PBSID",
+        }
+    }
+}
+
+/// Which method identified the model, and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MethodChoice {
+    /// What the settings asked for.
+    pub requested: Method,
+    /// The method used ([`Method::Moesp`] or [`Method::Pbsid`]).
+    pub used: Method,
+    /// The feedback test, run when [`Method::Auto`] was asked for and the data have
+    /// inputs that their own past does not predict exactly.
+    pub feedback: Option<FeedbackTest>,
+    /// Why PBSID was not used although the test found feedback (its refusal).
+    pub fallback: Option<String>,
+}
+
+impl MethodChoice {
+    /// The choice and its reason in one line; `inputs` names the kept inputs (index
+    /// `i` otherwise), e.g. `PBSID (closed loop): past outputs predict the inputs,
+    /// Granger test χ²(60) = 812.4, p = 2.1e-130 < 0.01 (most: FIC101, p = 1e-140); PBSID
+    /// is consistent under feedback, PO-MOESP is not`.
+    #[must_use]
+    pub fn line(&self, inputs: &[String]) -> String {
+        let name = |i: usize| {
+            inputs
+                .get(i)
+                .cloned()
+                .unwrap_or_else(|| format!("input {i}"))
+        };
+        if self.requested != Method::Auto {
+            return format!("{}, as requested", self.used.title());
+        }
+        let Some(t) = &self.feedback else {
+            return if inputs.is_empty() {
+                "PO-MOESP: no input, so no feedback to test (a time series)".into()
+            } else {
+                "PO-MOESP: every input is predicted exactly by its own past (deterministic \
+                 signals), feedback cannot be tested"
+                    .into()
+            };
+        };
+        let test = format!(
+            "Granger test of y → u, {} lags: χ²({}) = {:.1}, p = {}",
+            t.lags,
+            t.dof,
+            t.statistic,
+            fmt_p(t.p_value)
+        );
+        if t.feedback() {
+            let most = t
+                .strongest()
+                .map(|(i, p)| format!(" (most: {}, p = {})", name(i), fmt_p(p)))
+                .unwrap_or_default();
+            match &self.fallback {
+                None => format!(
+                    "PBSID (closed loop): past outputs predict the inputs, {test} < {}{most}; \
+                     PBSID is consistent under feedback, PO-MOESP is not",
+                    t.level
+                ),
+                Some(why) => format!(
+                    "PO-MOESP although the data look closed-loop ({test} < {}{most}): PBSID \
+                     refused them ({why}); the model may be biased by the feedback",
+                    t.level
+                ),
+            }
+        } else {
+            format!(
+                "PO-MOESP (open loop): past outputs do not predict the inputs, {test} ≥ {}",
+                t.level
+            )
+        }
+    }
+}
+
+/// A p-value for a sentence: 3 significant digits, scientific below 0.001.
+#[must_use]
+pub fn fmt_p(p: f64) -> String {
+    if p == 0.0 {
+        "0 (below 1e-300)".into()
+    } else if p < 1e-3 {
+        format!("{p:.1e}")
+    } else {
+        format!("{p:.3}")
+    }
 }
 
 /// Settings of [`identify`].
@@ -68,8 +186,18 @@ pub enum Method {
 pub struct IdentSettings {
     /// Preprocessing (detrend, constant-column tolerance).
     pub preprocess: PreprocessSettings,
-    /// The subspace method (default [`Method::Moesp`]).
+    /// The subspace method (default [`Method::Auto`]).
     pub method: Method,
+    /// [`Method::Auto`]: lags of the feedback test (default
+    /// [`DEFAULT_FEEDBACK_LAGS`]).
+    pub feedback_lags: usize,
+    /// [`Method::Auto`]: level of the feedback test, the probability of taking open-loop
+    /// data for closed-loop (default [`DEFAULT_FEEDBACK_LEVEL`], 1 %).
+    pub feedback_level: f64,
+    /// Level of the held-out validation: Ljung–Box over all outputs at this family-wise
+    /// level (Bonferroni: each output at level/p), the NIS mean in its two-sided
+    /// interval of this level (default 1 %).
+    pub validation_level: f64,
     /// [`Method::Moesp`]: past/future horizon i. `None`: i₀ = max(⌈(max_order + 1)/p⌉ + 1,
     /// 10), at least one more block row than the order needs, and long enough for the
     /// non-steady Kalman states of the projection to be close to the steady ones.
@@ -96,6 +224,9 @@ impl Default for IdentSettings {
         Self {
             preprocess: PreprocessSettings::default(),
             method: Method::default(),
+            feedback_lags: DEFAULT_FEEDBACK_LAGS,
+            feedback_level: DEFAULT_FEEDBACK_LEVEL,
+            validation_level: 0.01,
             horizon: None,
             max_order: 10,
             order: None,
@@ -123,6 +254,9 @@ pub struct Candidate {
     pub predictor_spectral_radius: f64,
     /// Why this order gave no model, if it did not.
     pub failure: Option<String>,
+    /// Its innovations on the held-out data (whiteness, NIS), when it gave a model with
+    /// a stable predictor.
+    pub validation: Option<ValidationReport>,
 }
 
 impl Candidate {
@@ -133,6 +267,15 @@ impl Candidate {
             && self.predictor_spectral_radius < 1.0
             && self.aic.is_finite()
             && self.bic.is_finite()
+    }
+
+    /// Failed validation checks: outputs whose innovations are not white, plus one if the
+    /// NIS mean is outside its interval; `usize::MAX` without a validation.
+    #[must_use]
+    pub fn validation_failures(&self) -> usize {
+        self.validation
+            .as_ref()
+            .map_or(usize::MAX, ValidationReport::failures)
     }
 
     fn criterion(&self, criterion: Criterion) -> f64 {
@@ -176,6 +319,116 @@ pub struct ValidationReport {
     pub predictor_spectral_radius: f64,
     /// True when no data were held out and the scores are in-sample.
     pub in_sample: bool,
+    /// The family-wise level of the checks ([`IdentSettings::validation_level`]).
+    pub level: f64,
+    /// The interval the NIS mean of a right model falls in with probability 1 − level:
+    /// centre p·(N_e + k)/(N_e − k) on held-out data (k = d/p parameters per output
+    /// estimated from N_e samples: Akaike's final-prediction-error inflation, Ljung 1999
+    /// §16.4; p in-sample), half-width z_{level/2}·√(2p/N) for N scored samples (the
+    /// mean of N independent χ²_p; Bar-Shalom, Li & Kirubarajan 2001, §5.4).
+    pub nis_interval: (f64, f64),
+}
+
+impl ValidationReport {
+    /// The per-output Ljung–Box level: level/p (Bonferroni over the outputs).
+    #[must_use]
+    pub fn per_output_level(&self) -> f64 {
+        self.level / self.outputs.max(1) as f64
+    }
+
+    /// Outputs (indices) whose innovations are not white at the family-wise level.
+    #[must_use]
+    pub fn not_white(&self) -> Vec<usize> {
+        let level = self.per_output_level();
+        self.ljung_box
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.p_value < level)
+            .map(|(j, _)| j)
+            .collect()
+    }
+
+    /// The NIS mean lies in [`ValidationReport::nis_interval`] (`false` when there is
+    /// none: Re is singular).
+    #[must_use]
+    pub fn nis_consistent(&self) -> bool {
+        self.nis_mean
+            .is_some_and(|m| m >= self.nis_interval.0 && m <= self.nis_interval.1)
+    }
+
+    /// Failed checks: outputs not white, plus one for an inconsistent NIS mean.
+    #[must_use]
+    pub fn failures(&self) -> usize {
+        self.not_white().len() + usize::from(!self.nis_consistent())
+    }
+
+    /// Every check passed.
+    #[must_use]
+    pub fn passed(&self) -> bool {
+        self.failures() == 0
+    }
+
+    /// One verdict per check, the number next to it, e.g. `Ljung–Box p = 0.0001 → FI301
+    /// innovations not white (at 1 % over 22 outputs: p < 0.00045)` and `mean NIS 25.80
+    /// outside its interval [21.55, 22.48] → innovations larger than Re says`. `outputs`
+    /// names the kept outputs (index `j` otherwise); `all` lists the passing outputs too.
+    #[must_use]
+    pub fn verdicts(&self, outputs: &[String], all: bool) -> Vec<String> {
+        let name = |j: usize| {
+            outputs
+                .get(j)
+                .cloned()
+                .unwrap_or_else(|| format!("output {j}"))
+        };
+        let level = self.per_output_level();
+        let pct = self.level * 100.0;
+        let mut lines = Vec::new();
+        for (j, t) in self.ljung_box.iter().enumerate() {
+            if t.p_value < level {
+                lines.push(format!(
+                    "Ljung–Box p = {} → {} innovations not white (at {pct} % over {} \
+                     outputs: p < {level:.2e})",
+                    fmt_p(t.p_value),
+                    name(j),
+                    self.outputs
+                ));
+            } else if all {
+                lines.push(format!(
+                    "Ljung–Box p = {} → {} innovations white (at {pct} %)",
+                    fmt_p(t.p_value),
+                    name(j)
+                ));
+            }
+        }
+        let (lo, hi) = self.nis_interval;
+        match self.nis_mean {
+            None => lines.push(
+                "mean NIS undefined: Re is not positive definite → the model's noise is \
+                 degenerate"
+                    .into(),
+            ),
+            Some(m) if m > hi => lines.push(format!(
+                "mean NIS {m:.2} above its {}% interval [{lo:.2}, {hi:.2}] for {} outputs → \
+                 innovations larger than Re says: a χ² threshold from Re alarms too often",
+                100.0 - pct,
+                self.outputs
+            )),
+            Some(m) if m < lo => lines.push(format!(
+                "mean NIS {m:.2} below its {}% interval [{lo:.2}, {hi:.2}] for {} outputs → \
+                 innovations smaller than Re says: faults are detected later",
+                100.0 - pct,
+                self.outputs
+            )),
+            Some(m) if all => lines.push(format!(
+                "mean NIS {m:.2} in its {}% interval [{lo:.2}, {hi:.2}] for {} outputs → \
+                 consistent with Re",
+                100.0 - pct,
+                self.outputs
+            )),
+            Some(_) => {}
+        }
+        lines
+    }
 }
 
 /// The result of [`identify`].
@@ -197,6 +450,8 @@ pub struct Identification {
     pub order: OrderSelection,
     /// The chosen model on the held-out data.
     pub validation: ValidationReport,
+    /// The method used and why.
+    pub method: MethodChoice,
 }
 
 /// Identifies an innovation model from one or more experiments.
@@ -233,6 +488,7 @@ pub fn identify(
             why: "must be at least 1".into(),
         });
     }
+    check_level("validation_level", settings.validation_level)?;
     let pre = preprocess(experiments, &settings.preprocess)?;
     let (l, p) = (
         pre.scaling.input_columns.len(),
@@ -240,29 +496,59 @@ pub fn identify(
     );
     let max_order = settings.order.unwrap_or(settings.max_order);
     let i0 = ((max_order + 1).div_ceil(p) + 1).max(10);
-    let horizon = match settings.method {
-        Method::Moesp => settings.horizon.unwrap_or(i0),
+    let horizon_of = |method: Method| match method {
         Method::Pbsid => settings.horizon.unwrap_or(i0.max(20)),
+        Method::Auto | Method::Moesp => settings.horizon.unwrap_or(i0),
     };
 
-    // Estimation parts and where each experiment's held-out part starts.
-    let (estimation, holdout_start) = split(&pre.experiments, settings.holdout, horizon)?;
-    let in_sample = holdout_start.iter().all(|&s| s == usize::MAX);
-    let sub = match settings.method {
-        Method::Moesp => Engine::Moesp(Subspace::new(&estimation, horizon)?),
-        Method::Pbsid => Engine::Pbsid(Pbsid::new(&estimation, horizon, i0.min(horizon))?),
+    let mut choice = MethodChoice {
+        requested: settings.method,
+        used: settings.method,
+        feedback: None,
+        fallback: None,
     };
+    if settings.method == Method::Auto {
+        check_level("feedback_level", settings.feedback_level)?;
+        choice.feedback = feedback_test(
+            &pre.experiments,
+            settings.feedback_lags,
+            settings.feedback_level,
+        )?;
+        choice.used = if choice.feedback.as_ref().is_some_and(FeedbackTest::feedback) {
+            Method::Pbsid
+        } else {
+            Method::Moesp
+        };
+    }
+    let (sub, horizon, holdout_start) =
+        match engine(&pre, settings, choice.used, i0, horizon_of(choice.used)) {
+            Ok(found) => found,
+            Err(err) if settings.method == Method::Auto && choice.used == Method::Pbsid => {
+                choice.fallback = Some(err.to_string());
+                choice.used = Method::Moesp;
+                engine(&pre, settings, Method::Moesp, i0, horizon_of(Method::Moesp))?
+            }
+            Err(err) => return Err(err),
+        };
+    let in_sample = holdout_start.iter().all(|&s| s == usize::MAX);
     let supported = sub.max_order();
 
     let orders: Vec<usize> = match settings.order {
         Some(n) => vec![n],
         None => (1..=settings.max_order.min(supported)).collect(),
     };
+    let scoring = Scoring {
+        experiments: &pre.experiments,
+        holdout_start: &holdout_start,
+        warmup: horizon,
+        lags: settings.ljung_box_lags,
+        level: settings.validation_level,
+    };
     // Every order is independent of the others: they are spread over the cores, and
     // collected in order (the same result as one after the other, bit for bit).
     let outcomes = parallel_map(&orders, |&n| match sub.model(n) {
         Ok(model) => {
-            let candidate = evaluate(&model, &pre.experiments, &holdout_start, horizon, l, p)?;
+            let candidate = evaluate(&model, &scoring, l, p)?;
             Ok((candidate, Some(model)))
         }
         Err(err @ IdentError::OrderAboveRank { .. }) => Err(err),
@@ -275,6 +561,7 @@ pub fn identify(
                 holdout_nrmse: DVector::from_element(p, f64::NAN),
                 predictor_spectral_radius: f64::NAN,
                 failure: Some(err.to_string()),
+                validation: None,
             },
             None,
         )),
@@ -287,16 +574,7 @@ pub fn identify(
         models.push(model);
     }
 
-    let best = candidates
-        .iter()
-        .enumerate()
-        .filter(|(_, c)| c.usable())
-        .min_by(|(_, a), (_, b)| {
-            a.criterion(settings.criterion)
-                .total_cmp(&b.criterion(settings.criterion))
-        })
-        .map(|(k, _)| k);
-    let Some(best) = best else {
+    let Some(best) = select(&candidates, settings.criterion) else {
         let why = candidates
             .last()
             .map(|c| {
@@ -319,14 +597,13 @@ pub fn identify(
         max_order: chosen,
         why: "the chosen order lost its model".into(),
     })?;
-
-    let validation = validate_holdout(
-        &scaled_model,
-        &pre.experiments,
-        &holdout_start,
-        horizon,
-        settings.ljung_box_lags,
-    )?;
+    let validation = candidates[best]
+        .validation
+        .clone()
+        .ok_or(IdentError::NoUsableOrder {
+            max_order: chosen,
+            why: "the chosen order has no validation".into(),
+        })?;
     let model = to_physical(&scaled_model, &pre.scaling);
     Ok(Identification {
         model,
@@ -342,7 +619,57 @@ pub fn identify(
             reason,
         },
         validation,
+        method: choice,
     })
+}
+
+fn check_level(name: &'static str, level: f64) -> Result<(), IdentError> {
+    if level > 0.0 && level < 1.0 {
+        Ok(())
+    } else {
+        Err(IdentError::InvalidSetting {
+            name,
+            why: format!("the level must be in (0, 1), got {level}"),
+        })
+    }
+}
+
+/// The method's factored estimation data, its horizon and the held-out starts.
+type Engined = (Engine, usize, Vec<usize>);
+
+fn engine(
+    pre: &crate::data::Preprocessed,
+    settings: &IdentSettings,
+    method: Method,
+    i0: usize,
+    horizon: usize,
+) -> Result<Engined, IdentError> {
+    // Estimation parts and where each experiment's held-out part starts.
+    let (estimation, holdout_start) = split(&pre.experiments, settings.holdout, horizon)?;
+    let sub = match method {
+        Method::Pbsid => Engine::Pbsid(Pbsid::new(&estimation, horizon, i0.min(horizon))?),
+        Method::Auto | Method::Moesp => Engine::Moesp(Subspace::new(&estimation, horizon)?),
+    };
+    Ok((sub, horizon, holdout_start))
+}
+
+/// The chosen candidate: the lowest criterion among the usable orders that pass the
+/// held-out validation; if none passes, among those with the fewest failed checks
+/// (an order whose innovations are coloured or mis-scaled on data it was not fitted to
+/// is a worse monitor whatever its criterion: BIC alone weighs the estimation data
+/// only).
+fn select(candidates: &[Candidate], criterion: Criterion) -> Option<usize> {
+    let fewest = candidates
+        .iter()
+        .filter(|c| c.usable())
+        .map(Candidate::validation_failures)
+        .min()?;
+    candidates
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.usable() && c.validation_failures() == fewest)
+        .min_by(|(_, a), (_, b)| a.criterion(criterion).total_cmp(&b.criterion(criterion)))
+        .map(|(k, _)| k)
 }
 
 /// The factored data of the chosen method.
@@ -489,11 +816,19 @@ fn vstack(parts: &[DMatrix<f64>], cols: usize) -> DMatrix<f64> {
     out
 }
 
+/// What a candidate is scored on: the preprocessed experiments, where each held-out part
+/// starts, the predictor's warm-up, the Ljung–Box lags and the validation level.
+struct Scoring<'a> {
+    experiments: &'a [Experiment],
+    holdout_start: &'a [usize],
+    warmup: usize,
+    lags: usize,
+    level: f64,
+}
+
 fn evaluate(
     model: &InnovationModel,
-    experiments: &[Experiment],
-    holdout_start: &[usize],
-    warmup: usize,
+    scoring: &Scoring<'_>,
     l: usize,
     p: usize,
 ) -> Result<Candidate, IdentError> {
@@ -511,9 +846,15 @@ fn evaluate(
             failure: Some(format!(
                 "predictor A − KC unstable (spectral radius {radius:.4})"
             )),
+            validation: None,
         });
     }
-    let s = score(model, experiments, holdout_start, warmup)?;
+    let s = score(
+        model,
+        scoring.experiments,
+        scoring.holdout_start,
+        scoring.warmup,
+    )?;
     let e = vstack(&s.estimation, p);
     let samples = e.nrows() as f64;
     let lambda = e.transpose() * &e / samples.max(1.0);
@@ -524,6 +865,27 @@ fn evaluate(
         .unwrap_or(f64::INFINITY);
     let fit = samples * log_det;
     let holdout_nrmse = nrmse(&vstack(&s.held_out_y, p), &vstack(&s.held_out_pred, p));
+    let in_sample = scoring.holdout_start.iter().all(|&h| h == usize::MAX);
+    // Whiteness and NIS per held-out part, pooled by concatenation: the few lag
+    // products across a boundary are an O(lags/N) share of each sum.
+    let innov = vstack(&s.held_out_innov, p);
+    let per_output = d as f64 / p as f64;
+    let validation = ValidationReport {
+        samples: innov.nrows(),
+        nrmse: holdout_nrmse.clone(),
+        ljung_box: ljung_box(&innov, scoring.lags),
+        nis_mean: nis_mean(&innov, &model.re),
+        outputs: p,
+        predictor_spectral_radius: radius,
+        in_sample,
+        level: scoring.level,
+        nis_interval: nis_interval(
+            p,
+            innov.nrows(),
+            (!in_sample).then_some((samples, per_output)),
+            scoring.level,
+        ),
+    };
     Ok(Candidate {
         order: n,
         aic: fit + 2.0 * d as f64,
@@ -532,7 +894,22 @@ fn evaluate(
         holdout_nrmse,
         predictor_spectral_radius: radius,
         failure: None,
+        validation: Some(validation),
     })
+}
+
+/// The interval of [`ValidationReport::nis_interval`] for p outputs, N scored samples,
+/// (N_e, k) when they are held out, at `level`.
+fn nis_interval(p: usize, n: usize, held_out: Option<(f64, f64)>, level: f64) -> (f64, f64) {
+    let p = p as f64;
+    let centre = match held_out {
+        Some((ne, k)) if ne > k => p * (ne + k) / (ne - k),
+        Some(_) => f64::INFINITY,
+        None => p,
+    };
+    let z = chi2_quantile(1.0, 1.0 - level).map_or(f64::INFINITY, f64::sqrt);
+    let half = z * (2.0 * p / (n.max(1) as f64)).sqrt() * centre / p;
+    ((centre - half).max(0.0), centre + half)
 }
 
 fn mean(v: &DVector<f64>) -> f64 {
@@ -551,17 +928,43 @@ fn reason(
         Criterion::Bic => "BIC",
     };
     let data = if in_sample { "in-sample" } else { "held-out" };
+    let range = format!(
+        "{}..={}",
+        candidates.first().map_or(0, |c| c.order),
+        candidates.last().map_or(0, |c| c.order)
+    );
+    let failures = c.validation_failures();
     let mut text = if settings.order.is_some() {
         format!("order {} fixed by the settings", c.order)
-    } else {
+    } else if failures == 0 {
         format!(
-            "order {}: lowest {name} ({:.1}) among orders {}..={} with a stable predictor",
+            "order {}: lowest {name} ({:.1}) among the orders of {range} whose {data} \
+             innovations pass validation (white, NIS in its interval)",
             c.order,
             c.criterion(settings.criterion),
-            candidates.first().map_or(0, |c| c.order),
-            candidates.last().map_or(0, |c| c.order),
+        )
+    } else {
+        format!(
+            "order {}: no order of {range} passes {data} validation; it fails the fewest \
+             checks ({failures}) and has the lowest {name} ({:.1}) among those",
+            c.order,
+            c.criterion(settings.criterion),
         )
     };
+    if settings.order.is_none()
+        && let Some(plain) = candidates.iter().filter(|c| c.usable()).min_by(|a, b| {
+            a.criterion(settings.criterion)
+                .total_cmp(&b.criterion(settings.criterion))
+        })
+        && plain.order != c.order
+    {
+        let _ = write!(
+            text,
+            " ({name} alone would pick order {}, which fails {} check(s))",
+            plain.order,
+            plain.validation_failures()
+        );
+    }
     let _ = write!(text, "; {data} mean NRMSE {:.4}", mean(&c.holdout_nrmse));
     if let Some(fit_best) = candidates
         .iter()
@@ -585,30 +988,6 @@ fn reason(
         let _ = write!(text, "; orders {unusable:?} gave no usable model");
     }
     text
-}
-
-fn validate_holdout(
-    model: &InnovationModel,
-    experiments: &[Experiment],
-    holdout_start: &[usize],
-    warmup: usize,
-    lags: usize,
-) -> Result<ValidationReport, IdentError> {
-    let p = model.outputs();
-    let s = score(model, experiments, holdout_start, warmup)?;
-    let in_sample = holdout_start.iter().all(|&h| h == usize::MAX);
-    // Whiteness and NIS per held-out part, pooled by concatenation: the few lag
-    // products across a boundary are an O(lags/N) share of each sum.
-    let innov = vstack(&s.held_out_innov, p);
-    Ok(ValidationReport {
-        samples: innov.nrows(),
-        nrmse: nrmse(&vstack(&s.held_out_y, p), &vstack(&s.held_out_pred, p)),
-        ljung_box: ljung_box(&innov, lags),
-        nis_mean: nis_mean(&innov, &model.re),
-        outputs: p,
-        predictor_spectral_radius: model.predictor_spectral_radius(),
-        in_sample,
-    })
 }
 
 /// Validates `model` on deviation data (`inputs` N × l, `outputs` N × p, in the model's
@@ -639,6 +1018,8 @@ pub fn validate(
         outputs: model.outputs(),
         predictor_spectral_radius: model.predictor_spectral_radius(),
         in_sample: false,
+        level: 0.01,
+        nis_interval: nis_interval(model.outputs(), n - from, None, 0.01),
     })
 }
 
@@ -691,4 +1072,113 @@ fn parallel_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Ve
             .flat_map(|(part, h)| h.join().unwrap_or_else(|_| part.iter().map(f).collect()))
             .collect()
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::validation::LjungBox;
+
+    fn report(p_values: &[f64], nis: f64) -> ValidationReport {
+        let p = p_values.len();
+        ValidationReport {
+            samples: 1000,
+            nrmse: DVector::zeros(p),
+            ljung_box: p_values
+                .iter()
+                .map(|&p_value| LjungBox {
+                    q: 0.0,
+                    lags: 20,
+                    p_value,
+                })
+                .collect(),
+            nis_mean: Some(nis),
+            outputs: p,
+            predictor_spectral_radius: 0.5,
+            in_sample: false,
+            level: 0.01,
+            nis_interval: nis_interval(p, 1000, Some((4000.0, 10.0)), 0.01),
+        }
+    }
+
+    fn candidate(order: usize, bic: f64, validation: ValidationReport) -> Candidate {
+        Candidate {
+            order,
+            aic: bic,
+            bic,
+            parameters: 1,
+            holdout_nrmse: DVector::zeros(validation.outputs),
+            predictor_spectral_radius: 0.5,
+            failure: None,
+            validation: Some(validation),
+        }
+    }
+
+    #[test]
+    fn the_order_is_the_lowest_bic_among_those_passing_validation_else_the_fewest_failures() {
+        // Order 2 has the lowest BIC but coloured innovations on y1 and a NIS too large.
+        let cands = vec![
+            candidate(1, 30.0, report(&[0.3, 1e-9], 2.0)),
+            candidate(2, 10.0, report(&[0.3, 1e-4], 2.6)),
+            candidate(3, 20.0, report(&[0.3, 0.2], 2.01)),
+            candidate(4, 25.0, report(&[0.3, 0.4], 2.0)),
+        ];
+        assert_eq!(cands[1].validation_failures(), 2);
+        assert_eq!(select(&cands, Criterion::Bic), Some(2));
+        let settings = IdentSettings::default();
+        let why = reason(&cands, 2, &settings, false);
+        assert!(why.starts_with("order 3: lowest BIC (20.0)"), "{why}");
+        assert!(
+            why.contains("BIC alone would pick order 2, which fails 2"),
+            "{why}"
+        );
+
+        // None passes: the fewest failures (order 4, one), whatever the BIC.
+        let cands = vec![
+            candidate(1, 10.0, report(&[1e-9, 1e-9], 2.0)),
+            candidate(4, 25.0, report(&[0.3, 1e-6], 2.0)),
+        ];
+        assert_eq!(select(&cands, Criterion::Bic), Some(1));
+        let why = reason(&cands, 1, &settings, false);
+        assert!(
+            why.contains("no order of 1..=4 passes held-out validation"),
+            "{why}"
+        );
+    }
+
+    #[test]
+    fn verdicts_say_what_failed_next_to_the_number() {
+        let v = report(&[0.3, 1e-4], 2.6);
+        let names = ["FI301".to_owned(), "TI302".to_owned()];
+        assert_eq!(v.not_white(), vec![1]);
+        assert!(!v.nis_consistent());
+        let lines = v.verdicts(&names, false);
+        assert_eq!(lines.len(), 2, "{lines:?}");
+        assert!(
+            lines[0].starts_with("Ljung–Box p = 1.0e-4 → TI302 innovations not white (at 1 %"),
+            "{lines:?}"
+        );
+        assert!(
+            lines[1].starts_with("mean NIS 2.60 above its 99% interval"),
+            "{lines:?}"
+        );
+        // Bonferroni over 2 outputs: each at 0.5 %.
+        assert_eq!(report(&[0.004, 0.3], 2.0).not_white(), vec![0]);
+        assert!(report(&[0.006, 0.3], 2.0).passed());
+        let all = report(&[0.006, 0.3], 2.0).verdicts(&names, true);
+        assert_eq!(all.len(), 3, "{all:?}");
+        assert!(all[2].contains("consistent with Re"), "{all:?}");
+    }
+
+    #[test]
+    fn the_nis_interval_is_centred_on_the_inflated_mean_and_narrows_with_samples() {
+        let (lo, hi) = nis_interval(22, 2000, None, 0.01);
+        assert!((lo + hi - 44.0).abs() < 1e-12);
+        // z_{0.005} √(44/2000) = 2.576 · 0.148.
+        assert!(((hi - lo) / 2.0 - 2.5758 * (44.0f64 / 2000.0).sqrt()).abs() < 1e-3);
+        let (lo2, hi2) = nis_interval(22, 2000, Some((8000.0, 26.0)), 0.01);
+        assert!(lo2 > lo && hi2 > hi);
+        let (lo3, hi3) = nis_interval(22, 200_000, None, 0.01);
+        assert!(hi3 - lo3 < (hi - lo) / 9.0);
+    }
 }

@@ -3,6 +3,7 @@
 
 pub mod data;
 pub mod error;
+pub mod feedback;
 pub mod identify;
 pub mod model;
 pub mod noise;
@@ -15,9 +16,10 @@ pub use data::{
     WarningKind, preprocess,
 };
 pub use error::{IdentError, Signal};
+pub use feedback::{DEFAULT_FEEDBACK_LAGS, DEFAULT_FEEDBACK_LEVEL, FeedbackTest, feedback_test};
 pub use identify::{
-    Candidate, Criterion, Holdout, IdentSettings, Identification, Method, OrderSelection,
-    ValidationReport, identify, to_physical, validate,
+    Candidate, Criterion, Holdout, IdentSettings, Identification, Method, MethodChoice,
+    OrderSelection, ValidationReport, fmt_p, identify, to_physical, validate,
 };
 pub use model::{
     InnovationModel, Prediction, RiccatiSolution, solve_riccati, sorted_eigenvalues,

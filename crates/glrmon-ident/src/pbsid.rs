@@ -52,7 +52,7 @@ use crate::subspace::pinv;
 const SVD_MAX_ITERATIONS: usize = 100_000;
 
 /// Regression rows per block of the data QR: memory stays O((block + d)·d).
-const BLOCK_ROWS: usize = 4096;
+pub(crate) const BLOCK_ROWS: usize = 4096;
 
 /// The VARX predictor and the SVD of Γ_f 𝒦_p Z_p of a set of experiments, for one past
 /// window p and future window f: any order up to [`Pbsid::max_order`] is then a
@@ -333,7 +333,7 @@ fn qr_r(m: &DMatrix<f64>) -> DMatrix<f64> {
 }
 
 /// The R of [r; block].
-fn stack_qr(r: &DMatrix<f64>, block: &DMatrix<f64>) -> DMatrix<f64> {
+pub(crate) fn stack_qr(r: &DMatrix<f64>, block: &DMatrix<f64>) -> DMatrix<f64> {
     let mut stacked = DMatrix::zeros(r.nrows() + block.nrows(), block.ncols());
     stacked.rows_mut(0, r.nrows()).copy_from(r);
     stacked.rows_mut(r.nrows(), block.nrows()).copy_from(block);
@@ -341,7 +341,7 @@ fn stack_qr(r: &DMatrix<f64>, block: &DMatrix<f64>) -> DMatrix<f64> {
 }
 
 /// `r` padded with zero rows to cols × cols (when fewer rows than columns were seen).
-fn square(r: DMatrix<f64>, cols: usize) -> DMatrix<f64> {
+pub(crate) fn square(r: DMatrix<f64>, cols: usize) -> DMatrix<f64> {
     if r.nrows() >= cols {
         return r.rows(0, cols).into_owned();
     }
