@@ -11,6 +11,8 @@ use std::fmt;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::text::Escaped;
+
 /// The bounded set of snake_case error codes used as the `error_type` counter label and
 /// as the `code` of an `error` record.
 ///
@@ -194,14 +196,16 @@ impl SizeLimit {
 pub enum DecodeErrorKind {
     /// The bytes are not JSON: a syntax error, truncated input, invalid UTF-8, trailing
     /// characters after the value, or nesting deeper than serde_json's limit of 128.
-    /// Holds serde_json's reason, which ends with the line and column.
-    #[error("is not valid JSON: {0}")]
+    /// Holds serde_json's reason, which ends with the line and column; shown escaped,
+    /// since it may quote the payload.
+    #[error("is not valid JSON: {}", Escaped(.0))]
     InvalidJson(String),
     /// A value has the wrong JSON type: a string instead of a number, a negative,
     /// fractional or float-literal `k`, `null` in `y`, an unknown record `type`, …
-    #[error("has the wrong type: expected {expected}")]
+    #[error("has the wrong type: expected {}", Escaped(expected))]
     WrongType {
-        /// What the format expects at this place, in words ("a non-negative integer").
+        /// What the format expects at this place, in words ("a non-negative integer");
+        /// shown escaped, since serde's words may quote the payload.
         expected: String,
     },
     /// A required field is absent (`y` in a sample; any non-optional record field).
@@ -265,7 +269,9 @@ impl DecodeErrorKind {
 ///
 /// Displayed as `channel "pump3": field y has 3 values, model expects 4`; the channel
 /// prefix is left out when the channel is unknown (empty), as for a record that failed
-/// before its `channel` could be read.
+/// before its `channel` could be read. The field is a name from the payload and the
+/// channel may be a record's: both are shown escaped ([`crate::text`]; the channel as
+/// a Rust string literal), so the message is one line that is safe to print or log.
 ///
 /// # Examples
 ///
@@ -295,7 +301,7 @@ impl fmt::Display for DecodeError {
             write!(f, "channel {:?}: ", self.channel)?;
         }
         match &self.field {
-            Some(field) => write!(f, "field {field} {}", self.kind),
+            Some(field) => write!(f, "field {} {}", Escaped(field), self.kind),
             None => write!(f, "payload {}", self.kind),
         }
     }
@@ -467,6 +473,30 @@ mod tests {
             r#"channel "pump3": field y has 3 values, model expects 4"#
         );
         assert_eq!(err.code(), ErrorCode::WrongDimension);
+    }
+
+    /// A field name or a serde reason quoting the payload reaches the message only as
+    /// visible escapes; the channel is quoted as a Rust literal, which escapes too.
+    #[test]
+    fn decode_error_messages_escape_text_from_the_payload() {
+        let err = DecodeError::new(
+            "p\u{202e}1",
+            Some("y\u{1b}]0;pwned\u{7}\nWARN forged".into()),
+            DecodeErrorKind::UnknownField,
+        );
+        assert_eq!(
+            err.to_string(),
+            r#"channel "p\u{202e}1": field y\x1b]0;pwned\x07\nWARN forged is not a field of a sample (k, t, u, y, p)"#
+        );
+        let kind = DecodeErrorKind::WrongType {
+            expected: "a valid record (unknown variant `\u{1b}[2J`)".into(),
+        };
+        assert_eq!(
+            kind.to_string(),
+            r"has the wrong type: expected a valid record (unknown variant `\x1b[2J`)"
+        );
+        let kind = DecodeErrorKind::InvalidJson("\u{9b}2J at line 1".into());
+        assert_eq!(kind.to_string(), r"is not valid JSON: \u{9b}2J at line 1");
     }
 
     #[test]
