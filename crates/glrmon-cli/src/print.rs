@@ -32,8 +32,10 @@ pub(crate) fn line(record: &Record) -> Option<String> {
 /// gives all of them.
 const MAX_LISTED: usize = 5;
 
-/// `isolated=[…] magnitude=[…] minmax=[…]` of an alarm or an isolation update. A
-/// dictionary of more than [`MAX_LISTED`] faults lists the isolated faults first, then
+/// `isolated=[…] ambiguous=[…] magnitude=[…] minmax=[…]` of an alarm or an isolation
+/// update (`ambiguous` only when some faults cannot yet be told apart once the onset
+/// is free). A dictionary of more than [`MAX_LISTED`] faults lists the isolated and
+/// ambiguous faults first, then
 /// the others with the largest minmax statistics, up to [`MAX_LISTED`] in all, and
 /// says how many it left out.
 fn isolation_fields(isolation: &[IsolationResult], faults: &[String], magnitude: &[f64]) -> String {
@@ -42,13 +44,20 @@ fn isolation_fields(isolation: &[IsolationResult], faults: &[String], magnitude:
         .filter(|i| i.isolated)
         .map(|i| Escaped(&i.fault).to_string())
         .collect();
+    let ambiguous: Vec<String> = isolation
+        .iter()
+        .filter(|i| !i.ambiguous_with.is_empty())
+        .map(|i| Escaped(&i.fault).to_string())
+        .collect();
     let mut listed: Vec<usize> = (0..faults.len().min(magnitude.len())).collect();
     let mut tests: Vec<&IsolationResult> = isolation.iter().collect();
     let mut left_out = 0;
     if faults.len() > MAX_LISTED {
         let test_of = |name: &str| isolation.iter().find(|t| t.fault == name);
         let rank = |name: &str| {
-            test_of(name).map_or((false, f64::NEG_INFINITY), |t| (t.isolated, t.minmax))
+            test_of(name).map_or((false, f64::NEG_INFINITY), |t| {
+                (t.isolated || !t.ambiguous_with.is_empty(), t.minmax)
+            })
         };
         listed.sort_by(|&a, &b| {
             let (ia, ma) = rank(&faults[a]);
@@ -85,8 +94,13 @@ fn isolation_fields(isolation: &[IsolationResult], faults: &[String], magnitude:
     } else {
         String::new()
     };
+    let ambiguous = if ambiguous.is_empty() {
+        String::new()
+    } else {
+        format!(" ambiguous=[{}]", ambiguous.join(", "))
+    };
     format!(
-        "isolated=[{}] magnitude=[{mag}] minmax=[{minmax}]{more}",
+        "isolated=[{}]{ambiguous} magnitude=[{mag}] minmax=[{minmax}]{more}",
         isolated.join(", ")
     )
 }
@@ -234,6 +248,39 @@ mod tests {
 
     use super::*;
 
+    /// Faults that cannot yet be told apart once the onset is free are printed as
+    /// ambiguous, none as isolated.
+    #[test]
+    fn alarm_line_prints_the_ambiguous_faults() {
+        let test = |fault: &str, rival: &str, minmax| IsolationResult {
+            fault: fault.into(),
+            minmax,
+            sensitivity: minmax,
+            threshold: 6.6,
+            isolated: false,
+            ambiguous_with: vec![rival.into()],
+        };
+        let a = Alarm {
+            channel: "unstable".into(),
+            k: 201,
+            t: None,
+            glr: 95.0,
+            threshold: 15.4,
+            onset: 200,
+            magnitude: vec![0.1, 1.2],
+            isolation: vec![
+                test("x0_jump", "x1_jump", 0.4),
+                test("x1_jump", "x0_jump", 92.0),
+            ],
+            faults: vec!["x0_jump".into(), "x1_jump".into()],
+            update_k: Some(203),
+        };
+        assert_eq!(
+            line(&Record::Alarm(a)).unwrap(),
+            "ALARM unstable k=201 onset=200 glr=95.0 (threshold 15.4) isolated=[] ambiguous=[x0_jump, x1_jump] magnitude=[x0_jump 0.1000, x1_jump 1.200] minmax=[x0_jump 0.4/6.6, x1_jump 92.0/6.6] update_k=203"
+        );
+    }
+
     #[test]
     fn alarm_line_names_channel_time_onset_isolated_fault_and_magnitude() {
         let a = Alarm {
@@ -250,6 +297,7 @@ mod tests {
                 sensitivity: 1300.0,
                 threshold: 6.6,
                 isolated: true,
+                ambiguous_with: Vec::new(),
             }],
             faults: vec!["x0_jump".into(), "x1_jump".into()],
             update_k: Some(203),
@@ -287,6 +335,7 @@ mod tests {
                 sensitivity: 1.5,
                 threshold: 6.6,
                 isolated: false,
+                ambiguous_with: Vec::new(),
             }],
             faults: vec!["x0_jump".into()],
         };
@@ -306,6 +355,7 @@ mod tests {
                 sensitivity: 100.0,
                 threshold: 6.6,
                 isolated: i == 3,
+                ambiguous_with: Vec::new(),
             })
             .collect();
         let a = Alarm {

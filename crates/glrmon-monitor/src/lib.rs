@@ -58,6 +58,7 @@ pub mod diagnosis;
 pub use diagnosis::{DiagnosisEngine, DiagnosisError, SpanDiagnosis};
 
 use glrmon_core::filter::consistency::Consistency;
+use glrmon_core::isolation::{FisherStatistics, ambiguity};
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{
     AlarmSettings, AlarmState, AlarmTransition, Detector, SignalScaling, StepError, StepOutput,
@@ -816,35 +817,93 @@ impl Monitor {
 
     /// Minmax and sensitivity tests of every group at onset r̂ (eq. (41), Basseville
     /// 1996 §3.2), from C_k(r̂), d_k(r̂): O(m³) per test, independent of the window.
+    /// A group isolated at r̂ stays isolated only if no other group, alone and at its
+    /// own best onset in the window, explains the data as well as every fault at r̂
+    /// within the group's threshold ([`ambiguity`]); the two are reported ambiguous
+    /// with each other when the group alone explains them as well: O(w·m³) more, at
+    /// alarms and updates only.
     fn isolate(&self, onset: u64) -> Vec<IsolationResult> {
         let Some(fisher) = self.detector.fisher_statistics(onset) else {
             return Vec::new();
         };
-        self.groups
+        let mut tested: Vec<(usize, IsolationResult)> = self
+            .groups
             .iter()
-            .filter_map(|g| {
+            .enumerate()
+            .filter_map(|(gi, g)| {
                 let minmax = fisher.minmax(&g.faults).ok()?;
                 let sensitivity = fisher.sensitivity(&g.faults).ok()?;
-                let dof = minmax.dof.max(1) as f64;
-                let threshold = match self
-                    .settings
-                    .tuning
-                    .isolation_thresholds
-                    .iter()
-                    .find(|(name, _)| *name == g.name)
-                {
-                    Some(&(_, t)) => t,
-                    None => chi2_upper_quantile(dof, self.settings.tuning.isolation_alpha).ok()?,
-                };
-                Some(IsolationResult {
-                    fault: g.name.clone(),
-                    minmax: minmax.value,
-                    sensitivity: sensitivity.value,
-                    threshold,
-                    isolated: minmax.value > threshold,
-                })
+                let threshold = self.isolation_threshold(&g.name, minmax.dof)?;
+                Some((
+                    gi,
+                    IsolationResult {
+                        fault: g.name.clone(),
+                        minmax: minmax.value,
+                        sensitivity: sensitivity.value,
+                        threshold,
+                        isolated: minmax.value > threshold,
+                        ambiguous_with: Vec::new(),
+                    },
+                ))
             })
-            .collect()
+            .collect();
+        if tested.iter().any(|(_, r)| r.isolated) {
+            self.mark_ambiguous(&fisher, &mut tested);
+        }
+        tested.into_iter().map(|(_, r)| r).collect()
+    }
+
+    /// The threshold of isolation test `name` with `dof` degrees of freedom: its
+    /// calibrated value, else the χ² upper quantile at the isolation level.
+    fn isolation_threshold(&self, name: &str, dof: usize) -> Option<f64> {
+        let tuning = &self.settings.tuning;
+        match tuning.isolation_thresholds.iter().find(|(n, _)| n == name) {
+            Some(&(_, t)) => Some(t),
+            None => chi2_upper_quantile(dof.max(1) as f64, tuning.isolation_alpha).ok(),
+        }
+    }
+
+    /// Onset-free check of the isolated groups (see [`ambiguity`]): an isolated group
+    /// that another, alone at its own onset, explains the data without is no longer
+    /// isolated; it and those of its alternatives it competes with name each other in
+    /// `ambiguous_with`.
+    fn mark_ambiguous(&self, fisher: &FisherStatistics, tested: &mut [(usize, IsolationResult)]) {
+        let k = self.out.k;
+        let first = k.saturating_sub(self.detector.memory().saturating_sub(1) as u64);
+        let per_onset = (first..=k).filter_map(|r| Some((r, self.detector.fisher_statistics(r)?)));
+        let groups: Vec<&[usize]> = self.groups.iter().map(|g| g.faults.as_slice()).collect();
+        let best = ambiguity::best_onsets(per_onset, &groups);
+        let global = fisher.global().value;
+        let mut thresholds = vec![f64::INFINITY; self.groups.len()];
+        for (gi, result) in tested.iter() {
+            thresholds[*gi] = result.threshold;
+        }
+        let mut pairs = Vec::new();
+        for (gi, result) in tested.iter_mut() {
+            if !result.isolated {
+                continue;
+            }
+            let alternatives =
+                ambiguity::alternatives(&best, &groups, *gi, global, result.threshold);
+            if !alternatives.is_empty() {
+                result.isolated = false;
+                pairs.extend(
+                    (alternatives.into_iter())
+                        .filter(|&h| ambiguity::competes(&best, *gi, h, thresholds[h]))
+                        .map(|h| (*gi, h)),
+                );
+            }
+        }
+        for (g, h) in pairs {
+            for (a, b) in [(g, h), (h, g)] {
+                if let Some((_, r)) = tested.iter_mut().find(|(gi, _)| *gi == a) {
+                    let name = &self.groups[b].name;
+                    if !r.ambiguous_with.contains(name) {
+                        r.ambiguous_with.push(name.clone());
+                    }
+                }
+            }
+        }
     }
 
     /// The minmax statistic of every isolation test at the current onset estimate r̂
@@ -1021,11 +1080,15 @@ mod tests {
         let alarms = alarms(&records);
         assert_eq!(alarms.len(), 1);
         let a = alarms[0];
-        // At the crossing r̂ = 200 and the x1 jump explains the data as well (a jump
-        // of x0 at 201 and of x1 at 200 give the same first innovation): the very
-        // ambiguity the update, two samples later, resolves.
+        // At the crossing r̂ = 200, where only the x1 jump fits; but a jump of x0 at
+        // 201 and of x1 at 200 give the same first innovation: the alarm reports the
+        // two ambiguous, and the update, two samples later, resolves it.
         assert_eq!((a.k, a.onset, a.update_k), (201, 200, Some(203)));
-        assert_eq!(isolated(&a.isolation), ["x1_jump"]);
+        assert!(isolated(&a.isolation).is_empty(), "{:#?}", a.isolation);
+        for (fault, rival) in [("x0_jump", "x1_jump"), ("x1_jump", "x0_jump")] {
+            let t = a.isolation.iter().find(|t| t.fault == fault).unwrap();
+            assert_eq!(t.ambiguous_with, [rival], "{:#?}", a.isolation);
+        }
         let updates = updates(&records);
         assert_eq!(updates.len(), 1);
         let u = updates[0];

@@ -199,7 +199,7 @@ mod tests {
         };
         for (key, rule) in obj {
             match key.as_str() {
-                "$schema" | "title" | "description" | "format" => {}
+                "$schema" | "title" | "description" | "format" | "default" => {}
                 "type" => {
                     let types: Vec<&str> = match rule {
                         Value::String(t) => vec![t.as_str()],
@@ -345,6 +345,7 @@ mod tests {
             sensitivity: 10.0,
             threshold: 5.0,
             isolated: true,
+            ambiguous_with: Vec::new(),
         }];
         let stat = Stat {
             channel: "a".into(),

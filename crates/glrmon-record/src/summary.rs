@@ -332,6 +332,7 @@ mod tests {
                 sensitivity: 10.0,
                 threshold: 5.0,
                 isolated: true,
+                ambiguous_with: Vec::new(),
             }],
             faults: vec!["leak".into()],
             update_k: None,

@@ -58,6 +58,7 @@ fn alarm() -> Record {
                 sensitivity: 35.0,
                 threshold: 6.63,
                 isolated: true,
+                ambiguous_with: Vec::new(),
             },
             IsolationResult {
                 fault: "<b>x1</b>".into(),
@@ -65,6 +66,7 @@ fn alarm() -> Record {
                 sensitivity: 4.5,
                 threshold: 6.63,
                 isolated: false,
+                ambiguous_with: Vec::new(),
             },
         ],
         faults: vec!["x0_jump".into(), "<b>x1</b>".into()],
@@ -90,6 +92,7 @@ fn update() -> Record {
                 sensitivity: 50.0,
                 threshold: 6.63,
                 isolated: true,
+                ambiguous_with: Vec::new(),
             },
             IsolationResult {
                 fault: "<b>x1</b>".into(),
@@ -97,6 +100,7 @@ fn update() -> Record {
                 sensitivity: 3.25,
                 threshold: 6.63,
                 isolated: false,
+                ambiguous_with: Vec::new(),
             },
         ],
         faults: vec!["x0_jump".into(), "<b>x1</b>".into()],

@@ -53,8 +53,18 @@ pub struct IsolationResult {
     pub sensitivity: f64,
     /// Threshold the statistics are compared with.
     pub threshold: f64,
-    /// Whether the fault is declared present.
+    /// Whether the fault is declared present: its minmax test exceeds the threshold at
+    /// r̂ and no other fault explains the data as well at an onset of its own
+    /// (`ambiguous_with` is empty).
     pub isolated: bool,
+    /// The faults that cannot yet be told apart from this one once the onset is free:
+    /// each, alone and at its own best onset in the window, explains the data within
+    /// this test's threshold of how well this fault does at its own. At the crossing few
+    /// samples carry the fault (a state jump at r and one of another state at r − 1 may
+    /// give the same first innovations); the `isolation` update narrows the set. Empty
+    /// when the test is decisive, and in records of versions before it existed.
+    #[serde(default)]
+    pub ambiguous_with: Vec<String>,
 }
 
 /// An alarm: l_k crossed the threshold (`type: "alarm"`), published at the crossing.
@@ -804,6 +814,7 @@ mod tests {
                     sensitivity: 39.0,
                     threshold: 6.63,
                     isolated: true,
+                    ambiguous_with: Vec::new(),
                 },
                 IsolationResult {
                     fault: "bias".into(),
@@ -811,6 +822,7 @@ mod tests {
                     sensitivity: 1.0 / 3.0,
                     threshold: 6.63,
                     isolated: false,
+                    ambiguous_with: Vec::new(),
                 },
             ],
             faults: vec!["leak".into(), "bias".into()],
@@ -834,6 +846,7 @@ mod tests {
                 sensitivity: 61.0,
                 threshold: 6.63,
                 isolated: true,
+                ambiguous_with: Vec::new(),
             }],
             faults: vec!["leak".into(), "bias".into()],
         }
@@ -1500,11 +1513,12 @@ mod tests {
                         glr,
                         magnitude,
                         isolation: vec![IsolationResult {
-                            fault,
+                            fault: fault.clone(),
                             minmax,
                             sensitivity,
                             threshold: glr,
                             isolated,
+                            ambiguous_with: vec![fault.clone()],
                         }],
                         ..alarm()
                     })

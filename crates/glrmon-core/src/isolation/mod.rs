@@ -96,6 +96,7 @@
 //!   detection and isolation*, §3.2 (sensitivity tests, statistical rejection/minmax,
 //!   mixed approach).
 
+pub mod ambiguity;
 pub mod information;
 pub mod isolability;
 
