@@ -112,7 +112,18 @@ fn two_files_are_separate_segments_with_no_episode_at_the_join() {
     for target in [Target::SampleFar(0.01), Target::Mtbfa(500.0)] {
         let a = calibrate_channel(&channel, together.clone(), target).unwrap();
         let b = calibrate_channel(&channel, pooled.clone(), target).unwrap();
-        assert_eq!(a, b, "{target:?}");
+        assert_eq!(a.alarm, b.alarm, "{target:?}");
+        assert_eq!(a.isolation, b.isolation, "{target:?}");
+        // The same runs, named by their files here and numbered there.
+        let rates = |c: &glrmon_eval::calibrate::ChannelCalibration| {
+            c.runs
+                .iter()
+                .map(|r| (r.samples, r.exceedances, r.events))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(rates(&a), rates(&b), "{target:?}");
+        assert_eq!(a.runs[1].name, files[1].display().to_string());
+        assert_eq!(b.runs[1].name, "run 2");
     }
 
     // The join: the second segment's first window against the calibrated λ.
@@ -206,22 +217,94 @@ fn a_file_with_no_usable_sample_is_an_error_naming_it() {
     let e = recorded_files(&channel, &[good.clone(), bad.clone()], None).unwrap_err();
     let msg = e.to_string();
     assert!(e.is_invalid_input(), "{e:?}");
-    assert!(
-        msg.starts_with(&format!(
-            "{}: no usable sample of channel \"unstable\": 2 rows",
+    assert_eq!(
+        msg,
+        format!(
+            "{}: no usable sample of channel \"unstable\": all 2 rows skipped: 2 wrong_type \
+             (first: row 2: column y0: \"abc\" is not a number)",
             bad.display()
-        )),
-        "{msg}"
+        )
     );
-    assert!(msg.contains("(first: row "), "{msg}");
     let header_only = dir.join("header.csv");
     std::fs::write(&header_only, "k,u0,y0\n").unwrap();
     let msg = recorded(&channel, &header_only, None)
         .unwrap_err()
         .to_string();
     assert!(
-        msg.contains("header.csv: no usable sample") && msg.contains("0 samples processed"),
+        msg.contains("header.csv: no usable sample") && msg.contains("holds no rows"),
         "{msg}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Every skipped row is counted by reason with the first of each: a NaN the reader
+/// refuses (`non_finite`), a value the monitor refuses (`too_large`), a repeated index
+/// (`duplicate`); the run's other rows are used. A file whose every row the monitor
+/// refuses is an error naming the file, the count and the reason.
+#[test]
+fn skipped_rows_are_counted_by_reason_with_the_first_row() {
+    let channel = channel(0.0025, 10);
+    let dir = temp_dir("calibrate-skips");
+    let path = dir.join("run.csv");
+    write_csv(&path, &channel, &simulate(&channel, [1.0, 0.5], 3, 1_000));
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    // Rows are numbered from the header (row 1): sample k is on row k + 2.
+    for k in [100, 400] {
+        lines[k + 1] = format!("{k},0.5,NaN");
+    }
+    for k in [200, 300, 500] {
+        lines[k + 1] = format!("{k},0.5,1e200");
+    }
+    lines.insert(702, lines[701].clone());
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    let stats = recorded(&channel, &path, None).unwrap();
+    let run = &stats.runs[0];
+    assert_eq!(run.name, path.display().to_string());
+    assert_eq!(run.rows, 1_001);
+    let skips: Vec<(&str, u64, &str)> = run
+        .skipped
+        .iter()
+        .map(|s| (s.reason.as_str(), s.count, s.first.as_str()))
+        .collect();
+    assert_eq!(
+        skips,
+        [
+            (
+                "non_finite",
+                2,
+                r#"row 102: column y0: "NaN" is not finite"#
+            ),
+            (
+                "too_large",
+                3,
+                "row 202: field y[0] = 1e200 is beyond the accepted magnitude 1e100 (in model \
+                 units): it would overflow the filter's statistics"
+            ),
+            (
+                "duplicate",
+                1,
+                "row 703: sample k = 700 repeats the last sample's index (expected 701)"
+            ),
+        ]
+    );
+    // The 995 others gave l_k.
+    assert_eq!(stats.glr.len(), 995);
+
+    // Every row refused by the monitor: an error naming the file, the count and why.
+    let large = dir.join("large.csv");
+    let rows: String = (0..2_000).map(|k| format!("{k},0.5,1e200\n")).collect();
+    std::fs::write(&large, format!("k,u0,y0\n{rows}")).unwrap();
+    let e = recorded_files(&channel, &[path.clone(), large.clone()], None).unwrap_err();
+    assert!(e.is_invalid_input(), "{e:?}");
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "{}: no usable sample of channel \"unstable\": all 2000 rows skipped: 2000 \
+             too_large (first: row 2: field y[0] = 1e200 is beyond the accepted magnitude \
+             1e100 (in model units): it would overflow the filter's statistics)",
+            large.display()
+        )
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }

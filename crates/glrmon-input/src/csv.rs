@@ -353,6 +353,13 @@ impl<R: BufRead> CsvReader<R> {
         Some(Ok(()))
     }
 
+    /// The row number (the header being row 1) of the row last read, blank lines
+    /// counted: where a sample the monitor then refuses came from.
+    #[must_use]
+    pub fn row(&self) -> u64 {
+        self.row
+    }
+
     fn err(&self, k: Option<u64>, code: ErrorCode, message: String) -> RowError {
         RowError {
             k,

@@ -17,5 +17,5 @@ pub use mcap::{McapInput, RecordedInput};
 pub use play::{Playback, PlayedSample, due};
 pub use readahead::{ReadAhead, ReadAheadError};
 pub use replay::{CsvReplayed, McapReplayed, ReplayError, replay_csv, replay_mcap};
-pub use samples::Samples;
+pub use samples::{Samples, Skipped};
 pub use table::{Table, read_table};

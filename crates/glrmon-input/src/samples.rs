@@ -40,6 +40,25 @@ use crate::{CsvReader, InputError, InputErrorKind, InputFormat, McapInput};
 #[derive(Debug)]
 pub struct Samples {
     source: Source,
+    /// Rows or recorded inputs of the channel read so far.
+    read: u64,
+}
+
+/// A row or recorded input that gives no sample, and why: what a batch tool counts and
+/// reports per reason.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Skipped {
+    /// The reason as the wire's error code (`non_finite`, `wrong_type`, `too_large`, …),
+    /// or `dropped` for payloads a recording says were lost at intake.
+    pub reason: &'static str,
+    /// What is wrong and where: `row <n>: column <name>: …` for a CSV row.
+    pub message: String,
+}
+
+impl std::fmt::Display for Skipped {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} ({})", self.message, self.reason)
+    }
 }
 
 #[derive(Debug)]
@@ -78,7 +97,17 @@ impl Samples {
             InputFormat::Mcap => Source::Mcap(Box::new(McapInput::open(path)?), channel.to_owned()),
             InputFormat::Csv => Source::Csv(CsvReader::open_with_columns(path, dims, columns)?),
         };
-        Ok(Self { source })
+        Ok(Self { source, read: 0 })
+    }
+
+    /// Where the last row or input read came from: `row <n>` of a CSV file (the header
+    /// being row 1), `input <n>` of the channel in a recording (from 1).
+    #[must_use]
+    pub fn position(&self) -> String {
+        match &self.source {
+            Source::Csv(csv) => format!("row {}", csv.row()),
+            Source::Mcap(..) => format!("input {}", self.read),
+        }
     }
 
     /// The next sample into `sample`; `Ok(None)` at the end, `Ok(Some(Err))` for a
@@ -86,17 +115,38 @@ impl Samples {
     /// dropped payload in the recording — after which reading goes on.
     ///
     /// # Errors
-    /// [`InputErrorKind::Read`] on an I/O error of a recording, and
-    /// [`InputErrorKind::Damaged`] at the end of a recording that lost data to damage
-    /// (its samples would not be the channel's consecutive samples).
+    /// As [`Samples::next_checked`].
     pub fn next_into(
         &mut self,
         sample: &mut Sample,
     ) -> Result<Option<Result<(), String>>, InputError> {
+        Ok(self
+            .next_checked(sample)?
+            .map(|r| r.map_err(|skip| skip.to_string())))
+    }
+
+    /// [`Samples::next_into`] with the reason of a skipped row or input kept apart
+    /// from its message, for counting skips by reason.
+    ///
+    /// # Errors
+    /// [`InputErrorKind::Read`] on an I/O error of a recording, and
+    /// [`InputErrorKind::Damaged`] at the end of a recording that lost data to damage
+    /// (its samples would not be the channel's consecutive samples).
+    pub fn next_checked(
+        &mut self,
+        sample: &mut Sample,
+    ) -> Result<Option<Result<(), Skipped>>, InputError> {
         match &mut self.source {
-            Source::Csv(csv) => Ok(csv
-                .next_into(sample)
-                .map(|r| r.map_err(|e| format!("{} ({})", e.message, e.code.as_str())))),
+            Source::Csv(csv) => {
+                let row = csv.next_into(sample).map(|r| {
+                    r.map_err(|e| Skipped {
+                        reason: e.code.as_str(),
+                        message: e.message,
+                    })
+                });
+                self.read += u64::from(row.is_some());
+                Ok(row)
+            }
             Source::Mcap(input, channel) => loop {
                 let Some(recorded) = input.next_input(None)? else {
                     let (lines, damaged) = input.damage_report();
@@ -111,16 +161,25 @@ impl Samples {
                 if *recorded.channel != **channel {
                     continue;
                 }
+                self.read += 1;
+                let at = self.read;
                 return Ok(Some(match recorded.item {
                     InputItem::Sample(s) => {
                         *sample = s;
                         Ok(())
                     }
-                    InputItem::Intake(IntakeEvent::Dropped { count }) => Err(format!(
-                        "{count} payload(s) of channel \"{channel}\" were dropped at intake here"
-                    )),
-                    InputItem::Intake(IntakeEvent::Rejected { message, .. }) => {
-                        Err(format!("a refused payload: {message}"))
+                    InputItem::Intake(IntakeEvent::Dropped { count }) => Err(Skipped {
+                        reason: "dropped",
+                        message: format!(
+                            "input {at}: {count} payload(s) of channel \"{channel}\" were \
+                             dropped at intake here"
+                        ),
+                    }),
+                    InputItem::Intake(IntakeEvent::Rejected { code, message, .. }) => {
+                        Err(Skipped {
+                            reason: code.as_str(),
+                            message: format!("input {at}: a refused payload: {message}"),
+                        })
                     }
                 }));
             },

@@ -11,7 +11,8 @@ use clap::Args;
 
 use glrmon_core::threshold::calibration::{Calibration, MIN_EVENTS, Target};
 use glrmon_eval::calibrate::{
-    CalibrateError, ChannelCalibration, IsolationCalibration, Statistics, calibrate_channel,
+    CalibrateError, ChannelCalibration, IsolationCalibration, RunRate, Statistics,
+    calibrate_channel, skip_summary,
 };
 use glrmon_spec::edit::EditError;
 use serde::Serialize;
@@ -97,14 +98,23 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         ),
     };
     let g = &channel.alarm;
+    let calibration = calibrate_channel(channel, stats, target).map_err(calibrate_error)?;
     let ChannelCalibration {
         alarm: c,
         current_episodes,
         isolation,
-    } = calibrate_channel(channel, stats, target).map_err(calibrate_error)?;
+        runs,
+    } = &calibration;
     let alpha = channel.isolation_alpha;
-    let warning = support_warning(&channel.name, &c);
+    let warning = support_warning(&channel.name, c);
     if let Some(w) = &warning {
+        eprintln!("glrmon calibrate: warning: {w}");
+    }
+    for r in runs.iter().filter(|r| !r.skipped.is_empty()) {
+        eprintln!("glrmon calibrate: warning: {}", skipped_line(r));
+    }
+    let disagreement = disagreement_warning(&channel.name, &calibration);
+    if let Some(w) = &disagreement {
         eprintln!("glrmon calibrate: warning: {w}");
     }
     if args.json {
@@ -112,28 +122,128 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             "{}",
             serde_json::to_string(&calibration_json(
                 &channel.name,
-                &c,
+                &calibration,
                 g.threshold,
-                current_episodes,
                 alpha,
-                &isolation,
-                warning.as_deref(),
+                Warnings {
+                    support: warning.as_deref(),
+                    disagreement: disagreement.as_deref(),
+                },
             ))?
         );
     } else {
         print!(
             "{}",
-            text(&channel.name, &c, g.threshold, current_episodes, &source)
+            text(&channel.name, c, g.threshold, *current_episodes, &source)
         );
-        print!("{}", isolation_text(&isolation, alpha));
+        print!("{}", runs_text(runs, c));
+        print!("{}", isolation_text(isolation, alpha, args.write));
     }
     if args.write
         && let Some(path) = &args.config
     {
-        write(path, &channel.name, &c, &isolation, &source)?;
-        eprintln!("glrmon calibrate: {} updated", path.display());
+        write(path, &channel.name, c, isolation, &source)?;
+        let written = isolation.iter().filter(|i| i.threshold().is_some()).count();
+        eprintln!(
+            "glrmon calibrate: {} updated: the detection threshold and {written} of {} \
+             isolation thresholds written{}",
+            path.display(),
+            isolation.len(),
+            if written < isolation.len() {
+                " (the others are not calibrated: see why above)"
+            } else {
+                ""
+            }
+        );
     }
     Ok(())
+}
+
+/// A run's skipped rows: how many of its rows, by reason with the first of each.
+fn skipped_line(r: &RunRate) -> String {
+    let n: u64 = r.skipped.iter().map(|s| s.count).sum();
+    format!(
+        "{}: {n} of {} rows skipped: {}",
+        r.name,
+        r.rows,
+        skip_summary(&r.skipped)
+    )
+}
+
+/// A run's rate at the threshold in the target's unit, with its interval.
+fn rate_text(r: &RunRate, target: Target) -> String {
+    match target {
+        Target::Mtbfa(_) => format!(
+            "{} episodes: one per {:.0} samples (95 % interval {:.0}–{:.0})",
+            r.events, r.rate, r.interval.0, r.interval.1
+        ),
+        Target::SampleFar(_) => format!(
+            "{:.3} % above the threshold (95 % interval {:.3}–{:.3} %), {} samples in {} \
+             clusters",
+            100.0 * r.rate,
+            100.0 * r.interval.0,
+            100.0 * r.interval.1,
+            r.exceedances,
+            r.events
+        ),
+    }
+}
+
+/// The runs that disagree beyond their 95 % intervals, named with their rates; `None`
+/// when every pair's intervals overlap.
+fn disagreement_warning(channel: &str, c: &ChannelCalibration) -> Option<String> {
+    let pairs = c.disagreements();
+    if pairs.is_empty() {
+        return None;
+    }
+    let short = |r: &RunRate| match c.alarm.target {
+        Target::Mtbfa(_) => format!(
+            "{} (one episode per {:.0} samples, {:.0}–{:.0})",
+            r.name, r.rate, r.interval.0, r.interval.1
+        ),
+        Target::SampleFar(_) => format!(
+            "{} ({:.3} % above, {:.3}–{:.3} %)",
+            r.name,
+            100.0 * r.rate,
+            100.0 * r.interval.0,
+            100.0 * r.interval.1
+        ),
+    };
+    let list: Vec<String> = pairs
+        .iter()
+        .map(|&(i, j)| format!("{} and {}", short(&c.runs[i]), short(&c.runs[j])))
+        .collect();
+    Some(format!(
+        "channel \"{channel}\": runs disagree beyond their 95 % intervals at the threshold \
+         {:.4}: {}; the rate varies from run to run more than sampling explains, so a new \
+         run may see a rate outside the pooled interval",
+        c.alarm.threshold,
+        list.join("; ")
+    ))
+}
+
+/// Each run's samples and rate at the threshold; nothing for a single run without
+/// skipped rows (the pooled figures are its own).
+fn runs_text(runs: &[RunRate], c: &Calibration) -> String {
+    if runs.len() < 2 && runs.iter().all(|r| r.skipped.is_empty()) {
+        return String::new();
+    }
+    let mut s = format!("\nruns at the threshold {:.4}:\n", c.threshold);
+    for r in runs {
+        let skipped: u64 = r.skipped.iter().map(|s| s.count).sum();
+        let skipped = if skipped > 0 {
+            format!(", {skipped} rows skipped")
+        } else {
+            String::new()
+        };
+        s.push_str(&format!(
+            "  {}: {} samples{skipped}, {}\n",
+            r.name,
+            r.samples,
+            rate_text(r, c.target)
+        ));
+    }
+    s
 }
 
 /// Samples per independent event at the target: per expected episode or exceedance,
@@ -188,8 +298,16 @@ fn support_warning(channel: &str, c: &Calibration) -> Option<String> {
     })
 }
 
+/// The warnings of a calibration, as the `--json` line carries them.
+struct Warnings<'a> {
+    /// Fewer than 10 events at the target ([`support_warning`]).
+    support: Option<&'a str>,
+    /// Runs that disagree ([`disagreement_warning`]).
+    disagreement: Option<&'a str>,
+}
+
 /// The `--json` line: the calibrated alarm threshold with its intervals, the target,
-/// the data's event counts, and one entry per isolation test.
+/// the data's event counts, each run's rate, and one entry per isolation test.
 #[derive(Debug, Serialize)]
 struct CalibrationJson<'a> {
     channel: &'a str,
@@ -212,19 +330,50 @@ struct CalibrationJson<'a> {
     expected: f64,
     /// The support warning (fewer than 10 expected events), or `null`.
     warning: Option<&'a str>,
+    /// The runs-disagree warning, or `null`.
+    disagreement: Option<&'a str>,
     current_threshold: f64,
     current_episodes: u64,
+    /// Each run (file, or simulated part) at the threshold.
+    runs: Vec<RunJson<'a>>,
     isolation_alpha: f64,
     isolation: Vec<IsolationJson<'a>>,
+}
+
+/// One run in the `--json` line.
+#[derive(Debug, Serialize)]
+struct RunJson<'a> {
+    name: &'a str,
+    rows: u64,
+    /// Skipped rows by reason: `{ reason, count, first }`.
+    skipped: Vec<SkipJson<'a>>,
+    samples: u64,
+    exceedances: u64,
+    /// Episodes (`mtbfa`) or clusters of exceedances (`sample_far`) at the threshold.
+    events: u64,
+    /// In the target's unit; `null` when unbounded.
+    rate: Option<f64>,
+    rate_interval: [Option<f64>; 2],
+}
+
+#[derive(Debug, Serialize)]
+struct SkipJson<'a> {
+    reason: &'a str,
+    count: u64,
+    first: &'a str,
 }
 
 /// One isolation test in the `--json` line.
 #[derive(Debug, Serialize)]
 struct IsolationJson<'a> {
     test: &'a str,
-    /// The calibrated threshold; `null` without data for the test.
+    /// The calibrated threshold; `null` when the test is not calibrated.
     threshold: Option<f64>,
     samples: u64,
+    /// Why the test is not calibrated, or `null`.
+    not_calibrated: Option<String>,
+    /// The χ² threshold, in force for a test without a calibrated one.
+    chi2_threshold: Option<f64>,
     current_threshold: f64,
     current_rate: f64,
 }
@@ -236,13 +385,12 @@ fn finite(v: f64) -> Option<f64> {
 
 fn calibration_json<'a>(
     channel: &'a str,
-    c: &Calibration,
+    cal: &'a ChannelCalibration,
     current_threshold: f64,
-    current_episodes: u64,
     isolation_alpha: f64,
-    isolation: &'a [IsolationCalibration],
-    warning: Option<&'a str>,
+    warnings: Warnings<'a>,
 ) -> CalibrationJson<'a> {
+    let c = &cal.alarm;
     let (target, mtbfa, sample_far) = match c.target {
         Target::Mtbfa(m) => ("mtbfa", Some(m), None),
         Target::SampleFar(f) => ("sample_far", None, Some(f)),
@@ -262,16 +410,42 @@ fn calibration_json<'a>(
         episodes: c.episodes,
         exceedances: c.exceedances,
         expected: c.expected,
-        warning,
+        warning: warnings.support,
+        disagreement: warnings.disagreement,
         current_threshold,
-        current_episodes,
+        current_episodes: cal.current_episodes,
+        runs: cal
+            .runs
+            .iter()
+            .map(|r| RunJson {
+                name: &r.name,
+                rows: r.rows,
+                skipped: r
+                    .skipped
+                    .iter()
+                    .map(|s| SkipJson {
+                        reason: &s.reason,
+                        count: s.count,
+                        first: &s.first,
+                    })
+                    .collect(),
+                samples: r.samples,
+                exceedances: r.exceedances,
+                events: r.events,
+                rate: finite(r.rate),
+                rate_interval: [finite(r.interval.0), finite(r.interval.1)],
+            })
+            .collect(),
         isolation_alpha,
-        isolation: isolation
+        isolation: cal
+            .isolation
             .iter()
             .map(|i| IsolationJson {
                 test: &i.test,
-                threshold: i.quantile.map(|q| q.value),
-                samples: i.quantile.map_or(0, |q| q.samples),
+                threshold: i.threshold(),
+                samples: i.samples,
+                not_calibrated: i.not_calibrated(isolation_alpha).map(|w| w.to_string()),
+                chi2_threshold: finite(i.chi2),
                 current_threshold: i.current,
                 current_rate: i.current_rate,
             })
@@ -279,24 +453,60 @@ fn calibration_json<'a>(
     }
 }
 
-fn isolation_text(isolation: &[IsolationCalibration], alpha: f64) -> String {
+/// What stays in force for a test that is not calibrated: the χ² threshold, which
+/// `--write` puts in place of a calibrated one of before.
+fn instead(i: &IsolationCalibration, write: bool) -> String {
+    if i.current == i.chi2 {
+        format!("the χ² threshold {:.2} stays in force", i.chi2)
+    } else if write {
+        format!(
+            "the χ² threshold {:.2} replaces the calibrated {:.2}",
+            i.chi2, i.current
+        )
+    } else {
+        format!(
+            "the threshold in force {:.2} stays (--write would put the χ² threshold {:.2} in \
+             its place)",
+            i.current, i.chi2
+        )
+    }
+}
+
+fn isolation_text(isolation: &[IsolationCalibration], alpha: f64, write: bool) -> String {
     let mut s = format!("\nisolation tests at r̂ (type-I probability α = {alpha}):\n");
+    let mut spanned = false;
     for i in isolation {
-        let q = i.quantile.map_or_else(
-            || "too little data for this α".to_owned(),
-            |q| {
-                format!(
-                    "threshold {:.4} (95 % interval {:.4}–{:.4}, {} samples)",
-                    q.value, q.interval.0, q.interval.1, q.samples
-                )
-            },
-        );
+        if let Some(why) = i.not_calibrated(alpha) {
+            spanned |= matches!(
+                why,
+                glrmon_eval::calibrate::NotCalibrated::NotIsolable { .. }
+            );
+            s.push_str(&format!(
+                "  isolation {}: not calibrated: {why}; {}\n",
+                i.test,
+                instead(i, write)
+            ));
+            continue;
+        }
+        let q = i.quantile.map_or_else(String::new, |q| {
+            format!(
+                "threshold {:.4} (95 % interval {:.4}–{:.4}, {} samples)",
+                q.value, q.interval.0, q.interval.1, q.samples
+            )
+        });
         s.push_str(&format!(
             "  {}: {q}; the current threshold {:.4} is exceeded by {:.2} % of the fault-free samples\n",
             i.test,
             i.current,
             100.0 * i.current_rate
         ));
+    }
+    if spanned {
+        s.push_str(
+            "  (a test that is not isolable can never isolate its fault alone: `glrmon \
+             validate` names the faults it cannot be told from; a [[channels.glr.groups]] \
+             group of them is tested as one)\n",
+        );
     }
     s
 }
@@ -428,9 +638,11 @@ fn write(
     source: &str,
 ) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(path)?;
+    // Only the tests that were calibrated: a test without a finite positive quantile
+    // keeps the χ² threshold (its line above says why).
     let thresholds: Vec<(&str, f64)> = isolation
         .iter()
-        .filter_map(|i| i.quantile.map(|q| (i.test.as_str(), q.value)))
+        .filter_map(|i| Some((i.test.as_str(), i.threshold()?)))
         .collect();
     let updated = glrmon_spec::edit::set_calibrated(&text, channel, c, &thresholds, source)
         .map_err(|e| match e {
@@ -457,21 +669,43 @@ mod tests {
             rate_interval: (270.0, f64::INFINITY),
             threshold_interval: (11.0, f64::INFINITY),
         };
-        let isolation = [IsolationCalibration {
-            test: "a\"b".into(),
-            quantile: None,
-            current: 6.63,
-            current_rate: 0.5,
-        }];
+        let cal = ChannelCalibration {
+            alarm: c,
+            current_episodes: 2,
+            isolation: vec![IsolationCalibration {
+                test: "a\"b".into(),
+                quantile: None,
+                samples: 0,
+                spanned: 0,
+                current: 6.63,
+                current_rate: 0.5,
+                chi2: 6.63,
+            }],
+            runs: vec![RunRate {
+                name: "a.csv".into(),
+                rows: 1001,
+                skipped: vec![glrmon_eval::calibrate::Skips {
+                    reason: "non_finite".into(),
+                    count: 1,
+                    first: "row 3: column y0: \"nan\" is not finite".into(),
+                }],
+                samples: 1000,
+                exceedances: 0,
+                events: 0,
+                rate: f64::INFINITY,
+                interval: (270.0, f64::INFINITY),
+            }],
+        };
         let warning = support_warning("m", &c);
         let text = serde_json::to_string(&calibration_json(
             "m",
-            &c,
+            &cal,
             13.0,
-            2,
             0.01,
-            &isolation,
-            warning.as_deref(),
+            Warnings {
+                support: warning.as_deref(),
+                disagreement: None,
+            },
         ))
         .unwrap();
         assert_eq!(
@@ -481,8 +715,13 @@ mod tests {
                 r#""mtbfa":10000.0,"sample_far":null,"rate_interval":[270.0,null],"samples":1000,"#,
                 r#""episodes":0,"exceedances":0,"expected":0.1,"#,
                 r#""warning":"channel \"m\": 1000 fault-free samples hold 0 false-alarm episodes at the threshold, the target of one per 10000 samples expects 0.1: fewer than 10, so the threshold is loosely supported (95 % interval of the mean samples between false alarms 270–inf, threshold 11.0000–inf); 100000 samples would hold 10","#,
-                r#""current_threshold":13.0,"current_episodes":2,"isolation_alpha":0.01,"#,
-                r#""isolation":[{"test":"a\"b","threshold":null,"samples":0,"current_threshold":6.63,"current_rate":0.5}]}"#
+                r#""disagreement":null,"current_threshold":13.0,"current_episodes":2,"#,
+                r#""runs":[{"name":"a.csv","rows":1001,"skipped":[{"reason":"non_finite","count":1,"first":"row 3: column y0: \"nan\" is not finite"}],"#,
+                r#""samples":1000,"exceedances":0,"events":0,"rate":null,"rate_interval":[270.0,null]}],"#,
+                r#""isolation_alpha":0.01,"#,
+                r#""isolation":[{"test":"a\"b","threshold":null,"samples":0,"#,
+                r#""not_calibrated":"0 fault-free samples are too few: its (1 − α) quantile needs 1000 (10 above it)","#,
+                r#""chi2_threshold":6.63,"current_threshold":6.63,"current_rate":0.5}]}"#
             )
         );
         let well = Calibration {
@@ -490,5 +729,11 @@ mod tests {
             ..c
         };
         assert_eq!(support_warning("m", &well), None);
+        assert_eq!(
+            isolation_text(&cal.isolation, 0.01, false),
+            "\nisolation tests at r̂ (type-I probability α = 0.01):\n  isolation a\"b: not \
+             calibrated: 0 fault-free samples are too few: its (1 − α) quantile needs 1000 (10 \
+             above it); the χ² threshold 6.63 stays in force\n"
+        );
     }
 }
