@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 
 use glrmon_runtime::{Output, RuntimeEvents, Sink, SinkError};
 use glrmon_wire::Record;
+use glrmon_wire::text::Escaped;
 
 use crate::print;
 use tracing_subscriber::fmt::format::Writer;
@@ -94,6 +95,10 @@ impl RuntimeEvents for LogEvents {
 
 /// Logs alarms (INFO) and rejected input (WARN, at most one line per channel and code
 /// per second, with the number suppressed).
+///
+/// A rejection's message quotes the payload (an unknown field's name), so it and the
+/// channel are written through [`Escaped`]: a hostile name cannot forge a log line or
+/// drive the terminal that shows the log.
 pub(crate) struct LogSink {
     last: HashMap<(String, &'static str), (Instant, u64)>,
 }
@@ -115,15 +120,15 @@ impl Sink for LogSink {
         match &output.record {
             Record::Alarm(_) | Record::Isolation(_) | Record::AlarmEnd(_) => {
                 if let Some(line) = print::line(&output.record) {
-                    tracing::info!(channel = output.record.channel(), "{line}");
+                    tracing::info!(channel = %Escaped(output.record.channel()), "{line}");
                 }
             }
             Record::Consistency(c) => {
                 let line = print::line(&output.record).unwrap_or_default();
                 if c.state == "consistent" {
-                    tracing::info!(channel = %c.channel, "The model fits again: {line}");
+                    tracing::info!(channel = %Escaped(&c.channel), "The model fits again: {line}");
                 } else {
-                    tracing::warn!(channel = %c.channel, "The model no longer fits the plant: {line}");
+                    tracing::warn!(channel = %Escaped(&c.channel), "The model no longer fits the plant: {line}");
                 }
             }
             Record::Error(e) => {
@@ -139,7 +144,13 @@ impl Sink for LogSink {
                     } else {
                         "Input stream"
                     };
-                    tracing::warn!(channel = %e.channel, code = e.code.as_str(), suppressed = entry.1, "{what}: {}.", e.message);
+                    tracing::warn!(
+                        channel = %Escaped(&e.channel),
+                        code = e.code.as_str(),
+                        suppressed = entry.1,
+                        "{what}: {}.",
+                        Escaped(&e.message)
+                    );
                     *entry = (now, 0);
                 } else {
                     entry.1 += 1;

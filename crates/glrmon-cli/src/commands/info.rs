@@ -1,12 +1,16 @@
 //! `glrmon info FILE.mcap`: what a recording holds (size, finished or salvaged, time
 //! range, each topic's messages, the recorded channels, the glrmon version), like
 //! `mcap info`; `--json` for scripts. The reading is `glrmon_record::summarize`.
+//!
+//! A recording may come from anywhere, so its file name, metadata, channel, topic and
+//! schema names and damage reasons are shown escaped ([`glrmon_wire::text`]).
 
 use std::path::PathBuf;
 
 use clap::Args;
 use glrmon_record::{ReadEnd, RecordingSummary, iso8601_utc};
 use glrmon_report::clock::{Zone, format_time};
+use glrmon_wire::text::{Escaped, escape_control, escape_json};
 
 use crate::common::InvalidInput;
 
@@ -25,9 +29,14 @@ pub(crate) struct InfoArgs {
 
 /// Summarises `args.file`; the table shows wall-clock times in `zone` (JSON: UTC).
 pub(crate) fn run(args: &InfoArgs, zone: Zone) -> anyhow::Result<()> {
-    let s = glrmon_record::summarize(&args.file).map_err(|e| InvalidInput(e.to_string()))?;
+    let s = glrmon_record::summarize(&args.file)
+        .map_err(|e| InvalidInput(escape_control(&e.to_string()).into_owned()))?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&to_json(&s))?);
+        // serde_json escapes U+0000–U+001F only; each line of its output is made safe
+        // alone, so that the pretty-printing's own line breaks stay.
+        for line in serde_json::to_string_pretty(&to_json(&s))?.lines() {
+            println!("{}", escape_json(line));
+        }
     } else {
         print_table(&s, zone);
     }
@@ -56,27 +65,34 @@ fn print_table(s: &RecordingSummary, zone: Zone) {
     // A recording of simulated samples has log times of seconds since 0: shown as such.
     let time =
         |t: Option<u64>| t.map_or_else(|| "-".to_owned(), |ns| format_time(ns as f64 / 1e9, zone));
-    println!("file:      {}", s.path.display());
+    let path = s.path.to_string_lossy();
+    println!("file:      {}", Escaped(&path));
     println!("size:      {} bytes", s.bytes);
-    println!("status:    {}", status(s));
+    println!("status:    {}", Escaped(&status(s)));
     if let Some(v) = s.glrmon_version() {
-        println!("version:   glrmon {v}");
+        println!("version:   glrmon {}", Escaped(&v));
     }
     if let Some(i) = s.header.extra.get("instance") {
-        println!("instance:  {i}");
+        println!("instance:  {}", Escaped(i));
     }
     if let Some(src) = s.header.extra.get("source") {
-        println!("source:    {src}");
+        println!("source:    {}", Escaped(src));
     }
-    println!("channels:  {}", s.header.channels.join(", "));
+    let channels: Vec<_> = s
+        .header
+        .channels
+        .iter()
+        .map(|c| escape_control(c))
+        .collect();
+    println!("channels:  {}", channels.join(", "));
     println!("start:     {}", time(s.start_ns));
     println!("end:       {}", time(s.end_ns));
     println!("duration:  {}", seconds(s.duration_ns()));
     println!("messages:  {}", s.messages);
-    let width = s
-        .topics
+    let topics: Vec<_> = s.topics.iter().map(|t| escape_control(&t.topic)).collect();
+    let width = topics
         .iter()
-        .map(|t| t.topic.len())
+        .map(|t| t.chars().count())
         .max()
         .unwrap_or(5)
         .max(5);
@@ -86,18 +102,18 @@ fn print_table(s: &RecordingSummary, zone: Zone) {
         "  {:<width$}  {:>9}  {:<20}  {:<30}  {}",
         head[0], head[1], head[2], head[3], head[4]
     );
-    for t in &s.topics {
+    for (t, topic) in s.topics.iter().zip(&topics) {
         println!(
             "  {:<width$}  {:>9}  {:<20}  {:<30}  {}",
-            t.topic,
+            topic,
             t.messages,
-            t.schema,
+            escape_control(&t.schema),
             time(t.first_ns),
             time(t.last_ns)
         );
     }
     for d in &s.damage {
-        println!("damaged:   {d}");
+        println!("damaged:   {}", Escaped(&d.to_string()));
     }
 }
 

@@ -2,11 +2,15 @@
 //! QueryTarget All) and prints one line each: its shard and channels, its recent
 //! throughput, active alarms, rejected and dropped input, its Zenoh sessions by kind,
 //! reconnections and uptime.
+//!
+//! Any peer can answer, so the instance names, shards and status JSON shown are escaped
+//! ([`glrmon_wire::text`]).
 
 use std::time::Duration;
 
 use clap::Args;
 use glrmon_wire::status;
+use glrmon_wire::text::{escape_control, escape_json};
 
 use crate::common::InvalidInput;
 use crate::flags::ZenohArgs;
@@ -54,7 +58,7 @@ async fn status(args: &StatusArgs) -> anyhow::Result<()> {
     }
     if args.json {
         for (_, json) in &replies {
-            println!("{json}");
+            println!("{}", escape_json(json));
         }
         return Ok(());
     }
@@ -82,9 +86,10 @@ fn table(replies: &[(String, String)]) -> String {
     ];
     let (mut channels, mut rate) = (0u64, 0.0);
     for (name, json) in replies {
+        let name = escape_control(name).into_owned();
         let Ok(v) = status::decode(json.as_bytes()) else {
             rows.push([
-                name.clone(),
+                name,
                 "(unreadable status)".into(),
                 String::new(),
                 String::new(),
@@ -108,8 +113,10 @@ fn table(replies: &[(String, String)]) -> String {
         channels += ch.len() as u64;
         rate += sps;
         rows.push([
-            name.clone(),
-            v.shard.clone().unwrap_or_else(|| "-".to_owned()),
+            name,
+            v.shard
+                .as_deref()
+                .map_or_else(|| "-".to_owned(), |s| escape_control(s).into_owned()),
             ch.len().to_string(),
             format!("{sps:.0}"),
             active.to_string(),
@@ -225,6 +232,27 @@ mod tests {
             "a status missing fields is not shown as zeros: {t}"
         );
         assert_eq!(lines[4], "3 instance(s), 1 channel(s), 1500 samples/s");
+    }
+
+    /// Any peer can answer a status query: its name and shard reach the table escaped,
+    /// so the table stays one line per instance and sends nothing to the terminal.
+    #[test]
+    fn hostile_instance_names_and_shards_are_escaped() {
+        let json = r#"{"instance":"x","uptime":1,"shard":"\u001b[2J","connected":true,"reconnections":0,"overlaps":0,"samples_per_second":0.0,"channels":[]}"#;
+        let t = table(&[("\u{1b}]0;pwned\u{7}\nALARM\u{202e}".into(), json.into())]);
+        assert!(
+            !t.chars()
+                .any(|c| c != '\n' && glrmon_wire::text::needs_escape(c)),
+            "{t:?}"
+        );
+        assert_eq!(t.lines().count(), 3, "{t}");
+        assert!(
+            t.lines()
+                .nth(1)
+                .unwrap()
+                .starts_with(r"\x1b]0;pwned\x07\nALARM\u{202e}  \x1b[2J "),
+            "{t}"
+        );
     }
 
     #[test]

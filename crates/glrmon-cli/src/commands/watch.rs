@@ -1,7 +1,13 @@
 //! `glrmon watch [KEYEXPR] [--json]`: alarms (at the crossing), their isolation
 //! updates, alarm ends, diagnoses and consistency changes, one line each.
+//!
+//! Any Zenoh peer can publish under the watched key, so nothing received reaches the
+//! terminal raw: lines, key expressions and decode errors are escaped
+//! ([`glrmon_wire::text`]), and records passed on as JSON keep their value with their
+//! control and bidi characters as JSON escapes.
 
 use clap::Args;
+use glrmon_wire::text::{Escaped, escape_json};
 use glrmon_wire::{Record, decode_record};
 
 use crate::flags::ZenohArgs;
@@ -48,20 +54,20 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
         let record = match decode_record(&bytes) {
             Ok(r) => r,
             Err(e) => {
-                eprintln!("glrmon watch: {}: {e}", sample.key_expr());
+                eprintln!(
+                    "glrmon watch: {}: {}",
+                    Escaped(sample.key_expr().as_str()),
+                    Escaped(&e.to_string())
+                );
                 continue;
             }
         };
         if !args.all && matches!(record, Record::Stat(_) | Record::Error(_)) {
             continue;
         }
-        if args.json {
-            println!("{}", String::from_utf8_lossy(&bytes));
-        } else {
-            match print::line(&record) {
-                Some(line) => println!("{line}"),
-                None => println!("{}", String::from_utf8_lossy(&bytes)),
-            }
+        match print::line(&record) {
+            Some(line) if !args.json => println!("{line}"),
+            _ => println!("{}", escape_json(&String::from_utf8_lossy(&bytes))),
         }
         printed += 1;
         if args.count.is_some_and(|c| printed >= c) {
