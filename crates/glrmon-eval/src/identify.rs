@@ -11,15 +11,33 @@
 use std::path::{Path, PathBuf};
 
 use glrmon_ident::{
-    Experiment, IdentError, IdentSettings, Identification, InnovationModel, Signal, WarningKind,
+    Experiment, IdentError, IdentSettings, Identification, InnovationModel, Method, Signal,
+    WarningKind, WorkEstimate, estimate_work,
 };
 use glrmon_input::{InputError, Table, read_table};
+use glrmon_spec::limits::{
+    CHANNEL_MEMORY_BUDGET, ChannelFootprint, MAX_FAULTS, MAX_INPUTS, MAX_OUTPUTS, MAX_STATES,
+    MAX_WINDOW, human_bytes,
+};
 use glrmon_spec::write::{IdentifiedChannel, identified_channel};
 use nalgebra::DMatrix;
 
 /// Runs shorter than this are left out (with a note): they cannot fill the block
 /// Hankel matrices of any useful horizon.
 pub const MIN_RUN_SAMPLES: usize = 50;
+
+/// Most working memory an identification may need, by [`estimate_work`]: a request
+/// above it is refused before any work (a horizon of 20 000 on 10⁶ samples once grew past
+/// 4.4 GB before it failed).
+pub const IDENT_MEMORY_BUDGET: u64 = 2 << 30;
+
+/// Most floating-point operations an identification may need, by [`estimate_work`]:
+/// about ten minutes at 1 GFLOP/s (what nalgebra's factorisations reach on one core of
+/// a release build; a debug build is much slower).
+pub const IDENT_FLOP_BUDGET: f64 = 6e11;
+
+/// The rate the time estimates assume, in floating-point operations per second.
+pub const ASSUMED_FLOPS_PER_SECOND: f64 = 1e9;
 
 /// What to identify.
 #[derive(Debug, Clone)]
@@ -74,6 +92,13 @@ pub struct Identified {
     /// covariance Σ_k after one pass over the first experiment and the identified Re
     /// (the configuration's Kalman filter is the identified predictor: ≈ 0).
     pub sigma_mismatch: f64,
+    /// The work estimated before identifying.
+    pub work: WorkEstimate,
+    /// The method used and why, in one line (inputs named).
+    pub method_line: String,
+    /// The held-out validation's failures in words, one per failed check, the number next
+    /// to the verdict (empty: validation passed).
+    pub validation_failures: Vec<String>,
 }
 
 /// Why identification failed.
@@ -100,6 +125,16 @@ pub enum IdentifyError {
     /// The numerics refused (the message names the columns).
     #[error("identification failed: {0}")]
     Ident(String),
+    /// A setting or size of the request is out of range: refused before any work.
+    /// `option` is the request's field (`window`, `order`, `max_order`, `inputs`,
+    /// `outputs`, `horizon`, or `files` for the recordings' size).
+    #[error("{option}: {why}")]
+    Request {
+        /// The request's field at fault.
+        option: &'static str,
+        /// What is wrong and what is accepted.
+        why: String,
+    },
     /// The written configuration does not validate (a bug: please report it).
     #[error("the written configuration does not validate:\n{0}")]
     Written(String),
@@ -111,6 +146,7 @@ pub enum IdentifyError {
 /// [`IdentifyError`]: unreadable files, missing columns, too little data, numerical
 /// refusals (naming the columns), or a written configuration that does not validate.
 pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, IdentifyError> {
+    check_request(request)?;
     let mut tables: Vec<(PathBuf, Table)> = Vec::new();
     for file in &request.files {
         for table in read_runs(file, &request.channel)? {
@@ -130,6 +166,7 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
         let sizes: Vec<String> = runs.iter().map(|r| r.samples.to_string()).collect();
         return Err(IdentifyError::TooShort(sizes.join(", ")));
     }
+    let work = check_sizes(request, &experiments, inputs.len(), outputs.len())?;
     let identification = glrmon_ident::identify(&experiments, &request.settings)
         .map_err(|e| IdentifyError::Ident(describe(&e, &inputs, &outputs)))?;
     let scaling = &identification.scaling;
@@ -165,8 +202,24 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
             .iter()
             .any(|n| !kept_inputs.contains(n) && !kept_outputs.contains(n))
     });
+    let method_line = identification.method.line(&kept_inputs);
+    let validation_failures = identification.validation.verdicts(&kept_outputs, false);
     let mut notes = request.notes.clone();
+    notes.push(format!("Method: {method_line}."));
     notes.extend(summary(&identification, &kept_outputs, &runs, &dropped));
+    if !validation_failures.is_empty() {
+        notes.push(format!(
+            "WARNING: this model fails its {} validation ({} check(s)); calibrate its \
+             threshold on fault-free data before use:",
+            if identification.validation.in_sample {
+                "in-sample"
+            } else {
+                "held-out"
+            },
+            validation_failures.len()
+        ));
+        notes.extend(validation_failures.iter().map(|l| format!("  {l}")));
+    }
     let channel = IdentifiedChannel {
         name: request.channel.clone(),
         period: periods.get(periods.len() / 2).copied(),
@@ -200,7 +253,169 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
         runs,
         dropped,
         sigma_mismatch,
+        work,
+        method_line,
+        validation_failures,
     })
+}
+
+/// The request's settings against the configuration's limits, before any file is read:
+/// the window, the orders, and no column named twice.
+fn check_request(request: &IdentifyRequest) -> Result<(), IdentifyError> {
+    if !(1..=MAX_WINDOW).contains(&request.window) {
+        return Err(IdentifyError::Request {
+            option: "window",
+            why: format!(
+                "{} is not a GLR window: it must be in 1..={MAX_WINDOW} (the \
+                 configuration's limit on glr.window)",
+                request.window
+            ),
+        });
+    }
+    let settings = &request.settings;
+    for (option, value) in [
+        ("order", settings.order),
+        (
+            "max_order",
+            settings.order.is_none().then_some(settings.max_order),
+        ),
+    ] {
+        if let Some(n) = value
+            && !(1..=MAX_STATES).contains(&n)
+        {
+            return Err(IdentifyError::Request {
+                option,
+                why: format!(
+                    "{n} states cannot be written: a channel has 1..={MAX_STATES} states (the \
+                     configuration's limit on n)"
+                ),
+            });
+        }
+    }
+    for (option, list) in [("inputs", &request.inputs), ("outputs", &request.outputs)] {
+        let Some(list) = list else { continue };
+        for (i, name) in list.iter().enumerate() {
+            if list[..i].contains(name) {
+                return Err(IdentifyError::Request {
+                    option,
+                    why: format!(
+                        "column \"{name}\" is given twice: a duplicate column is collinear \
+                         with itself, and no model can tell the two apart"
+                    ),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The sizes of the data and of the channel to write against the configuration's limits
+/// ([`glrmon_spec::limits`]) and the work against [`IDENT_MEMORY_BUDGET`] and
+/// [`IDENT_FLOP_BUDGET`], before identifying.
+fn check_sizes(
+    request: &IdentifyRequest,
+    experiments: &[Experiment],
+    l: usize,
+    p: usize,
+) -> Result<WorkEstimate, IdentifyError> {
+    for (option, count, max, what) in [
+        ("outputs", p, MAX_OUTPUTS, "outputs p"),
+        ("inputs", l, MAX_INPUTS, "inputs l"),
+    ] {
+        if count > max {
+            return Err(IdentifyError::Request {
+                option,
+                why: format!(
+                    "{count} columns, but a channel has at most {max} {what} (the \
+                     configuration's limit): choose fewer columns"
+                ),
+            });
+        }
+    }
+    if l + p > MAX_FAULTS {
+        return Err(IdentifyError::Request {
+            option: "inputs",
+            why: format!(
+                "{p} outputs and {l} inputs give {} bias faults, but a dictionary has at most \
+                 {MAX_FAULTS} (the configuration's limit): choose fewer columns",
+                l + p
+            ),
+        });
+    }
+    let settings = &request.settings;
+    let states = settings.order.unwrap_or(settings.max_order);
+    let footprint = ChannelFootprint {
+        states,
+        outputs: p,
+        inputs: l,
+        faults: l + p,
+        window: request.window,
+        history: 2 * request.window,
+    };
+    if footprint.bytes() > CHANNEL_MEMORY_BUDGET {
+        return Err(IdentifyError::Request {
+            option: "window",
+            why: format!(
+                "the written channel's monitor would need {} with up to {states} states ({}), \
+                 more than the {} a channel may use: lower --window or the order",
+                human_bytes(footprint.bytes()),
+                footprint.breakdown(),
+                human_bytes(CHANNEL_MEMORY_BUDGET)
+            ),
+        });
+    }
+    let samples: Vec<usize> = experiments.iter().map(Experiment::samples).collect();
+    let work = estimate_work(&samples, l, p, settings);
+    let total: usize = samples.iter().sum();
+    let (option, lever) = if settings.horizon.is_some() {
+        (
+            "horizon",
+            "a shorter --horizon, fewer samples or fewer columns",
+        )
+    } else {
+        (
+            "files",
+            "fewer samples (shorter or fewer recordings) or fewer columns",
+        )
+    };
+    let method = match settings.method {
+        Method::Auto => "either method",
+        other => other.title(),
+    };
+    let what = format!(
+        "{total} samples of {l} inputs and {p} outputs, {method} with horizon {} (widest \
+         factored matrix {} columns), orders up to {states}",
+        work.horizon, work.width
+    );
+    if work.bytes > IDENT_MEMORY_BUDGET {
+        return Err(IdentifyError::Request {
+            option,
+            why: format!(
+                "identification would need about {} of memory, more than its limit {}: \
+                 {what}; give {lever}",
+                human_bytes(work.bytes),
+                human_bytes(IDENT_MEMORY_BUDGET)
+            ),
+        });
+    }
+    if work.flops > IDENT_FLOP_BUDGET {
+        return Err(IdentifyError::Request {
+            option: if option == "files" && settings.order.is_none() && states > 10 {
+                "max_order"
+            } else {
+                option
+            },
+            why: format!(
+                "identification would take about {:.0} s ({:.1e} floating-point operations \
+                 at {:.0e}/s), more than its limit of {:.0} s: {what}; give {lever}",
+                work.flops / ASSUMED_FLOPS_PER_SECOND,
+                work.flops,
+                ASSUMED_FLOPS_PER_SECOND,
+                IDENT_FLOP_BUDGET / ASSUMED_FLOPS_PER_SECOND
+            ),
+        });
+    }
+    Ok(work)
 }
 
 /// The input and output column names: the request's, else the numbered `u…`, `y…`

@@ -672,6 +672,96 @@ fn select(candidates: &[Candidate], criterion: Criterion) -> Option<usize> {
         .map(|(k, _)| k)
 }
 
+/// What [`identify`] will need, estimated from the sizes alone (before any work), so
+/// that a caller can refuse a request that would exhaust the machine.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WorkEstimate {
+    /// Peak working memory in bytes: the data's copies, the blocks being factored (the
+    /// PO-MOESP LQ's four parts, or PBSID's data QR and state sequence), and each
+    /// candidate's regressions.
+    pub bytes: u64,
+    /// Floating-point operations, dominated by the QR factorisations (≈ 2·rows·width²
+    /// each, Golub & Van Loan 2013, *Matrix Computations*, 4th ed., §5.2) and the
+    /// candidates' least squares.
+    pub flops: f64,
+    /// The widest factored matrix: 2i(l + p) Hankel rows (PO-MOESP) or p(l + p) + l + p
+    /// regression columns (PBSID), whichever the method (both for [`Method::Auto`]).
+    pub width: usize,
+    /// The horizon (or past window) the estimate assumed.
+    pub horizon: usize,
+}
+
+/// The [`WorkEstimate`] of [`identify`] on experiments of `samples` rows each, with
+/// `inputs` and `outputs` columns and these settings: the largest of the methods
+/// [`Method::Auto`] may run, plus its feedback test.
+#[must_use]
+pub fn estimate_work(
+    samples: &[usize],
+    inputs: usize,
+    outputs: usize,
+    settings: &IdentSettings,
+) -> WorkEstimate {
+    let (l, p) = (inputs as f64, outputs.max(1) as f64);
+    let rows: f64 = samples.iter().map(|&n| n as f64).sum();
+    let e = samples.len() as f64;
+    let max_order = settings.order.unwrap_or(settings.max_order);
+    let orders = if settings.order.is_some() {
+        1.0
+    } else {
+        max_order as f64
+    };
+    let i0 = ((max_order + 1).div_ceil(outputs.max(1)) + 1).max(10);
+    let moesp_h = settings.horizon.unwrap_or(i0);
+    let pbsid_h = settings.horizon.unwrap_or(i0.max(20));
+    let data = 8.0 * 4.0 * rows * (l + p);
+    let n = max_order as f64;
+    // Each candidate: the predictor over every sample and its innovations (two threads).
+    let candidate_bytes = 2.0 * 8.0 * rows * (2.0 * p + n);
+    let candidate_flops = orders * 2.0 * rows * (n * n + n * (l + 2.0 * p) + p * l);
+    let qr = |rows: f64, width: f64, block: f64| 2.0 * rows * width * width * (1.0 + width / block);
+    let mut bytes: f64 = 0.0;
+    let mut flops: f64 = 0.0;
+    let mut width = 0.0_f64;
+    if settings.method != Method::Pbsid {
+        let m = 2.0 * moesp_h as f64 * (l + p);
+        bytes = bytes.max(8.0 * (4.0 * 2.0 * (m + 1024.0) * m + 6.0 * m * m));
+        flops = flops.max(qr(rows, m, 1024.0) + 10.0 * m * m * m);
+        width = width.max(m);
+    }
+    if settings.method != Method::Moesp {
+        let w = e + pbsid_h as f64 * (l + p) + l + p;
+        let f = i0.min(pbsid_h) as f64;
+        let states = rows * f * p;
+        let design = rows * (2.0 * n + l + p);
+        bytes = bytes.max(8.0 * (2.0 * (4096.0 + w) * w + states + 2.0 * design));
+        flops = flops.max(
+            2.0 * qr(rows, w, 4096.0)
+                + 2.0 * rows * w * f * p
+                + orders * 2.0 * qr(rows, 2.0 * n + l + p, 4096.0),
+        );
+        width = width.max(w);
+    }
+    if settings.method == Method::Auto && inputs > 0 {
+        let w = e + settings.feedback_lags as f64 * (l + p) + l;
+        flops += qr(rows, w, 4096.0);
+    }
+    let bytes = bytes + data + candidate_bytes;
+    WorkEstimate {
+        bytes: if bytes >= u64::MAX as f64 {
+            u64::MAX
+        } else {
+            bytes as u64
+        },
+        flops: flops + candidate_flops,
+        width: width.min(usize::MAX as f64) as usize,
+        horizon: if settings.method == Method::Pbsid {
+            pbsid_h
+        } else {
+            moesp_h
+        },
+    }
+}
+
 /// The factored data of the chosen method.
 enum Engine {
     Moesp(Subspace),

@@ -19,7 +19,8 @@ pub use error::{IdentError, Signal};
 pub use feedback::{DEFAULT_FEEDBACK_LAGS, DEFAULT_FEEDBACK_LEVEL, FeedbackTest, feedback_test};
 pub use identify::{
     Candidate, Criterion, Holdout, IdentSettings, Identification, Method, MethodChoice,
-    OrderSelection, ValidationReport, fmt_p, identify, to_physical, validate,
+    OrderSelection, ValidationReport, WorkEstimate, estimate_work, fmt_p, identify, to_physical,
+    validate,
 };
 pub use model::{
     InnovationModel, Prediction, RiccatiSolution, solve_riccati, sorted_eigenvalues,

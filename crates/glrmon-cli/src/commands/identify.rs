@@ -62,9 +62,11 @@ pub(crate) struct IdentifyArgs {
     /// Largest candidate order.
     #[arg(long, default_value_t = 10)]
     max_order: usize,
-    /// Subspace method: moesp (PO-MOESP, open-loop data) or pbsid (predictor-based,
-    /// consistent on data recorded under feedback control).
-    #[arg(long, value_enum, default_value_t = MethodArg::Moesp, conflicts_with = "model")]
+    /// Subspace method: auto (a Granger test of y → u at 1 % decides whether the data
+    /// were recorded under feedback: pbsid if so, moesp otherwise; the report says which
+    /// and why), moesp (PO-MOESP, open-loop data) or pbsid (predictor-based, consistent
+    /// on data recorded under feedback control).
+    #[arg(long, value_enum, default_value_t = MethodArg::Auto, conflicts_with = "model")]
     method: MethodArg,
     /// Criterion that picks the order.
     #[arg(long, value_enum, default_value_t = CriterionArg::Bic)]
@@ -97,6 +99,7 @@ enum QStructureArg {
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum MethodArg {
+    Auto,
     Moesp,
     Pbsid,
 }
@@ -150,6 +153,7 @@ pub(crate) fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
                 Holdout::LastFraction(args.holdout)
             },
             method: match args.method {
+                MethodArg::Auto => Method::Auto,
                 MethodArg::Moesp => Method::Moesp,
                 MethodArg::Pbsid => Method::Pbsid,
             },
@@ -177,10 +181,19 @@ pub(crate) fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
     let identified = identify_channel(&request).map_err(|e| match e {
         IdentifyError::Written(_) => anyhow::Error::from(e),
         IdentifyError::Input(e) => crate::common::input_error(e),
+        IdentifyError::Request { option, why } => InvalidInput(format!(
+            "{}: {why}",
+            match option {
+                "files" => "the input files".to_owned(),
+                flag => format!("--{}", flag.replace('_', "-")),
+            }
+        ))
+        .into(),
         other => InvalidInput(other.to_string()).into(),
     })?;
     std::fs::write(&args.output, &identified.config)
         .map_err(|e| anyhow::anyhow!("writing {}: {e}", args.output.display()))?;
+    warn_if_invalid(&identified, &args.output);
     if args.json {
         println!(
             "{}",
@@ -201,6 +214,30 @@ pub(crate) fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The loud warning of a model that fails its validation: written all the same (a
+/// calibrated threshold can still make it a usable monitor), but on standard error, each
+/// failed check in words.
+fn warn_if_invalid(id: &Identified, output: &std::path::Path) {
+    if id.validation_failures.is_empty() {
+        return;
+    }
+    let v = &id.identification.validation;
+    eprintln!(
+        "WARNING: the identified model FAILS its {} validation ({} failed check(s)); {} was \
+         written all the same, but its innovations are not what its Re says:",
+        if v.in_sample { "in-sample" } else { "held-out" },
+        id.validation_failures.len(),
+        output.display()
+    );
+    for line in &id.validation_failures {
+        eprintln!("WARNING:   {line}");
+    }
+    eprintln!(
+        "WARNING: calibrate its threshold on fault-free data (glrmon calibrate --write) and \
+         check the false-alarm rate on an independent run before trusting its alarms"
+    );
 }
 
 fn print_report(id: &Identified) {
@@ -225,6 +262,13 @@ fn print_report(id: &Identified) {
     for line in &id.dropped {
         println!("  warning: {line}");
     }
+    println!("method: {}", id.method_line);
+    println!(
+        "estimated work: {} of memory, ~{:.1} s at {:.0e} floating-point operations/s",
+        glrmon_spec::limits::human_bytes(id.work.bytes),
+        id.work.flops / glrmon_eval::identify::ASSUMED_FLOPS_PER_SECOND,
+        glrmon_eval::identify::ASSUMED_FLOPS_PER_SECOND
+    );
     let sv: Vec<String> = ident
         .order
         .singular_values
@@ -233,7 +277,9 @@ fn print_report(id: &Identified) {
         .map(|s| format!("{s:.3}"))
         .collect();
     println!("singular values: {}", sv.join(" "));
-    println!("order        AIC          BIC   held-out NRMSE (mean)   ρ(A−KC)");
+    println!(
+        "order        AIC          BIC   held-out NRMSE (mean)   ρ(A−KC)  not white  NIS (interval)"
+    );
     for c in &ident.order.candidates {
         let mean = if c.holdout_nrmse.is_empty() {
             f64::NAN
@@ -247,10 +293,27 @@ fn print_report(id: &Identified) {
         };
         match &c.failure {
             Some(why) => println!("{:>5}   {why}", c.order),
-            None => println!(
-                "{:>5} {:>10.1} {:>12.1} {:>22.4} {:>9.3}{mark}",
-                c.order, c.aic, c.bic, mean, c.predictor_spectral_radius
-            ),
+            None => {
+                let (white, nis) = c.validation.as_ref().map_or_else(
+                    || ("-".to_owned(), "-".to_owned()),
+                    |v| {
+                        (
+                            v.not_white().len().to_string(),
+                            format!(
+                                "{:.2} [{:.2}, {:.2}]{}",
+                                v.nis_mean.unwrap_or(f64::NAN),
+                                v.nis_interval.0,
+                                v.nis_interval.1,
+                                if v.nis_consistent() { "" } else { " ✗" }
+                            ),
+                        )
+                    },
+                );
+                println!(
+                    "{:>5} {:>10.1} {:>12.1} {:>22.4} {:>9.3} {white:>10}  {nis}{mark}",
+                    c.order, c.aic, c.bic, mean, c.predictor_spectral_radius
+                );
+            }
         }
     }
     println!(
@@ -267,27 +330,20 @@ fn print_report(id: &Identified) {
         .zip(v.nrmse.iter())
         .map(|(n, e)| format!("{n} {e:.3}"))
         .collect();
-    println!("validation on {} {what} samples:", v.samples);
+    println!(
+        "validation on {} {what} samples ({}):",
+        v.samples,
+        if v.passed() { "passed" } else { "FAILED" }
+    );
     println!("  one-step NRMSE: {}", fits.join(", "));
-    let lb: Vec<String> = id
-        .channel
-        .outputs
-        .iter()
-        .zip(&v.ljung_box)
-        .map(|(n, t)| format!("{n} p = {:.3}", t.p_value))
-        .collect();
     if let Some(first) = v.ljung_box.first() {
         println!(
-            "  innovation whiteness (Ljung–Box, {} lags): {}",
-            first.lags,
-            lb.join(", ")
+            "  innovation whiteness (Ljung–Box, {} lags) and consistency (NIS):",
+            first.lags
         );
     }
-    if let Some(nis) = v.nis_mean {
-        println!(
-            "  mean normalised innovation square {nis:.3} (expected {})",
-            v.outputs
-        );
+    for line in v.verdicts(&id.channel.outputs, true) {
+        println!("    {line}");
     }
     println!(
         "  predictor A − KC: spectral radius {:.4}{}",
@@ -320,6 +376,29 @@ struct Report {
     validation: ValidationReport,
     sigma_mismatch: f64,
     period: Option<f64>,
+    method: MethodReport,
+    estimated_bytes: u64,
+    estimated_flops: f64,
+}
+
+#[derive(Debug, Serialize)]
+struct MethodReport {
+    requested: &'static str,
+    used: &'static str,
+    reason: String,
+    feedback: Option<FeedbackReport>,
+    fallback: Option<String>,
+}
+
+#[derive(Debug, Serialize)]
+struct FeedbackReport {
+    statistic: Option<f64>,
+    dof: usize,
+    p_value: f64,
+    lags: usize,
+    level: f64,
+    feedback: bool,
+    per_input_p: Vec<Option<f64>>,
 }
 
 #[derive(Debug, Serialize)]
@@ -349,6 +428,11 @@ struct ValidationReport {
     ljung_box_lags: usize,
     nis_mean: Option<f64>,
     expected_nis: usize,
+    nis_interval: [f64; 2],
+    not_white: Vec<String>,
+    level: f64,
+    passed: bool,
+    failures: Vec<String>,
     predictor_spectral_radius: f64,
 }
 
@@ -397,10 +481,36 @@ impl Report {
                 ljung_box_lags: v.ljung_box.first().map_or(0, |t| t.lags),
                 nis_mean: v.nis_mean,
                 expected_nis: v.outputs,
+                nis_interval: [v.nis_interval.0, v.nis_interval.1],
+                not_white: v
+                    .not_white()
+                    .into_iter()
+                    .map(|j| id.channel.outputs[j].clone())
+                    .collect(),
+                level: v.level,
+                passed: v.passed(),
+                failures: id.validation_failures.clone(),
                 predictor_spectral_radius: v.predictor_spectral_radius,
             },
             sigma_mismatch: id.sigma_mismatch,
             period: id.channel.period,
+            method: MethodReport {
+                requested: ident.method.requested.name(),
+                used: ident.method.used.name(),
+                reason: id.method_line.clone(),
+                feedback: ident.method.feedback.as_ref().map(|t| FeedbackReport {
+                    statistic: finite(t.statistic),
+                    dof: t.dof,
+                    p_value: t.p_value,
+                    lags: t.lags,
+                    level: t.level,
+                    feedback: t.feedback(),
+                    per_input_p: t.per_input.clone(),
+                }),
+                fallback: ident.method.fallback.clone(),
+            },
+            estimated_bytes: id.work.bytes,
+            estimated_flops: id.work.flops,
         }
     }
 }
