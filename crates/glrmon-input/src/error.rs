@@ -2,6 +2,8 @@
 
 use std::path::{Path, PathBuf};
 
+use glrmon_wire::text::Escaped;
+
 use crate::HeaderError;
 
 /// An input file that could not be opened or read: the file, and what went wrong
@@ -113,12 +115,26 @@ impl InputError {
 impl std::fmt::Display for InputError {
     /// `<file>: <what and why>`; a CSV file that cannot be opened reads
     /// `opening <file>: <why>`, and damage lists the damaged parts alone.
+    ///
+    /// The file's name and everything the message quotes from the file (column and
+    /// channel names, damage, the recorded configuration's errors) are shown escaped
+    /// ([`glrmon_wire::text`]); only the recorded configuration's errors keep their
+    /// line breaks, one escaped line each.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let path = self.path.display();
+        let path = self.path.to_string_lossy();
+        let path = Escaped(&path);
         match &self.kind {
-            InputErrorKind::OpenCsv(e) => write!(f, "opening {path}: {e}"),
-            InputErrorKind::Damaged(_) => write!(f, "{}", self.kind),
-            kind => write!(f, "{path}: {kind}"),
+            InputErrorKind::OpenCsv(e) => write!(f, "opening {path}: {}", Escaped(&e.to_string())),
+            InputErrorKind::Damaged(_) => write!(f, "{}", Escaped(&self.kind.to_string())),
+            kind @ InputErrorKind::RecordedConfig(_) => {
+                write!(f, "{path}: ")?;
+                for (i, line) in kind.to_string().split('\n').enumerate() {
+                    let sep = if i == 0 { "" } else { "\n" };
+                    write!(f, "{sep}{}", Escaped(line))?;
+                }
+                Ok(())
+            }
+            kind => write!(f, "{path}: {}", Escaped(&kind.to_string())),
         }
     }
 }
@@ -163,6 +179,19 @@ mod tests {
             (
                 InputErrorKind::Damaged(vec!["damaged: a".into(), "damaged: b".into()]),
                 "damaged: a; damaged: b",
+                true,
+            ),
+            (
+                InputErrorKind::Header(HeaderError::Unknown("y\u{1b}]0;pwned\u{7}".into())),
+                r#"d/x: column "y\x1b]0;pwned\x07" is not one of k, t, u<i>, y<i>, p<i>"#,
+                true,
+            ),
+            (
+                InputErrorKind::UnknownChannel {
+                    name: "a".into(),
+                    known: vec!["b\n\u{202e}c".into()],
+                },
+                r#"d/x: channel "a" is not in the recorded configuration (channels: b\n\u{202e}c)"#,
                 true,
             ),
         ];

@@ -10,6 +10,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use glrmon_record::{Event, FileHeader, METADATA_NAME, McapReader, ReadEnd, TopicKind};
 use glrmon_runtime::InputItem;
+use glrmon_wire::text::Escaped;
 use glrmon_wire::{DecodeLimits, Sample, decode_intake, decode_samples};
 
 use crate::{InputError, InputErrorKind};
@@ -327,7 +328,8 @@ impl McapInput {
         }
     }
 
-    /// Damaged parts and how the file ended, as lines for the operator; `true` when
+    /// Damaged parts and how the file ended, as lines for the operator (what they quote
+    /// from the file escaped, [`glrmon_wire::text`]); `true` when
     /// data was lost to damage (not merely an unfinished file). Complete once
     /// [`McapInput::next_input`] returned `None`.
     #[must_use]
@@ -336,14 +338,14 @@ impl McapInput {
             .reader
             .damage()
             .iter()
-            .map(|d| format!("damaged: {d}"))
+            .map(|d| format!("damaged: {}", Escaped(&d.to_string())))
             .collect();
         let salvage = self.reader.salvage();
         let mut damaged = !lines.is_empty() || !self.bad_inputs.is_empty() || salvage.lost_data();
         lines.extend(
             self.bad_inputs
                 .iter()
-                .map(|b| format!("bad input message: {b}")),
+                .map(|b| format!("bad input message: {}", Escaped(b))),
         );
         match self.reader.end() {
             ReadEnd::Finished | ReadEnd::Reading => {}
@@ -359,7 +361,8 @@ impl McapInput {
             ReadEnd::Unreadable { at, reason } => {
                 damaged = true;
                 lines.push(format!(
-                    "unreadable from byte {at}: {reason}; no valid chunk follows"
+                    "unreadable from byte {at}: {}; no valid chunk follows",
+                    Escaped(reason)
                 ));
             }
         }
