@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::Args;
+use glrmon_wire::text::Escaped;
 use zenoh::Wait as _;
 
 use crate::common::{InvalidInput, input_error};
@@ -101,7 +102,10 @@ async fn play(mut playback: glrmon_input::Playback, args: &PlayArgs) -> anyhow::
         pass += 1;
         let (lines, _) = playback.damage_report();
         for line in lines {
-            eprintln!("glrmon play: {}: {line}", args.file.display());
+            eprintln!(
+                "glrmon play: {}: {line}",
+                Escaped(&args.file.to_string_lossy())
+            );
         }
         eprintln!(
             "glrmon play: {published} samples of {} channel(s) ({}) published in {:.3} s \
@@ -109,7 +113,7 @@ async fn play(mut playback: glrmon_input::Playback, args: &PlayArgs) -> anyhow::
             channels.len(),
             channels
                 .iter()
-                .map(|(c, k)| format!("{c} on {k}"))
+                .map(|(c, k)| format!("{} on {}", Escaped(c), Escaped(k)))
                 .collect::<Vec<_>>()
                 .join(", "),
             start.elapsed().as_secs_f64(),

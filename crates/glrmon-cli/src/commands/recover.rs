@@ -12,6 +12,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 use glrmon_record::ReadEnd;
+use glrmon_wire::text::{Escaped, escape_control};
 
 use crate::common::InvalidInput;
 
@@ -37,8 +38,8 @@ pub(crate) fn run(args: &RecoverArgs) -> anyhow::Result<()> {
     if output == args.input {
         return Err(InvalidInput("--output must differ from the input".into()).into());
     }
-    let r =
-        glrmon_record::recover(&args.input, &output).map_err(|e| InvalidInput(e.to_string()))?;
+    let r = glrmon_record::recover(&args.input, &output)
+        .map_err(|e| InvalidInput(escape_control(&e.to_string()).into_owned()))?;
     let end = match &r.end {
         ReadEnd::Finished | ReadEnd::Reading => "the input was finished".to_owned(),
         ReadEnd::Truncated { at, partial } => format!(
@@ -46,7 +47,10 @@ pub(crate) fn run(args: &RecoverArgs) -> anyhow::Result<()> {
              incomplete record dropped"
         ),
         ReadEnd::Unreadable { at, reason } => {
-            format!("unreadable from byte {at}: {reason}; no valid chunk follows")
+            format!(
+                "unreadable from byte {at}: {}; no valid chunk follows",
+                Escaped(reason)
+            )
         }
     };
     println!(
@@ -56,7 +60,10 @@ pub(crate) fn run(args: &RecoverArgs) -> anyhow::Result<()> {
         output.display()
     );
     for d in &r.damage {
-        eprintln!("glrmon recover: damaged, skipped: {d}");
+        eprintln!(
+            "glrmon recover: damaged, skipped: {}",
+            Escaped(&d.to_string())
+        );
     }
     if r.lost_data() || r.salvage.summary_note.is_some() {
         eprintln!("glrmon recover: salvage: {}", r.salvage);

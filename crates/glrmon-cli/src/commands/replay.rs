@@ -18,6 +18,7 @@ use glrmon_record::{FileHeader, McapFileSink};
 use glrmon_report::ReportSink;
 use glrmon_report::clock::Zone;
 use glrmon_runtime::{ChannelPipeline, Fanout, FnSink, Interest, JsonLinesSink, Output, Sink};
+use glrmon_wire::text::Escaped;
 use glrmon_wire::{DecodeLimits, Record};
 
 use crate::common::pick;
@@ -284,8 +285,12 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
             pipeline.error_total()
         );
     }
+    // A recording's topics may name any channel: shown escaped.
     for (name, n) in &unknown {
-        eprintln!("  channel \"{name}\": {n} inputs skipped: not in the configuration");
+        eprintln!(
+            "  channel \"{}\": {n} inputs skipped: not in the configuration",
+            Escaped(name)
+        );
     }
     if lines_on_stderr(args) {
         for line in &take_lines(&lines) {
@@ -294,7 +299,10 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
     }
     let (lines, damaged) = input.damage_report();
     for line in &lines {
-        eprintln!("glrmon replay: {}: {line}", args.input.display());
+        eprintln!(
+            "glrmon replay: {}: {line}",
+            Escaped(&args.input.to_string_lossy())
+        );
     }
     if damaged {
         return Err(InvalidInput(format!(
