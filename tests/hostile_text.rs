@@ -292,3 +292,65 @@ fn info_escapes_a_recordings_names_and_metadata() {
         "{stderr}"
     );
 }
+
+/// `glrmon replay` of a recording whose inputs name a hostile channel and carry a
+/// payload with a hostile field name: the skipped channel, the bad input's field and
+/// the damage summary on standard error are escaped.
+#[test]
+fn replay_escapes_a_recordings_channels_and_bad_inputs() {
+    let scratch = Scratch::new("hostile-replay");
+    let config = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/examples/dc-motor.toml"),
+    )
+    .unwrap();
+    let header = glrmon_record::FileHeader {
+        config,
+        channels: vec!["dc_motor".to_owned()],
+        extra: BTreeMap::new(),
+    };
+    let path = scratch.0.join("hostile.mcap");
+    let mut file =
+        glrmon_record::McapFile::create(&path, glrmon_record::FileOptions::default(), &header)
+            .unwrap();
+    let inputs = glrmon_record::TopicKind::Inputs;
+    let ghost = "\u{1b}[2J\u{202e}ghost";
+    for (i, (channel, payload)) in [
+        ("dc_motor", r#"{"k":0,"u":[1],"y":[0,0]}"#),
+        (
+            "dc_motor",
+            r#"{"k":1,"u":[1],"y":[0,0],"y\u001b]0;pwned\u0007\nglrmon replay: forged":1}"#,
+        ),
+        (ghost, r#"{"k":0,"y":[0]}"#),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let t = 1_000 + i as u64;
+        file.write(channel, inputs, t, t, payload.as_bytes())
+            .unwrap();
+    }
+    let path = file.finish().unwrap();
+
+    let out = glrmon()
+        .args(["replay", "--quiet", "--output"])
+        .arg(scratch.0.join("out.jsonl"))
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert_clean("replay's report", &stderr);
+    assert_clean("replay's output", &String::from_utf8(out.stdout).unwrap());
+    for expected in [
+        r#"channel "\x1b[2J\u{202e}ghost": 1 inputs skipped"#,
+        r"field y\x1b]0;pwned\x07\nglrmon replay: forged is not a field",
+    ] {
+        assert!(stderr.contains(expected), "no {expected} in\n{stderr}");
+    }
+    assert!(
+        !stderr
+            .lines()
+            .any(|l| l.starts_with("glrmon replay: forged")),
+        "a forged line in\n{stderr}"
+    );
+}
