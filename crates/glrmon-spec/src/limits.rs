@@ -58,6 +58,20 @@ pub const MAX_PAYLOAD_BYTES: usize = 64 << 20;
 /// Longest pre-fault capture kept in memory (`recording.capture.before_seconds`), and
 /// longest post-fault capture, in seconds.
 pub const MAX_CAPTURE_SECONDS: f64 = 3600.0;
+/// Smallest `[channels.scaling]` scale (`u_scale`, `y_scale`). A raw-unit fault's
+/// signature is e_j/scale in model units and the GLR's Fisher information sums its
+/// square over the window; the isolation tests multiply two of those. Scales within
+/// 10^±60 keep these products inside f64's range (10^±308) for any window up to
+/// [`MAX_WINDOW`]; a scale of 1e-300 overflowed the signature, one of 1e160 underflowed
+/// the correlation of two faults into ±∞.
+pub const MIN_SCALE: f64 = 1e-60;
+/// Largest `[channels.scaling]` scale (see [`MIN_SCALE`]).
+pub const MAX_SCALE: f64 = 1e60;
+/// Largest |offset| of `[channels.scaling]` (`u_offset`, `y_offset`): a raw sample near
+/// 0 becomes −offset/scale in model units, which the monitor refuses beyond 10¹⁰⁰
+/// (`too_large`): MAX_OFFSET / [`MIN_SCALE`] = 10¹⁰⁰. An offset of 1e308 made every
+/// sample `too_large`.
+pub const MAX_OFFSET: f64 = 1e40;
 /// Memory one channel may need, by [`ChannelFootprint::bytes`]: 1 GiB.
 pub const CHANNEL_MEMORY_BUDGET: u64 = 1 << 30;
 

@@ -565,3 +565,46 @@ fn malformed_zenoh_endpoints_name_their_field_and_the_fix() {
         "{e:?}"
     );
 }
+
+#[test]
+fn scales_and_offsets_beyond_the_limits_name_the_scaling_field_not_a_fault() {
+    let scaled = |scaling: &str| {
+        with(
+            "[channels.glr]",
+            &format!(
+                "[[channels.faults]]\nname = \"s\"\nkind = \"sensor_bias\"\noutput = 0\n\n\
+                 [channels.scaling]\n{scaling}\n\n[channels.glr]"
+            ),
+        )
+    };
+    // A tiny scale once overflowed the raw-unit fault's signature and was reported on the
+    // fault; a huge one underflowed two faults' correlation into ±∞.
+    for (scaling, path) in [
+        (
+            "y_scale = [1e-300]",
+            "scaling.y_scale[0]: 1e-300 is outside [1e-60, 1e60]",
+        ),
+        ("y_scale = [1e160]", "scaling.y_scale[0]: 1e160 is outside"),
+        ("u_scale = [1e-61]", "scaling.u_scale[0]: 1e-61 is outside"),
+        (
+            "y_offset = [1e308]",
+            "scaling.y_offset[0]: 1e308 is beyond ±1e40",
+        ),
+        ("u_offset = [-1e41]", "scaling.u_offset[0]: -1e41 is beyond"),
+    ] {
+        let errs = errors(&scaled(scaling));
+        assert!(
+            errs.iter().any(|e| e.contains(path)),
+            "{scaling}: {errs:#?}"
+        );
+        assert!(
+            !errs.iter().any(|e| e.contains("faults[")),
+            "{scaling}: an error named a fault: {errs:#?}"
+        );
+    }
+    // At the limits, the channel is valid.
+    glrmon_spec::parse(&scaled(
+        "y_scale = [1e-60]\ny_offset = [1e40]\nu_scale = [1e60]",
+    ))
+    .unwrap();
+}

@@ -5,6 +5,7 @@ use glrmon_core::{Dims, SignalScaling};
 
 use super::{Validator, join};
 use crate::Columns;
+use crate::limits;
 use crate::schema::{ColumnsSpec, ScalingSpec};
 
 impl Validator {
@@ -97,6 +98,32 @@ impl Validator {
                                         } else {
                                             "finite"
                                         }
+                                    ),
+                                );
+                            } else if scale
+                                && !(limits::MIN_SCALE..=limits::MAX_SCALE).contains(value)
+                            {
+                                v.error(
+                                    format!("{path}[{i}]"),
+                                    format!(
+                                        "{value:e} is outside [{:e}, {:e}] (limits::MIN_SCALE, \
+                                         MAX_SCALE): a raw-unit fault's signature is 1/scale in \
+                                         model units, and its information (squared, summed over \
+                                         the window) would leave floating-point range; give the \
+                                         signal in other units",
+                                        limits::MIN_SCALE,
+                                        limits::MAX_SCALE
+                                    ),
+                                );
+                            } else if !scale && value.abs() > limits::MAX_OFFSET {
+                                v.error(
+                                    format!("{path}[{i}]"),
+                                    format!(
+                                        "{value:e} is beyond ±{:e} (limits::MAX_OFFSET): a raw \
+                                         sample near 0 would be −offset/scale in model units, \
+                                         refused by the monitor as too large; is the operating \
+                                         point in the signal's units?",
+                                        limits::MAX_OFFSET
                                     ),
                                 );
                             }
