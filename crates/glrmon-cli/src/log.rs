@@ -175,4 +175,60 @@ mod tests {
         assert!(ColorChoice::Always.colors(false, Some("1")));
         assert!(!ColorChoice::Never.colors(true, None));
     }
+
+    /// A rejection whose channel and message hold control sequences and a line break
+    /// (an `error` record made from anything but glrmon-wire's escaped decode errors)
+    /// is still one log line with visible escapes.
+    #[test]
+    fn rejections_are_logged_escaped() {
+        use std::sync::{Arc, Mutex};
+
+        #[derive(Clone, Default)]
+        struct Captured(Arc<Mutex<Vec<u8>>>);
+        impl std::io::Write for Captured {
+            fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+                self.0.lock().unwrap().extend_from_slice(buf);
+                Ok(buf.len())
+            }
+            fn flush(&mut self) -> std::io::Result<()> {
+                Ok(())
+            }
+        }
+
+        let captured = Captured::default();
+        let writer = captured.clone();
+        let subscriber = tracing_subscriber::fmt()
+            .with_ansi(false)
+            .with_writer(move || writer.clone())
+            .finish();
+        let record = Record::Error(glrmon_wire::ErrorRecord {
+            channel: "c\u{1b}]0;pwned\u{7}".into(),
+            k: None,
+            code: glrmon_wire::ErrorCode::UnknownField,
+            message: "x\u{1b}[2J\n2026-12-03T10:00:00.000Z  INFO ALARM forged\u{202e}".into(),
+            stage: glrmon_wire::Stage::Receiving,
+        });
+        tracing::subscriber::with_default(subscriber, || {
+            let output = Output {
+                record,
+                json: Vec::new(),
+                log_time_ns: 0,
+                stat_index: None,
+            };
+            LogSink::new().write(&output).unwrap();
+        });
+        let log = String::from_utf8(captured.0.lock().unwrap().clone()).unwrap();
+        assert_eq!(log.lines().count(), 1, "{log}");
+        assert!(
+            !log.trim_end().chars().any(glrmon_wire::text::needs_escape),
+            "{log:?}"
+        );
+        assert!(
+            log.contains(
+                r"Rejected input: x\x1b[2J\n2026-12-03T10:00:00.000Z  INFO ALARM forged\u{202e}."
+            ),
+            "{log}"
+        );
+        assert!(log.contains(r"channel=c\x1b]0;pwned\x07"), "{log}");
+    }
 }
