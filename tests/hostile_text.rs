@@ -354,3 +354,54 @@ fn replay_escapes_a_recordings_channels_and_bad_inputs() {
         "a forged line in\n{stderr}"
     );
 }
+
+/// `glrmon status` asks every instance; a hostile peer answers under a name with a
+/// window-title OSC, a line break and a bidi override, and a shard that clears the
+/// screen: the table and `--json` show them escaped.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn status_escapes_a_hostile_instances_name_and_status() {
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let peer = session(Some(&endpoint), None).await;
+    let key = "glrmon/@status/\u{1b}]0;pwned\u{7}\nALARM\u{202e}x";
+    let status = "{\"instance\":\"x\",\"uptime\":1,\"shard\":\"\\u001b[2J\u{9b}\",\"connected\":true,\
+                  \"reconnections\":0,\"overlaps\":0,\"samples_per_second\":0.0,\"channels\":[]}";
+    let _queryable = peer
+        .declare_queryable(key)
+        .callback(move |query| {
+            use zenoh::Wait as _;
+            query.reply(key, status).wait().unwrap();
+        })
+        .await
+        .unwrap();
+    for json in [false, true] {
+        let mut cmd = glrmon();
+        cmd.args(["status", "--timeout", "2", "--connect", &endpoint]);
+        if json {
+            cmd.arg("--json");
+        }
+        let out = tokio::task::spawn_blocking(move || cmd.output())
+            .await
+            .unwrap()
+            .unwrap();
+        let (stdout, stderr) = (
+            String::from_utf8(out.stdout).unwrap(),
+            String::from_utf8(out.stderr).unwrap(),
+        );
+        assert!(out.status.success(), "{stdout}\n{stderr}");
+        assert_clean("status", &stdout);
+        assert_clean("status's errors", &stderr);
+        if json {
+            let v: serde_json::Value = serde_json::from_str(stdout.trim_end()).unwrap();
+            assert_eq!(v["shard"], "\u{1b}[2J\u{9b}");
+            assert!(stdout.contains(r#""shard":"\u001b[2J\u009b""#), "{stdout}");
+        } else {
+            let lines: Vec<&str> = stdout.lines().collect();
+            assert_eq!(lines.len(), 3, "{stdout}");
+            assert!(
+                lines[1].starts_with(r"\x1b]0;pwned\x07\nALARM\u{202e}x  \x1b[2J\u{9b} "),
+                "{stdout}"
+            );
+        }
+    }
+    peer.close().await.unwrap();
+}
