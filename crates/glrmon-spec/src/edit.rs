@@ -61,6 +61,15 @@ pub enum EditError {
     /// A matrix to write has a value that is not finite (named).
     #[error("{0} has a value that is not finite")]
     NotFinite(&'static str),
+    /// An isolation threshold to write is not finite and positive: a test the data
+    /// could not calibrate, to be left out rather than written.
+    #[error("the isolation threshold of \"{test}\" is {value}, not finite and positive")]
+    Isolation {
+        /// The test.
+        test: String,
+        /// The threshold.
+        value: f64,
+    },
     /// The edited text would not be a valid configuration.
     #[error("the updated configuration would be invalid:\n{0}")]
     Invalid(SpecErrors),
@@ -70,14 +79,18 @@ pub enum EditError {
 /// calibration `c` (with `source`, a description of the data it was found on, and the
 /// isolation thresholds `isolation` as `(test, threshold)` pairs, left out when empty)
 /// and removes the other ways of setting the detection threshold (`threshold`,
-/// `false_alarm`, `threshold_mode`). Returns the edited text: everything else of
-/// `text` (comments, order, layout) is kept.
+/// `false_alarm`, `threshold_mode`). The table replaces any earlier one whole: a test
+/// missing from `isolation` (one that could not be calibrated) falls back to its χ²
+/// threshold. Returns the edited text: everything else of `text` (comments, order,
+/// layout) is kept.
 ///
 /// # Errors
 /// [`EditError::Toml`] when `text` is not TOML, [`EditError::NoChannels`] or
 /// [`EditError::NoChannel`] when it has no channel named `channel`,
-/// [`EditError::GlrNotTable`] when that channel's `glr` is not a table, and
-/// [`EditError::Invalid`] when the edited text does not [`parse`](crate::parse).
+/// [`EditError::GlrNotTable`] when that channel's `glr` is not a table,
+/// [`EditError::Isolation`] for an isolation threshold that is not finite and positive
+/// (naming its test), and [`EditError::Invalid`] when the edited text does not
+/// [`parse`](crate::parse).
 pub fn set_calibrated(
     text: &str,
     channel: &str,
@@ -85,6 +98,12 @@ pub fn set_calibrated(
     isolation: &[(&str, f64)],
     source: &str,
 ) -> Result<String, EditError> {
+    if let Some(&(test, value)) = isolation.iter().find(|(_, t)| !(t.is_finite() && *t > 0.0)) {
+        return Err(EditError::Isolation {
+            test: test.to_owned(),
+            value,
+        });
+    }
     let mut doc: toml_edit::DocumentMut = text
         .parse()
         .map_err(|e: toml_edit::TomlError| EditError::Toml(e.to_string()))?;
@@ -409,6 +428,25 @@ isolation = { level_bias = 7.5 }
             cfg.channels[0].isolation_thresholds,
             [("level_bias".to_owned(), 7.5)]
         );
+    }
+
+    /// An isolation threshold that is not finite and positive (a test the data could
+    /// not calibrate) is refused naming its test, before anything is written; an
+    /// earlier calibrated table is replaced whole, so a test left out falls back to χ².
+    #[test]
+    fn an_isolation_threshold_of_zero_is_refused_naming_its_test() {
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let e = set_calibrated(TEXT, "tank", &calibration(), &[("level_bias", bad)], "a")
+                .unwrap_err();
+            assert!(matches!(&e, EditError::Isolation { test, .. } if test == "level_bias"));
+            assert!(e.to_string().contains("\"level_bias\""), "{e}");
+        }
+        let once =
+            set_calibrated(TEXT, "tank", &calibration(), &[("level_bias", 7.5)], "a").unwrap();
+        let again = set_calibrated(&once, "tank", &calibration(), &[], "b").unwrap();
+        assert!(!again.contains("isolation"), "{again}");
+        let cfg = crate::parse(&again).unwrap();
+        assert!(cfg.channels[0].isolation_thresholds.is_empty());
     }
 
     /// A per-sample target is written as `sample_far` with the exceedances,
