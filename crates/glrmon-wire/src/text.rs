@@ -5,14 +5,15 @@
 //! received from a peer, recording metadata and file names can hold any character. Shown
 //! raw, `ESC ] 0 ; … BEL` retitles a terminal window, `ESC [ 2 J` clears the screen, a
 //! newline starts a forged log line and U+202E RIGHT-TO-LEFT OVERRIDE makes `lmx.exe`
-//! read as `exe.xml`. Every human-readable output passes such text through
-//! [`escape_control`] or [`Escaped`], once, where the text enters the message.
+//! read as `exe.xml`. Such text passes through [`escape_control`] or [`Escaped`] where
+//! it enters a human-readable message (a decode error quoting a field name) and again
+//! where a printer shows text it received (a record's channel in `glrmon watch`).
 //!
 //! Escaped are: the C0 controls (U+0000–U+001F, among them TAB, LF, CR, BEL and ESC),
 //! DEL (U+007F), the C1 controls (U+0080–U+009F) and the invisible format characters that
 //! change how text around them is laid out ([`needs_escape`]). ASCII ones are written
-//! `\t`, `\n`, `\r` or `\xNN` (`\x1b`), the others `\u{NNNN}` (`\u{202e}`), as Rust
-//! writes them. Backslashes are left alone, so escaping twice changes nothing: a message
+//! `\t`, `\n`, `\r` or `\xNN` (`\x1b`), the others `\u{…}` in hex (`\u{9b}`,
+//! `\u{202e}`), as Rust writes them. Backslashes are left alone, so escaping twice changes nothing: a message
 //! escaped where it was made may safely be escaped again where it is printed. The escape
 //! is for reading, not reversible: text that already held a backslash sequence looks
 //! the same as an escaped character.
