@@ -13,10 +13,10 @@
 //! DEL (U+007F), the C1 controls (U+0080–U+009F) and the invisible format characters that
 //! change how text around them is laid out ([`needs_escape`]). ASCII ones are written
 //! `\t`, `\n`, `\r` or `\xNN` (`\x1b`), the others `\u{…}` in hex (`\u{9b}`,
-//! `\u{202e}`), as Rust writes them. Backslashes are left alone, so escaping twice changes nothing: a message
-//! escaped where it was made may safely be escaped again where it is printed. The escape
-//! is for reading, not reversible: text that already held a backslash sequence looks
-//! the same as an escaped character.
+//! `\u{202e}`), as Rust writes them. Backslashes are left alone, so escaping twice
+//! changes nothing: a message escaped where it was made may safely be escaped again where
+//! it is printed. The escape is for reading, not reversible: text that already held a
+//! backslash sequence looks the same as an escaped character.
 //!
 //! JSON output is different: serde_json escapes only U+0000–U+001F, and a record passed
 //! on verbatim may hold raw line breaks between its values. [`escape_json`] gives such
