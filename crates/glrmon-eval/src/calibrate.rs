@@ -228,15 +228,17 @@ impl Statistics {
         for (test, n) in run.spanned {
             *self.spanned.entry(test).or_default() += n;
         }
-        if run.runs.is_empty() {
-            self.runs.push(Run {
+        let runs = if run.runs.is_empty() {
+            vec![Run {
                 name: String::new(),
-                range: offset..offset + len,
+                range: 0..len,
                 rows: len as u64,
                 skipped: Vec::new(),
-            });
-        }
-        for r in run.runs {
+            }]
+        } else {
+            run.runs
+        };
+        for r in runs {
             let name = if r.name.is_empty() {
                 format!("run {}", self.runs.len() + 1)
             } else {
