@@ -276,3 +276,128 @@ fn the_predictor_based_method_identifies_the_tank_too() {
         "NIS {nis}"
     );
 }
+
+/// Writes `rows` rows of `inputs` u-columns and `outputs` y-columns of seeded noise.
+fn noise_csv(path: &Path, rows: usize, inputs: usize, outputs: usize) {
+    let mut rng = glrmon_sim::Rng::new(9);
+    let mut text = String::from("k");
+    for i in 0..inputs {
+        text.push_str(&format!(",u{i}"));
+    }
+    for j in 0..outputs {
+        text.push_str(&format!(",y{j}"));
+    }
+    text.push('\n');
+    for k in 0..rows {
+        text.push_str(&k.to_string());
+        for _ in 0..inputs + outputs {
+            text.push_str(&format!(",{:.5}", rng.normal()));
+        }
+        text.push('\n');
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// Sizes and options a channel or the machine cannot hold are refused before any work:
+/// exit 1 (bad usage, not a runtime failure), quickly, naming the option and the limit.
+#[test]
+fn early_refusals_exit_1_quickly_naming_the_option() {
+    let d = dir("refusals");
+    let small = d.join("small.csv");
+    noise_csv(&small, 2000, 2, 2);
+    let wide = d.join("wide.csv");
+    noise_csv(&wide, 2000, 70, 100);
+    let tiny = d.join("tiny.csv");
+    let huge = d.join("huge.csv");
+    let mut rng = glrmon_sim::Rng::new(3);
+    let (mut t, mut h) = (String::from("k,u0,y0\n"), String::from("k,u0,y0\n"));
+    for k in 0..500 {
+        let (a, b) = (rng.normal(), rng.normal());
+        t.push_str(&format!("{k},{a},{:e}\n", 1e-300 * (1.0 + 0.5 * b)));
+        h.push_str(&format!("{k},{a},{:e}\n", 1e50 + 1e45 * b));
+    }
+    std::fs::write(&tiny, t).unwrap();
+    std::fs::write(&huge, h).unwrap();
+    let big = d.join("big.csv");
+    noise_csv(&big, 1_000_000, 1, 1);
+    let out = d.join("x.toml");
+    let out = out.to_str().unwrap();
+    let path = |p: &Path| p.to_str().unwrap().to_owned();
+    let cases: Vec<(Vec<String>, &str, f64)> = vec![
+        (
+            vec!["--window".into(), "0".into(), path(&small)],
+            "--window: 0 is not a GLR window: it must be in 1..=100000",
+            5.0,
+        ),
+        (
+            vec!["--window".into(), "1000000000".into(), path(&small)],
+            "--window: 1000000000",
+            5.0,
+        ),
+        (
+            vec!["--order".into(), "300".into(), path(&small)],
+            "--order: 300 states cannot be written: a channel has 1..=128",
+            5.0,
+        ),
+        (
+            vec!["--max-order".into(), "300".into(), path(&small)],
+            "--max-order: 300",
+            5.0,
+        ),
+        (
+            vec!["--inputs".into(), "u0,u0".into(), path(&small)],
+            "--inputs: column \"u0\" is given twice",
+            5.0,
+        ),
+        (
+            vec![path(&wide)],
+            "--outputs: 100 columns, but a channel has at most 64",
+            5.0,
+        ),
+        (
+            vec!["--outputs".into(), "y0,y1".into(), path(&wide)],
+            "--inputs: 70 columns, but a channel has at most 64",
+            5.0,
+        ),
+        (
+            vec![
+                "--window".into(),
+                "100000".into(),
+                "--max-order".into(),
+                "128".into(),
+                path(&small),
+            ],
+            "--window: the written channel's monitor would need",
+            5.0,
+        ),
+        (vec![path(&tiny)], "--outputs: column \"y0\" varies by", 5.0),
+        (
+            vec![path(&huge)],
+            "--outputs: column \"y0\" sits at 1.000e50, beyond the offsets a channel can hold, ±1e40",
+            5.0,
+        ),
+        // 10⁶ rows take about 2.5 s to read on a debug build.
+        (
+            vec!["--horizon".into(), "20000".into(), path(&big)],
+            "--horizon: identification would need about",
+            15.0,
+        ),
+    ];
+    for (args, expected, seconds) in cases {
+        let mut all = vec!["identify", "--channel", "c", "--force", "--output", out];
+        all.extend(args.iter().map(String::as_str));
+        let started = std::time::Instant::now();
+        let o = glrmon(&all);
+        let elapsed = started.elapsed().as_secs_f64();
+        let e = String::from_utf8_lossy(&o.stderr);
+        println!(
+            "{args:?}: exit {:?} in {elapsed:.2} s: {}",
+            o.status.code(),
+            e.trim()
+        );
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {e}");
+        assert!(e.contains(expected), "{args:?}: wanted «{expected}» in {e}");
+        assert!(elapsed < seconds, "{args:?} took {elapsed:.1} s");
+        assert!(!Path::new(out).exists(), "{args:?} wrote {out}");
+    }
+}

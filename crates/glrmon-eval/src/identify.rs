@@ -16,8 +16,8 @@ use glrmon_ident::{
 };
 use glrmon_input::{InputError, Table, read_table};
 use glrmon_spec::limits::{
-    CHANNEL_MEMORY_BUDGET, ChannelFootprint, MAX_FAULTS, MAX_INPUTS, MAX_OUTPUTS, MAX_STATES,
-    MAX_WINDOW, human_bytes,
+    CHANNEL_MEMORY_BUDGET, ChannelFootprint, MAX_FAULTS, MAX_INPUTS, MAX_OFFSET, MAX_OUTPUTS,
+    MAX_SCALE, MAX_STATES, MAX_WINDOW, MIN_SCALE, human_bytes,
 };
 use glrmon_spec::write::{IdentifiedChannel, identified_channel};
 use nalgebra::DMatrix;
@@ -167,6 +167,7 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
         return Err(IdentifyError::TooShort(sizes.join(", ")));
     }
     let work = check_sizes(request, &experiments, inputs.len(), outputs.len())?;
+    check_scaling(request, &experiments, &inputs, &outputs)?;
     let identification = glrmon_ident::identify(&experiments, &request.settings)
         .map_err(|e| IdentifyError::Ident(describe(&e, &inputs, &outputs)))?;
     let scaling = &identification.scaling;
@@ -301,6 +302,68 @@ fn check_request(request: &IdentifyRequest) -> Result<(), IdentifyError> {
                     why: format!(
                         "column \"{name}\" is given twice: a duplicate column is collinear \
                          with itself, and no model can tell the two apart"
+                    ),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Each kept column's scale (its spread) and operating point (its mean) against the
+/// limits of `[channels.scaling]` ([`MIN_SCALE`], [`MAX_SCALE`], [`MAX_OFFSET`]), before
+/// identifying: a column the written configuration could not hold is refused by name
+/// instead of failing after the work (the written file would not validate).
+fn check_scaling(
+    request: &IdentifyRequest,
+    experiments: &[Experiment],
+    inputs: &[String],
+    outputs: &[String],
+) -> Result<(), IdentifyError> {
+    let pre = match glrmon_ident::preprocess(experiments, &request.settings.preprocess) {
+        Ok(pre) => pre,
+        // The identification reports it, with the columns named.
+        Err(_) => return Ok(()),
+    };
+    let sc = &pre.scaling;
+    let columns = sc
+        .input_columns
+        .iter()
+        .zip(sc.input_scale.iter())
+        .map(|(&c, &s)| ("inputs", &inputs[c], Signal::Input, c, s))
+        .chain(
+            sc.output_columns
+                .iter()
+                .zip(sc.output_scale.iter())
+                .map(|(&c, &s)| ("outputs", &outputs[c], Signal::Output, c, s)),
+        );
+    for (option, name, signal, column, scale) in columns {
+        if !(MIN_SCALE..=MAX_SCALE).contains(&scale) {
+            return Err(IdentifyError::Request {
+                option,
+                why: format!(
+                    "column \"{name}\" varies by {scale:.3e} (its standard deviation), outside \
+                     the scales a channel can hold, [{MIN_SCALE:e}, {MAX_SCALE:e}] \
+                     (glrmon_spec::limits): give it in other units, or leave it out"
+                ),
+            });
+        }
+        for op in &sc.operating_points {
+            let (kept, means) = match signal {
+                Signal::Input => (&sc.input_columns, &op.input_mean),
+                Signal::Output => (&sc.output_columns, &op.output_mean),
+            };
+            let Some(at) = kept.iter().position(|&c| c == column) else {
+                continue;
+            };
+            if means[at].abs() > MAX_OFFSET {
+                return Err(IdentifyError::Request {
+                    option,
+                    why: format!(
+                        "column \"{name}\" sits at {:.3e}, beyond the offsets a channel can \
+                         hold, ±{MAX_OFFSET:e} (glrmon_spec::limits): give it in other units, \
+                         or leave it out",
+                        means[at]
                     ),
                 });
             }

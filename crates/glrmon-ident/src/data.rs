@@ -364,22 +364,29 @@ fn kept_columns(
     let mut kept = Vec::new();
     let mut scales = Vec::new();
     for column in 0..columns {
-        let (mut sum_sq, mut count, mut level) = (0.0, 0usize, 0.0_f64);
+        let col = |exp| column_slice(exp, signal, column);
+        // The deviations are summed relative to the column's largest magnitude, so that
+        // the test is relative: a column of size 1e-300 is not constant because its
+        // squares underflow, nor does one of size 1e200 overflow.
+        let level = experiments
+            .iter()
+            .flat_map(|exp| col(exp).iter())
+            .fold(0.0_f64, |m, v| m.max(v.abs()));
+        let unit = if level > 0.0 && level.is_finite() {
+            level
+        } else {
+            1.0
+        };
+        let (mut sum_sq, mut count) = (0.0, 0usize);
         let mut first_value = None;
         let mut spread = false;
         for exp in experiments {
-            let m = match signal {
-                Signal::Input => &exp.inputs,
-                Signal::Output => &exp.outputs,
-            };
-            let col = m.column(column);
-            let x = col.as_slice();
+            let x = col(exp);
             let (mean, slope) = line(x, settings.detrend);
             let mid = (x.len() as f64 - 1.0) / 2.0;
             for (k, v) in x.iter().enumerate() {
-                let d = v - mean - slope * (k as f64 - mid);
+                let d = (v - mean - slope * (k as f64 - mid)) / unit;
                 sum_sq += d * d;
-                level = level.max(v.abs());
                 match first_value {
                     None => first_value = Some(*v),
                     Some(f) => spread |= f != *v,
@@ -388,11 +395,12 @@ fn kept_columns(
             count += x.len();
         }
         let std = if count > 1 {
-            (sum_sq / (count - 1) as f64).sqrt()
+            unit * (sum_sq / (count - 1) as f64).sqrt()
         } else {
             0.0
         };
-        if !std.is_finite() {
+        // The physical covariances are σ² times the scaled ones.
+        if !(std * std).is_finite() {
             return Err(IdentError::Overflow { signal, column });
         }
         let kind = if std == 0.0 || (!spread && count > 0) {
@@ -417,6 +425,16 @@ fn kept_columns(
         }
     }
     Ok((kept, DVector::from_vec(scales)))
+}
+
+/// Column `column` of an experiment's inputs or outputs (column-major: contiguous).
+fn column_slice(exp: &Experiment, signal: Signal, column: usize) -> &[f64] {
+    let m = match signal {
+        Signal::Input => &exp.inputs,
+        Signal::Output => &exp.outputs,
+    };
+    let n = m.nrows();
+    &m.as_slice()[column * n..(column + 1) * n]
 }
 
 /// The kept columns of `m`, detrended and divided by their scale; with the removed
@@ -528,6 +546,36 @@ mod tests {
                 column: 0
             }
         );
+    }
+
+    #[test]
+    fn the_constant_test_is_relative_to_the_size_of_the_data() {
+        // Data of size 1e-300 vary (their squares underflow, their ratios do not); data of
+        // size 1e150 do not overflow; a truly constant tiny column is still constant.
+        let n = 200;
+        let y = DMatrix::from_fn(n, 3, |k, j| {
+            let s = (k as f64 * 0.37).sin();
+            match j {
+                0 => 1e-300 * (2.0 + s),
+                1 => 1e150 * (2.0 + s),
+                _ => 3e-300,
+            }
+        });
+        let pre = preprocess(
+            &[Experiment::time_series(y)],
+            &PreprocessSettings::default(),
+        )
+        .unwrap();
+        assert_eq!(pre.scaling.output_columns, vec![0, 1], "{:?}", pre.warnings);
+        let s = &pre.scaling.output_scale;
+        assert!(
+            (s[0] / 1e-300 - s[1] / 1e150).abs() < 1e-9 * s[1] / 1e150,
+            "{s}"
+        );
+        assert!(matches!(
+            pre.warnings[0].kind,
+            WarningKind::Constant { value } if value == 3e-300
+        ));
     }
 
     #[test]

@@ -166,10 +166,11 @@ pub enum IdentError {
         /// Columns the model expects.
         expected: usize,
     },
-    /// A column's spread overflows f64 (values near ±1.8e308): it cannot be scaled.
+    /// A column's spread overflows f64 or its square does (values beyond about ±1e154):
+    /// it cannot be scaled, nor its covariances written.
     #[error(
-        "{signal} column {column}: its values are too large to scale (standard deviation \
-         overflows); rescale the recording"
+        "{signal} column {column}: its values are too large to scale (the square of its \
+         standard deviation overflows); rescale the recording"
     )]
     Overflow {
         /// Inputs or outputs.
