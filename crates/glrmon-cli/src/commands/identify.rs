@@ -226,7 +226,7 @@ fn warn_if_invalid(id: &Identified, output: &std::path::Path) {
     let v = &id.identification.validation;
     eprintln!(
         "WARNING: the identified model FAILS its {} validation ({} failed check(s)); {} was \
-         written all the same, but its innovations are not what its Re says:",
+         written all the same:",
         if v.in_sample { "in-sample" } else { "held-out" },
         id.validation_failures.len(),
         output.display()
