@@ -1,8 +1,37 @@
 //! Alarm episodes: one alarm per fault episode, not one per sample.
 //!
-//! An episode starts when l_k crosses the threshold λ and ends when l_k falls below
-//! λ·(1 − h) (hysteresis h) for `clear_samples` consecutive samples, so a statistic
-//! that hovers around λ does not flap.
+//! An episode starts when l_k crosses the threshold λ. How it ends is the channel's
+//! [`EpisodeEnd`]:
+//! - [`EpisodeEnd::BelowThreshold`]: when l_k falls below λ·(1 − h) (hysteresis h) for
+//!   `clear_samples` consecutive samples, so a statistic that hovers around λ does not
+//!   flap. A fault that persists longer than the window can end its episode this way
+//!   (its onset leaves the window and the onsets inside it fit the settled response
+//!   badly) and raise a new one later: a stream of alarms for one fault.
+//! - [`EpisodeEnd::FaultGone`]: when the data say the fault is gone: the fault followed
+//!   from the alarm's onset past the window ([`crate::Detector::followed`]) does not go
+//!   on in the last w samples ([`FollowedEvidence::continues`]: they cannot see it at
+//!   level α, or are closer to no fault than to it) for `samples` consecutive samples,
+//!   and l_k is below λ·(1 − h) then (so the end is not followed at once by an alarm on
+//!   the same data). Without a followed statistic (a kind that cannot follow an onset)
+//!   it falls back to the first rule.
+
+use crate::threshold::chi2_upper_quantile;
+use crate::window::FollowedEvidence;
+
+/// How an alarm episode ends.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum EpisodeEnd {
+    /// l_k below λ·(1 − h) for `clear_samples` consecutive samples.
+    BelowThreshold,
+    /// The followed fault does not go on ([`FollowedEvidence::continues`] at `alpha`)
+    /// for `samples` consecutive samples, with l_k below λ·(1 − h) at the last.
+    FaultGone {
+        /// Level at which the last w samples must be able to see the fault, in (0, 0.5).
+        alpha: f64,
+        /// Consecutive samples without evidence that end the episode (at least 1).
+        samples: u32,
+    },
+}
 
 /// Alarm settings of a channel.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,58 +89,120 @@ pub enum AlarmTransition {
 #[derive(Debug, Clone)]
 pub struct AlarmState {
     settings: AlarmSettings,
+    end: EpisodeEnd,
     started: Option<u64>,
     peak: f64,
     below: u32,
+    /// Consecutive samples of the episode without evidence of the followed fault.
+    gone: u32,
+    /// The normal upper quantile of the fault-gone test: (α, value).
+    quantile: Option<(f64, f64)>,
 }
 
 impl AlarmState {
-    /// A quiet alarm state.
+    /// A quiet alarm state whose episodes end below the threshold
+    /// ([`EpisodeEnd::BelowThreshold`]; see [`AlarmState::set_end`]).
     #[must_use]
     pub fn new(settings: AlarmSettings) -> Self {
         Self {
             settings,
+            end: EpisodeEnd::BelowThreshold,
             started: None,
             peak: 0.0,
             below: 0,
+            gone: 0,
+            quantile: None,
         }
     }
 
-    /// Feeds l_k of sample k (`None` when no onset is admissible).
+    /// Sets how episodes end, from the next sample on (an episode going on continues).
+    pub fn set_end(&mut self, end: EpisodeEnd) {
+        self.end = end;
+    }
+
+    /// How episodes end.
+    #[must_use]
+    pub fn end(&self) -> EpisodeEnd {
+        self.end
+    }
+
+    /// Feeds l_k of sample k (`None` when no onset is admissible), with no followed
+    /// fault: episodes end below the threshold.
     pub fn update(&mut self, k: u64, glr: Option<f64>) -> AlarmTransition {
+        self.update_followed(k, glr, None)
+    }
+
+    /// Feeds l_k of sample k and the followed fault's evidence of the episode, if any
+    /// ([`crate::Detector::followed`]).
+    ///
+    /// # Examples
+    /// ```
+    /// use glrmon_core::alarm::{AlarmSettings, AlarmState, AlarmTransition, EpisodeEnd};
+    /// use glrmon_core::FollowedEvidence;
+    /// let mut alarm = AlarmState::new(AlarmSettings::with_threshold(10.0));
+    /// alarm.set_end(EpisodeEnd::FaultGone { alpha: 0.01, samples: 2 });
+    /// let ev = |score| Some(FollowedEvidence { score, information: 25.0 });
+    /// assert_eq!(alarm.update_followed(0, Some(12.0), None), AlarmTransition::Started);
+    /// // l_k has fallen, but the followed fault is still in the data (z ≥ √δ/2 = 2.5).
+    /// assert_eq!(alarm.update_followed(1, Some(2.0), ev(4.0)), AlarmTransition::Active);
+    /// assert_eq!(alarm.update_followed(2, Some(2.0), ev(1.0)), AlarmTransition::Active);
+    /// assert!(matches!(alarm.update_followed(3, Some(2.0), ev(-0.5)), AlarmTransition::Ended { .. }));
+    /// ```
+    pub fn update_followed(
+        &mut self,
+        k: u64,
+        glr: Option<f64>,
+        followed: Option<FollowedEvidence>,
+    ) -> AlarmTransition {
         let s = self.settings;
-        match self.started {
-            None => {
-                if glr.is_some_and(|l| l > s.threshold) {
-                    self.started = Some(k);
-                    self.peak = glr.unwrap_or(0.0);
-                    self.below = 0;
-                    AlarmTransition::Started
-                } else {
-                    AlarmTransition::Quiet
-                }
+        let Some(started) = self.started else {
+            if glr.is_some_and(|l| l > s.threshold) {
+                self.started = Some(k);
+                self.peak = glr.unwrap_or(0.0);
+                self.below = 0;
+                self.gone = 0;
+                return AlarmTransition::Started;
             }
-            Some(started) => {
-                let clear = s.threshold * (1.0 - s.hysteresis);
-                match glr {
-                    Some(l) if l >= clear => {
-                        self.peak = self.peak.max(l);
-                        self.below = 0;
-                        AlarmTransition::Active
-                    }
-                    _ => {
-                        self.below += 1;
-                        if self.below >= s.clear_samples.max(1) {
-                            self.started = None;
-                            AlarmTransition::Ended {
-                                started,
-                                peak: self.peak,
-                            }
-                        } else {
-                            AlarmTransition::Active
-                        }
-                    }
+            return AlarmTransition::Quiet;
+        };
+        let clear = s.threshold * (1.0 - s.hysteresis);
+        let high = glr.is_some_and(|l| l >= clear);
+        if let Some(l) = glr.filter(|_| high) {
+            self.peak = self.peak.max(l);
+            self.below = 0;
+        } else {
+            self.below += 1;
+        }
+        let ended = match (self.end, followed) {
+            (EpisodeEnd::FaultGone { alpha, samples }, Some(evidence)) => {
+                if !evidence.continues(self.z_alpha(alpha)) {
+                    self.gone += 1;
+                } else {
+                    self.gone = 0;
                 }
+                self.gone >= samples.max(1) && !high
+            }
+            _ => self.below >= s.clear_samples.max(1),
+        };
+        if ended {
+            self.started = None;
+            AlarmTransition::Ended {
+                started,
+                peak: self.peak,
+            }
+        } else {
+            AlarmTransition::Active
+        }
+    }
+
+    /// The normal upper quantile at α, √(χ²(1) upper quantile at 2α) for α < 0.5.
+    fn z_alpha(&mut self, alpha: f64) -> f64 {
+        match self.quantile {
+            Some((a, q)) if a == alpha => q,
+            _ => {
+                let q = chi2_upper_quantile(1.0, 2.0 * alpha).map_or(f64::INFINITY, f64::sqrt);
+                self.quantile = Some((alpha, q));
+                q
             }
         }
     }
@@ -133,6 +224,7 @@ impl AlarmState {
         let ended = self.started.take().map(|s| (s, self.peak));
         self.peak = 0.0;
         self.below = 0;
+        self.gone = 0;
         ended
     }
 
@@ -172,6 +264,72 @@ mod tests {
                 peak: 7.0
             }
         );
+    }
+
+    /// Fault-gone ending: l_k below the threshold does not end the episode while the
+    /// followed evidence is high; `samples` consecutive samples without evidence end it
+    /// once l_k is below λ(1 − h) too; evidence in between starts the count again.
+    #[test]
+    fn a_followed_fault_keeps_its_episode_until_it_is_gone() {
+        let mut a = AlarmState::new(AlarmSettings::with_threshold(10.0));
+        a.set_end(EpisodeEnd::FaultGone {
+            alpha: 0.01,
+            samples: 3,
+        });
+        assert_eq!(
+            a.update_followed(0, Some(11.0), None),
+            AlarmTransition::Started
+        );
+        // z per sample, δ = 16: the fault goes on while z ≥ 2.
+        let trace = [
+            (Some(3.0), 6.0),
+            (Some(2.0), 2.0),
+            (Some(2.0), 1.0),
+            (Some(2.0), 2.5), // evidence again: the count restarts
+            (Some(2.0), 0.1),
+            (Some(9.5), -1.0), // l_k in the hysteresis band: not yet
+            (Some(8.0), 0.3),
+            (None, 0.0),
+        ];
+        let t: Vec<_> = trace
+            .iter()
+            .enumerate()
+            .map(|(i, &(l, score))| {
+                let evidence = FollowedEvidence {
+                    score,
+                    information: 16.0,
+                };
+                a.update_followed(i as u64 + 1, l, Some(evidence))
+            })
+            .collect();
+        assert!(
+            t[..6].iter().all(|x| *x == AlarmTransition::Active),
+            "{t:?}"
+        );
+        // Gone at 5, 6, 7: the third is sample 7, where l_k = 8 < 9.
+        assert_eq!(
+            t[6],
+            AlarmTransition::Ended {
+                started: 0,
+                peak: 11.0
+            }
+        );
+        assert_eq!(t[7], AlarmTransition::Quiet);
+    }
+
+    /// Without a followed statistic the fault-gone rule falls back to the threshold.
+    #[test]
+    fn fault_gone_without_evidence_ends_below_the_threshold() {
+        let mut a = AlarmState::new(AlarmSettings::with_threshold(1.0));
+        a.set_end(EpisodeEnd::FaultGone {
+            alpha: 0.01,
+            samples: 50,
+        });
+        a.update_followed(0, Some(2.0), None);
+        assert!(matches!(
+            a.update_followed(1, Some(0.1), None),
+            AlarmTransition::Ended { .. }
+        ));
     }
 
     #[test]

@@ -17,7 +17,7 @@ pub mod sparse;
 pub mod threshold;
 mod window;
 
-pub use alarm::{AlarmSettings, AlarmState, AlarmTransition};
+pub use alarm::{AlarmSettings, AlarmState, AlarmTransition, EpisodeEnd};
 pub use detector::{
     Chi2Detector, DEFAULT_STEADY_TOLERANCE, Detector, GlrDetector, Sample, StepOutput,
     WindowSettings,
@@ -30,3 +30,4 @@ pub use model::scaling::SignalScaling;
 pub use model::{Dims, Lpv, LpvMatrix, Signals, StateSpace, SystemMatrices};
 pub use simd::{VectorLevel, fused_multiply_add};
 pub use window::DEFAULT_RANK_TOLERANCE;
+pub use window::FollowedEvidence;

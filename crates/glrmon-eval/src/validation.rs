@@ -389,6 +389,12 @@ fn threshold_text(channel: &Channel) -> String {
             channel.alarm.threshold,
             channel.fault_names.len()
         ),
+        ThresholdSource::KnownOnset { false_alarm } => format!(
+            "{:.4} (χ²({}) upper quantile at {false_alarm:e}: the faults' profile is known, \
+             no onset is searched, so the level is exact)",
+            channel.alarm.threshold,
+            channel.fault_names.len()
+        ),
         ThresholdSource::Chi2 { false_alarm } if !channel.detector_kind.maximises_over_onsets() => {
             format!(
                 "{:.4} (χ²({}) upper quantile at {false_alarm:e} per sample)",

@@ -61,7 +61,8 @@ use glrmon_core::filter::consistency::Consistency;
 use glrmon_core::isolation::{FisherStatistics, ambiguity};
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{
-    AlarmSettings, AlarmState, AlarmTransition, Detector, SignalScaling, StepError, StepOutput,
+    AlarmSettings, AlarmState, AlarmTransition, Detector, EpisodeEnd, SignalScaling, StepError,
+    StepOutput,
 };
 use glrmon_wire::{
     Alarm, AlarmEnd, ErrorCode, ErrorRecord, IsolationResult, IsolationUpdate, Record, Sample,
@@ -104,12 +105,19 @@ pub struct MonitorSettings {
 pub struct Tuning {
     /// Detection threshold and episode hysteresis.
     pub alarm: AlarmSettings,
+    /// How an episode ends: when the fault followed from the alarm's onset is gone
+    /// from the data, or when l_k falls below the threshold ([`EpisodeEnd`]).
+    pub episode_end: EpisodeEnd,
     /// Samples between the alarm (the crossing) and its `isolation` update; 0: the
     /// alarm's isolation is final.
     pub isolation_delay: u32,
     /// Type-I probability of each isolation test; the threshold is the χ²(dim a) upper
-    /// quantile.
+    /// quantile at `isolation_alpha`/`isolation_onsets`.
     pub isolation_alpha: f64,
+    /// The onsets the isolation level is divided among (Bonferroni): the tests run at
+    /// the onset r̂ the data chose among w − s, where the χ² quantile at α is exceeded
+    /// far more often than α under no fault of the tested group; 1 for the nominal law.
+    pub isolation_onsets: u64,
     /// Calibrated isolation thresholds by test (group or fault) name, replacing the χ²
     /// quantile for those tests (found by `glrmon calibrate`).
     pub isolation_thresholds: Vec<(String, f64)>,
@@ -121,8 +129,10 @@ impl Tuning {
     pub fn from_channel(channel: &glrmon_spec::Channel) -> Self {
         Self {
             alarm: channel.alarm,
+            episode_end: channel.episode_end,
             isolation_delay: channel.isolation_delay,
             isolation_alpha: channel.isolation_alpha,
+            isolation_onsets: channel.isolation_onsets,
             isolation_thresholds: channel.isolation_thresholds.clone(),
         }
     }
@@ -218,7 +228,11 @@ impl Monitor {
         let out = StepOutput::new(dims.outputs, detector.faults().len());
         Self {
             channel: channel.to_owned(),
-            alarm: AlarmState::new(settings.tuning.alarm),
+            alarm: {
+                let mut alarm = AlarmState::new(settings.tuning.alarm);
+                alarm.set_end(settings.tuning.episode_end);
+                alarm
+            },
             detector,
             settings,
             groups,
@@ -330,6 +344,7 @@ impl Monitor {
     /// keeps its sample).
     pub fn retune(&mut self, tuning: &Tuning) {
         self.alarm.set_settings(tuning.alarm);
+        self.alarm.set_end(tuning.episode_end);
         self.settings.tuning.clone_from(tuning);
     }
 
@@ -703,9 +718,15 @@ impl Monitor {
     /// The alarm episode after the step at k: `alarm` at the crossing, `alarm_end`,
     /// and the announced isolation update when its sample has come.
     fn follow_alarm(&mut self, k: u64, t: Option<f64>, records: &mut Vec<Record>) {
-        match self.alarm.update(k, self.out.glr) {
+        let followed = if self.alarm.is_active() {
+            self.detector.followed()
+        } else {
+            None
+        };
+        match self.alarm.update_followed(k, self.out.glr, followed) {
             AlarmTransition::Started => self.emit_alarm(k, t, records),
             AlarmTransition::Ended { started, peak } => {
+                self.detector.follow(None);
                 // An episode shorter than the isolation delay: its alarm, raised at
                 // the crossing, stays its isolation (see the crate documentation).
                 self.pending = None;
@@ -742,6 +763,7 @@ impl Monitor {
         };
         self.counters.alarms += 1;
         self.reported_onset = onset;
+        self.follow_fault(onset);
         let delay = u64::from(self.settings.tuning.isolation_delay);
         let update_k = (delay > 0).then(|| k.saturating_add(delay));
         self.pending = update_k.map(|update_k| PendingUpdate {
@@ -764,6 +786,18 @@ impl Monitor {
         self.diagnose(k, onset, records);
     }
 
+    /// Follows the fault from onset r̂ past the window when episodes end on its
+    /// evidence ([`EpisodeEnd::FaultGone`]); a kind that cannot follow one ends them
+    /// on l_k.
+    fn follow_fault(&mut self, onset: u64) {
+        if matches!(
+            self.settings.tuning.episode_end,
+            EpisodeEnd::FaultGone { .. }
+        ) {
+            self.detector.follow(Some(onset));
+        }
+    }
+
     /// The `isolation` record of the alarm `p` at k (its `update_k`), the episode still
     /// on, l_k = `glr` and r̂ = `onset`: magnitude and isolation tests as they are now.
     fn emit_update(
@@ -778,6 +812,7 @@ impl Monitor {
         self.counters.isolation_updates += 1;
         // The episode's `alarm_end` reports the latest estimate of its onset.
         self.reported_onset = onset;
+        self.follow_fault(onset);
         let isolation = self.isolate(onset);
         records.push(Record::Isolation(IsolationUpdate {
             channel: self.channel.clone(),
@@ -854,12 +889,17 @@ impl Monitor {
     }
 
     /// The threshold of isolation test `name` with `dof` degrees of freedom: its
-    /// calibrated value, else the χ² upper quantile at the isolation level.
+    /// calibrated value, else the χ² upper quantile at the isolation level divided
+    /// among `isolation_onsets`.
     fn isolation_threshold(&self, name: &str, dof: usize) -> Option<f64> {
         let tuning = &self.settings.tuning;
         match tuning.isolation_thresholds.iter().find(|(n, _)| n == name) {
             Some(&(_, t)) => Some(t),
-            None => chi2_upper_quantile(dof.max(1) as f64, tuning.isolation_alpha).ok(),
+            None => chi2_upper_quantile(
+                dof.max(1) as f64,
+                tuning.isolation_alpha / tuning.isolation_onsets.max(1) as f64,
+            )
+            .ok(),
         }
     }
 
@@ -1006,8 +1046,10 @@ mod tests {
             MonitorSettings {
                 tuning: Tuning {
                     alarm: AlarmSettings::with_threshold(threshold),
+                    episode_end: EpisodeEnd::BelowThreshold,
                     isolation_delay: 2,
                     isolation_alpha: 0.01,
+                    isolation_onsets: 1,
                     isolation_thresholds: vec![],
                 },
                 groups: vec![],
@@ -1121,8 +1163,10 @@ mod tests {
             let mut mon = monitor();
             mon.retune(&Tuning {
                 alarm: mon.settings.tuning.alarm,
+                episode_end: mon.settings.tuning.episode_end,
                 isolation_delay: delay,
                 isolation_alpha: 0.01,
+                isolation_onsets: 1,
                 isolation_thresholds: vec![],
             });
             let mut records = Vec::new();
@@ -1185,8 +1229,10 @@ mod tests {
         let mut mon = monitor();
         mon.retune(&Tuning {
             alarm: mon.settings.tuning.alarm,
+            episode_end: mon.settings.tuning.episode_end,
             isolation_delay: 1000,
             isolation_alpha: 0.01,
+            isolation_onsets: 1,
             isolation_thresholds: vec![],
         });
         let mut records = Vec::new();
@@ -1220,8 +1266,10 @@ mod tests {
         let mut mon = monitor();
         mon.retune(&Tuning {
             alarm: mon.settings.tuning.alarm,
+            episode_end: mon.settings.tuning.episode_end,
             isolation_delay: 0,
             isolation_alpha: 0.01,
+            isolation_onsets: 1,
             isolation_thresholds: vec![],
         });
         let mut records = Vec::new();

@@ -111,8 +111,13 @@ fn monitor() -> Monitor {
         MonitorSettings {
             tuning: Tuning {
                 alarm: AlarmSettings::with_threshold(5.0),
+                episode_end: glrmon_core::EpisodeEnd::FaultGone {
+                    alpha: 0.01,
+                    samples: 3,
+                },
                 isolation_delay: 2,
                 isolation_alpha: 0.01,
+                isolation_onsets: 1,
                 isolation_thresholds: vec![],
             },
             groups: vec![],

@@ -8,8 +8,8 @@
 //! ambiguous, and never the wrong jump alone; the update still isolates the injected
 //! one.
 
-use glrmon_core::AlarmSettings;
 use glrmon_core::threshold::chi2_upper_quantile;
+use glrmon_core::{AlarmSettings, EpisodeEnd};
 use glrmon_monitor::{Monitor, MonitorSettings, Tuning};
 use glrmon_sim::scenarios;
 use glrmon_wire::{IsolationResult, Record, Sample};
@@ -26,8 +26,10 @@ fn monitor() -> Monitor {
         MonitorSettings {
             tuning: Tuning {
                 alarm: AlarmSettings::with_threshold(threshold),
+                episode_end: EpisodeEnd::BelowThreshold,
                 isolation_delay: 2,
                 isolation_alpha: 0.01,
+                isolation_onsets: 1,
                 isolation_thresholds: vec![],
             },
             groups: vec![],

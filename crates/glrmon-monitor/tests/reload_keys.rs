@@ -29,6 +29,10 @@ fn changed(key: &str) -> &'static str {
         }
         "hysteresis" => "hysteresis = 0.3\n",
         "clear_samples" => "clear_samples = 4\n",
+        "episode_end" => "episode_end = \"below_threshold\"\n",
+        "gone_alpha" => "gone_alpha = 0.05\n",
+        "gone_samples" => "gone_samples = 7\n",
+        "isolation_law" => "isolation_law = \"chi2\"\n",
         "isolation_delay" => "isolation_delay = 7\n",
         "isolation_alpha" => "isolation_alpha = 0.05\n",
         other => panic!("a reloadable key this test does not know: {other}; add it"),
@@ -44,7 +48,7 @@ fn tuning(text: &str) -> (glrmon_spec::Config, Tuning) {
 #[test]
 fn each_reloadable_key_changes_the_tuning_and_needs_no_restart() {
     let (base_cfg, base) = tuning(BASE);
-    let mut fields_changed = [false; 6];
+    let mut fields_changed = [false; 8];
     for key in RELOADABLE_GLR_KEYS {
         let (cfg, t) = tuning(&format!("{BASE}{}", changed(key)));
         assert!(
@@ -57,14 +61,26 @@ fn each_reloadable_key_changes_the_tuning_and_needs_no_restart() {
             t.alarm.threshold != base.alarm.threshold,
             t.alarm.hysteresis != base.alarm.hysteresis,
             t.alarm.clear_samples != base.alarm.clear_samples,
+            t.episode_end != base.episode_end,
             t.isolation_delay != base.isolation_delay,
             t.isolation_alpha != base.isolation_alpha,
+            t.isolation_onsets != base.isolation_onsets,
             t.isolation_thresholds != base.isolation_thresholds,
         ]) {
             *seen |= differs;
         }
     }
-    assert_eq!(fields_changed, [true; 6], "a Tuning field no key reaches");
+    assert_eq!(fields_changed, [true; 8], "a Tuning field no key reaches");
+    // Every field of Tuning is in the list above: this fails to compile when one is
+    // added without it.
+    let Tuning {
+        alarm: _,
+        episode_end: _,
+        isolation_delay: _,
+        isolation_alpha: _,
+        isolation_onsets: _,
+        isolation_thresholds: _,
+    } = base;
     // A key outside the list needs a restart.
     let (window, _) = tuning(&BASE.replace("window = 20", "window = 30"));
     assert!(!base_cfg.restart_needed(&window).is_empty());

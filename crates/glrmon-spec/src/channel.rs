@@ -46,6 +46,12 @@ pub enum ThresholdSource {
         /// α.
         false_alarm: f64,
     },
+    /// χ²(m) upper quantile at α for faults of known profile (no onset to search:
+    /// one test per sample, exact).
+    KnownOnset {
+        /// α.
+        false_alarm: f64,
+    },
     /// Found by `glrmon calibrate` on fault-free data.
     Calibrated {
         /// What it was calibrated for: a mean number of samples between false-alarm
@@ -198,12 +204,18 @@ pub struct Channel {
     pub window: WindowSettings,
     /// Detection threshold and hysteresis.
     pub alarm: AlarmSettings,
+    /// How an alarm episode ends (`glr.episode_end`, `gone_alpha`, `gone_samples`).
+    pub episode_end: glrmon_core::EpisodeEnd,
     /// How the threshold was set.
     pub threshold_source: ThresholdSource,
     /// Samples between crossing and isolation.
     pub isolation_delay: u32,
     /// Type-I probability of each isolation test.
     pub isolation_alpha: f64,
+    /// The number of onsets the isolation level is divided among for a test without
+    /// a calibrated threshold: w − s under `isolation_law = "bonferroni"` (the GLR's
+    /// default), 1 under `chi2` or for a detector that tests one onset.
+    pub isolation_onsets: u64,
     /// Isolation groups `(name, fault indices)`.
     pub groups: Vec<(String, Vec<usize>)>,
     /// Calibrated isolation thresholds by test name (`[channels.glr.calibrated]

@@ -25,15 +25,19 @@ pub struct Config {
 /// running monitor: the detection threshold and how it is set, the alarm episode
 /// settings, and the isolation tests' delay, level and thresholds. Everything else
 /// shapes the filters and needs a restart.
-pub const RELOADABLE_GLR_KEYS: [&str; 8] = [
+pub const RELOADABLE_GLR_KEYS: [&str; 12] = [
     "threshold",
     "false_alarm",
     "threshold_mode",
     "calibrated",
     "hysteresis",
     "clear_samples",
+    "episode_end",
+    "gone_alpha",
+    "gone_samples",
     "isolation_delay",
     "isolation_alpha",
+    "isolation_law",
 ];
 
 impl Config {

@@ -557,12 +557,39 @@ pub struct GlrSpec {
     /// Consecutive samples below λ(1 − h) that end an episode. Default 1.
     #[serde(default = "default_clear")]
     pub clear_samples: u32,
+    /// How an alarm episode ends: `fault_gone` (default; when the fault followed from
+    /// the alarm's onset past the window has had no evidence in the last w samples for
+    /// `gone_samples` samples in a row, and l_k is below λ(1 − h): one episode per
+    /// fault however long it lasts; the evidence is the magnitude of the last w
+    /// samples along the fault's earlier estimate, over its standard deviation, tested
+    /// at level `gone_alpha`) or `below_threshold` (when l_k stays below λ(1 − h) for
+    /// `clear_samples` samples: a fault that outlasts the window can end its episode
+    /// and raise another later). Kinds that cannot follow an onset (`chi2`) always end
+    /// below the threshold.
+    #[schemars(extend("enum" = ["fault_gone", "below_threshold"]))]
+    pub episode_end: Option<String>,
+    /// Level of the no-evidence test of `episode_end = "fault_gone"`, in (0, 0.5): the
+    /// evidence of a fault still there falls below its normal quantile this often.
+    /// Default 0.01.
+    pub gone_alpha: Option<f64>,
+    /// Consecutive samples without evidence of the followed fault that end an episode
+    /// (`episode_end = "fault_gone"`), at least 1. Default 2w: the evidence is judged
+    /// on the last w samples, and a fault still there must look gone on two windows'
+    /// worth of them (a dip of one window's length happens in a long episode).
+    pub gone_samples: Option<u32>,
     /// Samples between the alarm (raised at the crossing) and its isolation update; 0
     /// sends none. Default: n (the number of states).
     pub isolation_delay: Option<u32>,
     /// Type-I probability of each isolation (minmax) test, in (0, 1). Default 0.01.
     #[serde(default = "default_isolation_alpha")]
     pub isolation_alpha: f64,
+    /// The law of an isolation test without a calibrated threshold: `bonferroni`
+    /// (default for the GLR: the χ²(dof) upper quantile at `isolation_alpha`/(w − s),
+    /// since the test runs at the onset r̂ the data chose, where the plain χ² level is
+    /// exceeded far more often than α) or `chi2` (the quantile at `isolation_alpha`,
+    /// the nominal law of a test at a known onset, as in Zhang & Basseville 2014).
+    #[schemars(extend("enum" = ["bonferroni", "chi2"]))]
+    pub isolation_law: Option<String>,
     /// `[[channels.glr.groups]]`: isolation groups tested together. Default: each fault
     /// against all others.
     #[serde(default)]
@@ -624,8 +651,12 @@ impl Default for GlrSpec {
             detector: None,
             hysteresis: default_hysteresis(),
             clear_samples: default_clear(),
+            episode_end: None,
+            gone_alpha: None,
+            gone_samples: None,
             isolation_delay: None,
             isolation_alpha: default_isolation_alpha(),
+            isolation_law: None,
             groups: Vec::new(),
             rank_tolerance: None,
             max_gap: default_max_gap(),

@@ -12,7 +12,9 @@ use crate::isolation::FisherStatistics;
 use crate::linalg::gemm;
 use crate::model::fault::FaultDictionary;
 use crate::model::{Dims, LpvMatrix, Signals, StateSpace, SystemMatrices};
-use crate::window::{DEFAULT_RANK_TOLERANCE, StepInputs, WindowBank};
+use crate::window::{
+    DEFAULT_RANK_TOLERANCE, FollowedEvidence, FollowedOnset, StepInputs, WindowBank,
+};
 
 use super::{Detector, Sample, StepOutput};
 
@@ -132,6 +134,11 @@ pub struct GlrDetector {
     unknown_input: Option<Box<UnknownInput>>,
     /// S = E(W_kV_kᵀ), when the noises are correlated.
     cross: Option<DMatrix<f64>>,
+    /// The onset followed past the window ([`GlrDetector::follow`]).
+    followed: FollowedOnset,
+    /// The step inputs the stationary regime holds constant (A, Ψ̃, FKΦ̃, L⁻¹H, L⁻¹Φ̃),
+    /// copied when it is entered, for the followed onset's steps in that regime.
+    steady_inputs: [DMatrix<f64>; 5],
 }
 
 /// E_k of a plant with an unknown input E_kd_k ([`GlrDetector::with_unknown_input`]).
@@ -208,7 +215,14 @@ impl GlrDetector {
         let (n, p, m) = (dims.states, dims.outputs, faults.len());
         let (model_constant, faults_constant) = (model.is_constant(), faults.is_constant());
         let filter = InnovationFilter::new(x0.clone(), p0.clone(), p)?;
-        let kinds = faults.faults().iter().map(|f| f.onset).collect();
+        let kinds: Vec<_> = faults.faults().iter().map(|f| f.onset).collect();
+        let followed = FollowedOnset::new(
+            n,
+            p,
+            kinds.clone(),
+            settings.window,
+            settings.rank_tolerance,
+        );
         let bank = WindowBank::new(
             n,
             m,
@@ -247,6 +261,14 @@ impl GlrDetector {
             constant: model_constant && faults_constant,
             unknown_input: None,
             cross: None,
+            followed,
+            steady_inputs: [
+                DMatrix::zeros(n, n),
+                DMatrix::zeros(n, m),
+                DMatrix::zeros(n, m),
+                DMatrix::zeros(p, n),
+                DMatrix::zeros(p, m),
+            ],
         })
     }
 
@@ -370,6 +392,7 @@ impl GlrDetector {
         self.input_count = 0;
         self.input_variance.fill(0.0);
         self.steady_samples = 0;
+        self.followed.stop();
         Ok(())
     }
 
@@ -481,17 +504,26 @@ impl GlrDetector {
             0.0,
             self.fk_phi.as_mut_slice(),
         );
-        let best = self.bank.step(
-            k,
-            &StepInputs {
-                h_white: self.filter.whitened_output_matrix().as_slice(),
-                phi_white: self.phi.as_slice(),
-                eps_white: self.filter.whitened_innovation().as_slice(),
-                closed_loop: self.filter.closed_loop().as_slice(),
-                psi: self.psi.as_slice(),
-                fk_phi: self.fk_phi.as_slice(),
-            },
-        );
+        let inputs = StepInputs {
+            h_white: self.filter.whitened_output_matrix().as_slice(),
+            phi_white: self.phi.as_slice(),
+            eps_white: self.filter.whitened_innovation().as_slice(),
+            closed_loop: self.filter.closed_loop().as_slice(),
+            psi: self.psi.as_slice(),
+            fk_phi: self.fk_phi.as_slice(),
+        };
+        let best = self.bank.step(k, &inputs);
+        if self.followed.onset().is_some() {
+            self.followed.measure(
+                k,
+                inputs.h_white,
+                inputs.phi_white,
+                inputs.eps_white,
+                inputs.closed_loop,
+                inputs.psi,
+                inputs.fk_phi,
+            );
+        }
         self.write_output(k, best, out);
         self.track_stationarity(k);
         self.finish_measured(sample);
@@ -509,6 +541,18 @@ impl GlrDetector {
             .accumulate_steady(k, self.filter.whitened_innovation().as_slice());
         let best = self.bank.maximize_steady(k);
         self.write_output(k, best, out);
+        if self.followed.onset().is_some() {
+            let [a, psi, fk_phi, h_white, phi_white] = &self.steady_inputs;
+            self.followed.measure(
+                k,
+                h_white.as_slice(),
+                phi_white.as_slice(),
+                self.filter.whitened_innovation().as_slice(),
+                a.as_slice(),
+                psi.as_slice(),
+                fk_phi.as_slice(),
+            );
+        }
         self.filter.time_update_steady(&self.system, sample.u);
         self.bank.advance_steady(k);
         self.finish_measured(sample);
@@ -601,6 +645,16 @@ impl GlrDetector {
         }
         self.steady_samples += 1;
         if self.steady_samples >= self.settings.window as u64 {
+            let held = [
+                self.filter.closed_loop(),
+                &self.psi,
+                &self.fk_phi,
+                self.filter.whitened_output_matrix(),
+                &self.phi,
+            ];
+            for (copy, m) in self.steady_inputs.iter_mut().zip(held) {
+                copy.copy_from(m);
+            }
             self.bank.enter_steady(
                 k,
                 self.filter.closed_loop().as_slice(),
@@ -724,6 +778,12 @@ impl GlrDetector {
             self.psi.as_slice(),
             self.fk_phi.as_slice(),
             true,
+        );
+        self.followed.predict(
+            k,
+            self.filter.closed_loop().as_slice(),
+            self.psi.as_slice(),
+            self.fk_phi.as_slice(),
         );
         self.next_k = Some(k + 1);
         Ok(())
@@ -879,6 +939,31 @@ impl GlrDetector {
         self.bank.gamma(onset, out.as_mut_slice())
     }
 
+    /// Follows the fault of onset r past the window from the next sample on
+    /// (`Some(r)`, r in the window after the last step), or stops (`None`); see
+    /// [`Detector::follow`]. False when r is not in the window.
+    pub fn follow(&mut self, onset: Option<u64>) -> bool {
+        let Some(r) = onset else {
+            self.followed.stop();
+            return true;
+        };
+        let (n, m) = (self.dims.states, self.faults.len());
+        // Off the per-sample path (at an alarm): small allocations are fine.
+        let (mut gamma, mut info, mut score) = (vec![0.0; n * m], vec![0.0; m * m], vec![0.0; m]);
+        if !self.bank.gamma(r, &mut gamma) || !self.bank.information(r, &mut info, &mut score) {
+            return false;
+        }
+        self.followed.start(r, &gamma, &info, &score);
+        true
+    }
+
+    /// The followed fault's evidence in the last w samples (see
+    /// [`Detector::followed`]).
+    #[must_use]
+    pub fn followed(&self) -> Option<FollowedEvidence> {
+        self.followed.statistic()
+    }
+
     /// Rank of C_k(r) and the statistic d_k(r)ᵀC_k(r)⁺d_k(r) at the last step.
     #[must_use]
     pub fn onset_statistic(&self, onset: u64) -> Option<(f64, usize)> {
@@ -936,5 +1021,13 @@ impl Detector for GlrDetector {
 
     fn innovation_filter(&self) -> Option<&InnovationFilter> {
         Some(&self.filter)
+    }
+
+    fn follow(&mut self, onset: Option<u64>) -> bool {
+        GlrDetector::follow(self, onset)
+    }
+
+    fn followed(&self) -> Option<FollowedEvidence> {
+        GlrDetector::followed(self)
     }
 }

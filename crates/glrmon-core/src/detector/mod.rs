@@ -28,6 +28,7 @@ use crate::filter::innovation::InnovationFilter;
 use crate::isolation::FisherStatistics;
 use crate::model::Dims;
 use crate::model::fault::FaultDictionary;
+use crate::window::FollowedEvidence;
 
 /// A channel's fault detector: the residual generator of a model-based method and the
 /// decision statistic it computes on each sample.
@@ -108,6 +109,25 @@ pub trait Detector: std::fmt::Debug + Send {
     fn innovation_filter(&self) -> Option<&InnovationFilter> {
         None
     }
+
+    /// Follows the fault of onset r (an alarm's r̂) past the window from the next
+    /// sample on, so that [`Detector::followed`] says whether it is still in the data
+    /// (`Some(r)`), or stops following (`None`). False when the kind cannot follow an
+    /// onset or r is no longer available; the monitor then ends episodes on the
+    /// decision statistic. Off the per-sample path (may allocate).
+    fn follow(&mut self, onset: Option<u64>) -> bool {
+        let _ = onset;
+        false
+    }
+
+    /// The followed fault's evidence in the last [`Detector::memory`] samples: z_k,
+    /// the score test along the fault's magnitude estimated before them, N(0, 1) when
+    /// they carry no fault and N(√δ, 1) while it goes on (δ the information of those
+    /// samples about it); [`FollowedEvidence::continues`] decides. `None` when nothing
+    /// is followed or no sample has been measured since.
+    fn followed(&self) -> Option<FollowedEvidence> {
+        None
+    }
 }
 
 impl<D: Detector + ?Sized> Detector for Box<D> {
@@ -146,6 +166,12 @@ impl<D: Detector + ?Sized> Detector for Box<D> {
     }
     fn innovation_filter(&self) -> Option<&InnovationFilter> {
         (**self).innovation_filter()
+    }
+    fn follow(&mut self, onset: Option<u64>) -> bool {
+        (**self).follow(onset)
+    }
+    fn followed(&self) -> Option<FollowedEvidence> {
+        (**self).followed()
     }
 }
 

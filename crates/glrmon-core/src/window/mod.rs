@@ -108,6 +108,7 @@ macro_rules! wide_call {
 }
 
 mod argmax;
+mod followed;
 mod fused;
 mod lanes;
 mod magnitude;
@@ -115,6 +116,8 @@ mod reference;
 mod statistic;
 mod steady;
 
+pub use followed::FollowedEvidence;
+pub(crate) use followed::FollowedOnset;
 use fused::fused_dims;
 use steady::LagTables;
 

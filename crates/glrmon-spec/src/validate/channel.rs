@@ -100,8 +100,10 @@ impl Validator {
                 clear_samples: glr.clear_samples.max(1),
             },
             threshold_source: detection.threshold_source,
+            episode_end: detection.episode_end,
             isolation_delay: glr.isolation_delay.unwrap_or(n as u32),
             isolation_alpha: glr.isolation_alpha,
+            isolation_onsets: detection.isolation_onsets,
             detector_kind: detection.detector_kind,
             isolation_thresholds: glr
                 .calibrated

@@ -19,6 +19,9 @@ pub(super) struct Glr {
     pub(super) threshold_source: ThresholdSource,
     /// Isolation groups `(name, fault indices)`.
     pub(super) groups: Vec<(String, Vec<usize>)>,
+    pub(super) episode_end: glrmon_core::EpisodeEnd,
+    /// The onsets the isolation level is divided among (`isolation_law`).
+    pub(super) isolation_onsets: u64,
 }
 
 fn positive(t: f64) -> bool {
@@ -124,12 +127,71 @@ impl Validator {
         let (threshold, threshold_source) = self.threshold(prefix, glr, detector_kind, m, known);
         let groups = self.groups(prefix, glr, faults);
         self.calibrated_isolation(prefix, glr, faults);
+        let episode_end = self.episode_end(prefix, glr);
+        let one_onset = known || !detector_kind.maximises_over_onsets();
+        let isolation_onsets = match glr.isolation_law.as_deref() {
+            None | Some("bonferroni") if !one_onset => {
+                glr.window.saturating_sub(glr.min_lag).max(1) as u64
+            }
+            None | Some("bonferroni" | "chi2") => 1,
+            Some(other) => {
+                self.error(
+                    gpath("isolation_law"),
+                    locate::not_one_of(other, &["bonferroni", "chi2"]),
+                );
+                1
+            }
+        };
         Glr {
             rank_tolerance: tolerance,
             detector_kind,
             threshold,
             threshold_source,
             groups,
+            episode_end,
+            isolation_onsets,
+        }
+    }
+
+    /// `episode_end`, `gone_alpha` and `gone_samples`: how an alarm episode ends.
+    fn episode_end(&mut self, prefix: &str, glr: &GlrSpec) -> glrmon_core::EpisodeEnd {
+        use glrmon_core::EpisodeEnd;
+        let gpath = |f: &str| join(prefix, &format!("glr.{f}"));
+        let alpha = glr.gone_alpha.unwrap_or(0.01);
+        if !(alpha > 0.0 && alpha < 0.5) {
+            self.error(gpath("gone_alpha"), format!("{alpha} is not in (0, 0.5)"));
+        }
+        let samples = glr
+            .gone_samples
+            .unwrap_or_else(|| u32::try_from(2 * glr.window).unwrap_or(u32::MAX));
+        if samples == 0 {
+            self.error(gpath("gone_samples"), "must be at least 1".into());
+        }
+        match glr.episode_end.as_deref() {
+            None | Some("fault_gone") => EpisodeEnd::FaultGone { alpha, samples },
+            Some("below_threshold") => {
+                for (key, given) in [
+                    ("gone_alpha", glr.gone_alpha.is_some()),
+                    ("gone_samples", glr.gone_samples.is_some()),
+                ] {
+                    if given {
+                        self.error(
+                            gpath(key),
+                            "applies to `episode_end = \"fault_gone\"`, not to \
+                             `below_threshold` (whose episodes end after `clear_samples`)"
+                                .into(),
+                        );
+                    }
+                }
+                EpisodeEnd::BelowThreshold
+            }
+            Some(other) => {
+                self.error(
+                    gpath("episode_end"),
+                    locate::not_one_of(other, &["fault_gone", "below_threshold"]),
+                );
+                EpisodeEnd::BelowThreshold
+            }
         }
     }
 
@@ -273,6 +335,7 @@ impl Validator {
         };
         match chi2_upper_quantile(m as f64, a / onsets as f64) {
             Ok(t) if chi2 || per_onset => (t, ThresholdSource::Chi2 { false_alarm: a }),
+            Ok(t) if known => (t, ThresholdSource::KnownOnset { false_alarm: a }),
             Ok(t) => (t, ThresholdSource::Bonferroni { false_alarm: a }),
             Err(e) => {
                 self.error(gpath("false_alarm"), e.to_string());
