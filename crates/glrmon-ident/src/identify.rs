@@ -394,9 +394,11 @@ impl ValidationReport {
                 ));
             } else if all {
                 lines.push(format!(
-                    "Ljung–Box p = {} → {} innovations white (at {pct} %)",
+                    "Ljung–Box p = {} → {} innovations white (at {pct} % over {} outputs: \
+                     p ≥ {level:.2e})",
                     fmt_p(t.p_value),
-                    name(j)
+                    name(j),
+                    self.outputs
                 ));
             }
         }

@@ -417,6 +417,10 @@ struct CandidateReport {
     holdout_nrmse: Vec<f64>,
     predictor_spectral_radius: Option<f64>,
     failure: Option<String>,
+    not_white: Option<usize>,
+    nis_mean: Option<f64>,
+    nis_interval: Option<[f64; 2]>,
+    validation_passed: Option<bool>,
 }
 
 #[derive(Debug, Serialize)]
@@ -468,6 +472,13 @@ impl Report {
                     holdout_nrmse: c.holdout_nrmse.iter().copied().collect(),
                     predictor_spectral_radius: finite(c.predictor_spectral_radius),
                     failure: c.failure.clone(),
+                    not_white: c.validation.as_ref().map(|v| v.not_white().len()),
+                    nis_mean: c.validation.as_ref().and_then(|v| v.nis_mean),
+                    nis_interval: c
+                        .validation
+                        .as_ref()
+                        .map(|v| [v.nis_interval.0, v.nis_interval.1]),
+                    validation_passed: c.validation.as_ref().map(|v| v.passed()),
                 })
                 .collect(),
             order: ident.model.order(),
