@@ -163,3 +163,41 @@ fn a_noise_free_controller_without_dither_is_feedback_and_pbsid_falls_back() {
     assert!(id.method.fallback.is_some(), "{line}");
     assert!(line.contains("PBSID refused them"), "{line}");
 }
+
+/// The level on a wide open-loop system (9 white inputs, 22 outputs, 12 states), where
+/// the test has l·p·M = 1980 degrees of freedom (M = 10 lags on 4000 samples) and
+/// Bartlett's correction matters (6/200 at 5 % when written): heavy, run with
+/// `--release -- --ignored`.
+#[test]
+#[ignore = "heavy: 200 tests of 9 inputs and 22 outputs"]
+fn the_level_on_a_wide_system_is_the_nominal_one() {
+    let (n, l, p, samples) = (12, 9, 22, 4000);
+    let seeds = 200;
+    let mut at_5 = 0;
+    for seed in 0..seeds {
+        let mut rng = Rng::new(40_000 + seed);
+        let mut a = rng.normals(n, n);
+        let radius = glrmon_ident::spectral_radius(&a);
+        a *= 0.9 / radius;
+        let truth = Truth {
+            a,
+            b: rng.normals(n, l),
+            c: rng.normals(p, n),
+            d: DMatrix::zeros(p, l),
+            k: rng.normals(n, p) * 0.1,
+            re: DMatrix::identity(p, p) * 0.1,
+        };
+        let u = rng.normals(samples, l);
+        let y = truth.simulate(&u, &mut rng);
+        let t = feedback_test(&scaled(Experiment::new(u, y)), 10, 0.05)
+            .unwrap()
+            .unwrap();
+        at_5 += usize::from(t.p_value < 0.05);
+        if seed == 0 {
+            println!("lags {}, dof {}, rows {}", t.lags, t.dof, t.rows);
+        }
+    }
+    println!("wide open loop: rejected at 5 % in {at_5}/{seeds}");
+    // Binomial(200, 0.05): mean 10, σ 3.1.
+    assert!((2..=20).contains(&at_5), "{at_5}/{seeds} at 5 %");
+}
