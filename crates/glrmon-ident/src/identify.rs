@@ -109,6 +109,8 @@ pub struct MethodChoice {
     pub feedback: Option<FeedbackTest>,
     /// Why PBSID was not used although the test found feedback (its refusal).
     pub fallback: Option<String>,
+    /// Why the feedback test could not run (too few samples), if it could not.
+    pub untested: Option<String>,
 }
 
 impl MethodChoice {
@@ -128,7 +130,9 @@ impl MethodChoice {
             return format!("{}, as requested", self.used.title());
         }
         let Some(t) = &self.feedback else {
-            return if inputs.is_empty() {
+            return if let Some(why) = &self.untested {
+                format!("PO-MOESP: the data are too short to test for feedback ({why})")
+            } else if inputs.is_empty() {
                 "PO-MOESP: no input, so no feedback to test (a time series)".into()
             } else {
                 "PO-MOESP: every input is predicted exactly by its own past (deterministic \
@@ -508,14 +512,23 @@ pub fn identify(
         used: settings.method,
         feedback: None,
         fallback: None,
+        untested: None,
     };
     if settings.method == Method::Auto {
         check_level("feedback_level", settings.feedback_level)?;
-        choice.feedback = feedback_test(
+        choice.feedback = match feedback_test(
             &pre.experiments,
             settings.feedback_lags,
             settings.feedback_level,
-        )?;
+        ) {
+            Ok(test) => test,
+            // Too few samples for even one lag: PO-MOESP says what it needs.
+            Err(err @ IdentError::TooFewSamples { .. }) => {
+                choice.untested = Some(err.to_string());
+                None
+            }
+            Err(err) => return Err(err),
+        };
         choice.used = if choice.feedback.as_ref().is_some_and(FeedbackTest::feedback) {
             Method::Pbsid
         } else {
