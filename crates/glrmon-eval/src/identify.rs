@@ -659,9 +659,17 @@ fn summary(
         ),
     ];
     if let Some(nis) = id.validation.nis_mean {
+        let (lo, hi) = id.validation.nis_interval;
         lines.push(format!(
-            "Mean normalised innovation square {nis:.3} (expected {} for a right model).",
-            id.validation.outputs
+            "Mean normalised innovation square {nis:.3} (p = {} outputs; a right model's is in \
+             [{lo:.3}, {hi:.3}] with probability {}: {}).",
+            id.validation.outputs,
+            1.0 - id.validation.level,
+            if id.validation.nis_consistent() {
+                "consistent"
+            } else {
+                "NOT consistent"
+            }
         ));
     }
     lines.extend(dropped.iter().cloned());
