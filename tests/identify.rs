@@ -318,6 +318,16 @@ fn early_refusals_exit_1_quickly_naming_the_option() {
     }
     std::fs::write(&tiny, t).unwrap();
     std::fs::write(&huge, h).unwrap();
+    // u2 is u1 in other units: the same signal under another name.
+    let copy = d.join("copy.csv");
+    let text = std::fs::read_to_string(&small).unwrap();
+    let mut lines = text.lines();
+    let mut c = format!("{},u1f\n", lines.next().unwrap());
+    for line in lines {
+        let u1: f64 = line.split(',').nth(2).unwrap().parse().unwrap();
+        c.push_str(&format!("{line},{}\n", 32.0 + 1.8 * u1));
+    }
+    std::fs::write(&copy, c).unwrap();
     let big = d.join("big.csv");
     noise_csv(&big, 1_000_000, 1, 1);
     let out = d.join("x.toml");
@@ -368,6 +378,11 @@ fn early_refusals_exit_1_quickly_naming_the_option() {
                 path(&small),
             ],
             "--window: the written channel's monitor would need",
+            5.0,
+        ),
+        (
+            vec!["--inputs".into(), "u0,u1,u1f".into(), path(&copy)],
+            "--inputs: columns \"u1\" and \"u1f\" carry the same signal",
             5.0,
         ),
         (vec![path(&tiny)], "--outputs: column \"y0\" varies by", 5.0),

@@ -168,8 +168,29 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
     }
     let work = check_sizes(request, &experiments, inputs.len(), outputs.len())?;
     check_scaling(request, &experiments, &inputs, &outputs)?;
-    let identification = glrmon_ident::identify(&experiments, &request.settings)
-        .map_err(|e| IdentifyError::Ident(describe(&e, &inputs, &outputs)))?;
+    let identification =
+        glrmon_ident::identify(&experiments, &request.settings).map_err(|e| match e {
+            IdentError::DuplicateColumns {
+                signal,
+                first,
+                second,
+            } => {
+                let (option, names) = match signal {
+                    Signal::Input => ("inputs", &inputs),
+                    Signal::Output => ("outputs", &outputs),
+                };
+                IdentifyError::Request {
+                    option,
+                    why: format!(
+                        "columns \"{}\" and \"{}\" carry the same signal (correlation ±1 \
+                         once each one's operating point and scale are removed): no model can \
+                         tell them apart; leave one out",
+                        names[first], names[second]
+                    ),
+                }
+            }
+            e => IdentifyError::Ident(describe(&e, &inputs, &outputs)),
+        })?;
     let scaling = &identification.scaling;
     let kept_inputs: Vec<String> = scaling
         .input_columns

@@ -187,6 +187,7 @@ pub struct Preprocessed {
 /// [`IdentError::NoExperiment`], [`IdentError::RowMismatch`],
 /// [`IdentError::ColumnMismatch`], [`IdentError::NoOutput`], [`IdentError::NonFinite`]
 /// (naming experiment, column and row), [`IdentError::AllOutputsConstant`],
+/// [`IdentError::DuplicateColumns`] (two columns of one signal), [`IdentError::Overflow`],
 /// [`IdentError::InvalidSetting`].
 pub fn preprocess(
     experiments: &[Experiment],
@@ -234,6 +235,19 @@ pub fn preprocess(
             output_mean: y_mean,
             output_slope: y_slope,
         });
+    }
+    for signal in [Signal::Input, Signal::Output] {
+        let kept = match signal {
+            Signal::Input => &input_columns,
+            Signal::Output => &output_columns,
+        };
+        if let Some((a, b)) = duplicate_pair(&scaled, signal) {
+            return Err(IdentError::DuplicateColumns {
+                signal,
+                first: kept[a],
+                second: kept[b],
+            });
+        }
     }
     Ok(Preprocessed {
         experiments: scaled,
@@ -427,6 +441,39 @@ fn kept_columns(
     Ok((kept, DVector::from_vec(scales)))
 }
 
+/// Correlation above which two scaled columns are the same signal (up to sign and
+/// rounding): no model can tell them apart, and their covariances are singular.
+const DUPLICATE_CORRELATION: f64 = 1.0 - 1e-10;
+
+/// The first pair (a < b) of kept columns of `signal` whose pooled correlation over the
+/// scaled experiments is ±1 to [`DUPLICATE_CORRELATION`].
+fn duplicate_pair(scaled: &[Experiment], signal: Signal) -> Option<(usize, usize)> {
+    let cols = match signal {
+        Signal::Input => scaled.first()?.inputs.ncols(),
+        Signal::Output => scaled.first()?.outputs.ncols(),
+    };
+    if cols < 2 {
+        return None;
+    }
+    let mut gram = DMatrix::<f64>::zeros(cols, cols);
+    for exp in scaled {
+        let m = match signal {
+            Signal::Input => &exp.inputs,
+            Signal::Output => &exp.outputs,
+        };
+        gram += m.transpose() * m;
+    }
+    for b in 1..cols {
+        for a in 0..b {
+            let r = gram[(a, b)] / (gram[(a, a)] * gram[(b, b)]).sqrt();
+            if r.abs() > DUPLICATE_CORRELATION {
+                return Some((a, b));
+            }
+        }
+    }
+    None
+}
+
 /// Column `column` of an experiment's inputs or outputs (column-major: contiguous).
 fn column_slice(exp: &Experiment, signal: Signal, column: usize) -> &[f64] {
     let m = match signal {
@@ -557,7 +604,7 @@ mod tests {
             let s = (k as f64 * 0.37).sin();
             match j {
                 0 => 1e-300 * (2.0 + s),
-                1 => 1e150 * (2.0 + s),
+                1 => 1e150 * (2.0 + s * s * s),
                 _ => 3e-300,
             }
         });
@@ -568,14 +615,41 @@ mod tests {
         .unwrap();
         assert_eq!(pre.scaling.output_columns, vec![0, 1], "{:?}", pre.warnings);
         let s = &pre.scaling.output_scale;
+        let spread = |f: &dyn Fn(f64) -> f64| {
+            let x: Vec<f64> = (0..n).map(|k| f((k as f64 * 0.37).sin())).collect();
+            let mean = x.iter().sum::<f64>() / n as f64;
+            (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt()
+        };
+        assert!((s[0] / 1e-300 / spread(&|v| v) - 1.0).abs() < 1e-9, "{s}");
         assert!(
-            (s[0] / 1e-300 - s[1] / 1e150).abs() < 1e-9 * s[1] / 1e150,
+            (s[1] / 1e150 / spread(&|v| v * v * v) - 1.0).abs() < 1e-9,
             "{s}"
         );
         assert!(matches!(
             pre.warnings[0].kind,
             WarningKind::Constant { value } if value == 3e-300
         ));
+    }
+
+    #[test]
+    fn a_column_repeated_or_copied_is_an_error_naming_both() {
+        let n = 100;
+        let u = DMatrix::from_fn(n, 3, |k, j| match j {
+            0 => (k as f64 * 0.7).sin(),
+            1 => (k as f64 * 0.3).cos(),
+            _ => 10.0 - 2.0 * (k as f64 * 0.3).cos(),
+        });
+        let y = DMatrix::from_fn(n, 1, |k, _| (k as f64 * 0.2).sin());
+        let err = preprocess(&[Experiment::new(u, y)], &PreprocessSettings::default()).unwrap_err();
+        assert_eq!(
+            err,
+            IdentError::DuplicateColumns {
+                signal: Signal::Input,
+                first: 1,
+                second: 2
+            }
+        );
+        assert!(err.to_string().contains("input columns 1 and 2"), "{err}");
     }
 
     #[test]

@@ -178,6 +178,20 @@ pub enum IdentError {
         /// Column of the signal.
         column: usize,
     },
+    /// Two kept columns carry the same signal (correlation ±1 after scaling): the same
+    /// column named twice, or a copy of it.
+    #[error(
+        "{signal} columns {first} and {second} are the same signal (correlation ±1 after \
+         removing the operating point and scale): no model can tell them apart; leave one out"
+    )]
+    DuplicateColumns {
+        /// Inputs or outputs.
+        signal: Signal,
+        /// The first column (caller's index).
+        first: usize,
+        /// The column that repeats it.
+        second: usize,
+    },
     /// An SVD did not converge (only on pathological, near-overflowing data).
     #[error("the SVD of {what} did not converge")]
     SvdNotConverged {
