@@ -111,13 +111,15 @@ pub struct MethodChoice {
     pub fallback: Option<String>,
     /// Why the feedback test could not run (too few samples), if it could not.
     pub untested: Option<String>,
+    /// Inputs l of the data (after constant columns were left out).
+    pub inputs: usize,
 }
 
 impl MethodChoice {
-    /// The choice and its reason in one line; `inputs` names the kept inputs (index
-    /// `i` otherwise), e.g. `PBSID (closed loop): past outputs predict the inputs,
-    /// Granger test χ²(60) = 812.4, p = 2.1e-130 < 0.01 (most: FIC101, p = 1e-140); PBSID
-    /// is consistent under feedback, PO-MOESP is not`.
+    /// The choice and its reason in one line; `inputs` names the kept inputs (`input i`
+    /// otherwise), e.g. `PBSID (closed loop): past outputs predict the inputs, Granger
+    /// test of y → u, 10 lags: χ²(60) = 812.4, p = 2.1e-130 < 0.01 (most: FIC101,
+    /// p = 1.0e-140); PBSID is consistent under feedback, PO-MOESP is not`.
     #[must_use]
     pub fn line(&self, inputs: &[String]) -> String {
         let name = |i: usize| {
@@ -132,7 +134,7 @@ impl MethodChoice {
         let Some(t) = &self.feedback else {
             return if let Some(why) = &self.untested {
                 format!("PO-MOESP: the data are too short to test for feedback ({why})")
-            } else if inputs.is_empty() {
+            } else if self.inputs == 0 {
                 "PO-MOESP: no input, so no feedback to test (a time series)".into()
             } else {
                 "PO-MOESP: every input is predicted exactly by its own past (deterministic \
@@ -513,6 +515,7 @@ pub fn identify(
         feedback: None,
         fallback: None,
         untested: None,
+        inputs: l,
     };
     if settings.method == Method::Auto {
         check_level("feedback_level", settings.feedback_level)?;

@@ -201,3 +201,18 @@ fn the_level_on_a_wide_system_is_the_nominal_one() {
     // Binomial(200, 0.05): mean 10, σ 3.1.
     assert!((2..=20).contains(&at_5), "{at_5}/{seeds} at 5 %");
 }
+
+#[test]
+fn a_time_series_has_no_feedback_to_test() {
+    let truth = Truth::four_state();
+    let mut rng = Rng::new(8);
+    let u = DMatrix::zeros(SAMPLES, 2);
+    let y = truth.simulate(&u, &mut rng);
+    let id = identify(&[Experiment::time_series(y)], &IdentSettings::default()).unwrap();
+    assert_eq!(id.method.used, Method::Moesp);
+    assert!(id.method.feedback.is_none());
+    assert_eq!(
+        id.method.line(&[]),
+        "PO-MOESP: no input, so no feedback to test (a time series)"
+    );
+}
