@@ -189,6 +189,11 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
                     ),
                 }
             }
+            IdentError::InvalidSetting { name, why }
+                if matches!(name, "horizon" | "holdout" | "max_order" | "order") =>
+            {
+                IdentifyError::Request { option: name, why }
+            }
             e => IdentifyError::Ident(describe(&e, &inputs, &outputs)),
         })?;
     let scaling = &identification.scaling;

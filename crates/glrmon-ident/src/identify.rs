@@ -541,7 +541,14 @@ pub fn identify(
     let (sub, horizon, holdout_start) =
         match engine(&pre, settings, choice.used, i0, horizon_of(choice.used)) {
             Ok(found) => found,
-            Err(err) if settings.method == Method::Auto && choice.used == Method::Pbsid => {
+            // PBSID refusing these data (too short for its past window, or an input
+            // without excitation besides the feedback): PO-MOESP, saying why. A bad
+            // setting is the caller's error whatever the method.
+            Err(
+                err @ (IdentError::ExperimentTooShort { .. }
+                | IdentError::TooFewSamples { .. }
+                | IdentError::NotPositiveDefinite { .. }),
+            ) if settings.method == Method::Auto && choice.used == Method::Pbsid => {
                 choice.fallback = Some(err.to_string());
                 choice.used = Method::Moesp;
                 engine(&pre, settings, Method::Moesp, i0, horizon_of(Method::Moesp))?
