@@ -216,3 +216,64 @@ fn a_time_series_has_no_feedback_to_test() {
         "PO-MOESP: no input, so no feedback to test (a time series)"
     );
 }
+
+/// The work estimate next to the measured time and the data's size on a wide system
+/// (9 inputs, 22 outputs, 3 × 5000 samples, both methods and the feedback test): printed,
+/// not asserted (the time depends on the machine); run with `--release -- --ignored`.
+#[test]
+#[ignore = "a timing figure, meaningful on a release build only"]
+fn the_work_estimate_next_to_the_time_taken() {
+    let (n, l, p, samples) = (12, 9, 22, 5000);
+    let mut rng = Rng::new(26);
+    let mut a = rng.normals(n, n);
+    let radius = glrmon_ident::spectral_radius(&a);
+    a *= 0.9 / radius;
+    let truth = Truth {
+        a,
+        b: rng.normals(n, l),
+        c: rng.normals(p, n),
+        d: DMatrix::zeros(p, l),
+        k: rng.normals(n, p) * 0.1,
+        re: DMatrix::identity(p, p) * 0.1,
+    };
+    let data: Vec<Experiment> = (0..3)
+        .map(|_| {
+            let u = rng.normals(samples, l);
+            let y = truth.simulate(&u, &mut rng);
+            Experiment::new(u, y)
+        })
+        .collect();
+    for method in [Method::Moesp, Method::Pbsid, Method::Auto] {
+        let settings = IdentSettings {
+            method,
+            max_order: 20,
+            ..IdentSettings::default()
+        };
+        let work = glrmon_ident::estimate_work(&[samples; 3], l, p, &settings);
+        let started = std::time::Instant::now();
+        let id = identify(&data, &settings).unwrap();
+        println!(
+            "{method:?}: estimated {:.1} MiB and {:.2e} operations ({:.1} s at 4e9/s); took \
+             {:.2} s; order {} ({})",
+            work.bytes as f64 / (1 << 20) as f64,
+            work.flops,
+            work.flops / 4e9,
+            started.elapsed().as_secs_f64(),
+            id.order.chosen,
+            id.order.reason
+        );
+        for c in &id.order.candidates {
+            if let Some(v) = &c.validation {
+                println!(
+                    "  order {}: BIC {:.1}, not white {:?}, NIS {:.3} in [{:.3}, {:.3}]",
+                    c.order,
+                    c.bic,
+                    v.not_white(),
+                    v.nis_mean.unwrap_or(f64::NAN),
+                    v.nis_interval.0,
+                    v.nis_interval.1
+                );
+            }
+        }
+    }
+}
