@@ -202,10 +202,15 @@ pub(crate) fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
     } else {
         print_report(&identified);
         println!(
-            "\nwrote {} (it validates). Next, thresholds from fault-free data:\n  \
+            "\nwrote {} (a valid configuration{}). Next, thresholds from fault-free data:\n  \
              glrmon calibrate --config {} --channel {} {} --sample-far 0.01 --write\n\
              then monitor: glrmon replay --config {} NEW.csv   or   glrmon run --config {}",
             args.output.display(),
+            if identified.validation_failures.is_empty() {
+                ""
+            } else {
+                "; its model FAILED the held-out validation: see the WARNING"
+            },
             args.output.display(),
             channel,
             files.join(" "),
