@@ -393,6 +393,7 @@ struct MethodReport {
     reason: String,
     feedback: Option<FeedbackReport>,
     fallback: Option<String>,
+    untested: Option<String>,
 }
 
 #[derive(Debug, Serialize)]
@@ -524,6 +525,7 @@ impl Report {
                     per_input_p: t.per_input.clone(),
                 }),
                 fallback: ident.method.fallback.clone(),
+                untested: ident.method.untested.clone(),
             },
             estimated_bytes: id.work.bytes,
             estimated_flops: id.work.flops,
