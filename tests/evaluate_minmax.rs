@@ -84,6 +84,7 @@ fn json_has_each_runs_minmax_statistic_and_the_rates_they_give() {
         assert_eq!(
             keys,
             [
+                "ambiguous",
                 "crossing",
                 "false_alarms",
                 "isolated",
@@ -129,7 +130,9 @@ fn json_has_each_runs_minmax_statistic_and_the_rates_they_give() {
                 "{fault}/{test}: {stated} vs {rate}"
             );
             // The statistics are those of the isolation the confusion matrix counts: a
-            // run isolated the test exactly when its statistic exceeds the threshold.
+            // run isolated the test only when its statistic exceeds the threshold (the
+            // test fired); a test that fired is left out when another fault alone, at
+            // its own onset, explains the data as well (onset-free isolation).
             let fired = stats.iter().filter(|s| s.as_f64().unwrap() > h).count();
             assert_eq!(t["fired"], fired, "{fault}/{test}");
             for (run, s) in isolating.iter().zip(stats) {
@@ -138,7 +141,7 @@ fn json_has_each_runs_minmax_statistic_and_the_rates_they_give() {
                     .unwrap()
                     .iter()
                     .any(|n| n == test);
-                assert_eq!(named, s.as_f64().unwrap() > h, "{fault}/{test}: {run}");
+                assert!(!named || s.as_f64().unwrap() > h, "{fault}/{test}: {run}");
             }
         }
     }

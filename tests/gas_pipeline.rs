@@ -200,6 +200,25 @@ fn first_alarm(records: &[serde_json::Value], onset: u64, own: &str, other: &str
         2 * (k - onset)
     );
     let update = isolation_of(records, first);
+    // At the alarm the two inlet faults (signatures correlated at 0.81) may not yet be
+    // told apart once the onset is free: then both are reported ambiguous, neither
+    // isolated; the update isolates the injected one.
+    let ambiguous = |r: &serde_json::Value| {
+        r["isolation"].as_array().unwrap().iter().any(|t| {
+            t["fault"] == own
+                && (t["ambiguous_with"].as_array().unwrap())
+                    .iter()
+                    .any(|n| n == other)
+        })
+    };
+    assert!(
+        isolated(first).iter().any(|n| n == own) || ambiguous(first),
+        "{own} neither isolated nor ambiguous at the alarm: {first}"
+    );
+    assert!(
+        !ambiguous(update),
+        "{own}: still ambiguous at the update: {update}"
+    );
     for r in [first, update] {
         let r_hat = r["onset"].as_u64().unwrap();
         println!(
@@ -213,7 +232,10 @@ fn first_alarm(records: &[serde_json::Value], onset: u64, own: &str, other: &str
             2 * r_hat
         );
         let names = isolated(r);
-        assert!(names.iter().any(|n| n == own), "{own} not isolated: {r}");
+        assert!(
+            names.iter().any(|n| n == own) || ambiguous(r),
+            "{own} not isolated: {r}"
+        );
         assert!(
             !names.iter().any(|n| n == other),
             "{own} taken for {other}: {r}"

@@ -211,6 +211,7 @@ fn validate(schema: &serde_json::Value, v: &serde_json::Value, at: &str) -> Resu
                 | "description"
                 | "title"
                 | "format"
+                | "default"
                 | "$schema"
         ) {
             return Err(format!("{at}: unsupported schema keyword {key}"));

@@ -9,11 +9,20 @@
 //!   badly) and raise a new one later: a stream of alarms for one fault.
 //! - [`EpisodeEnd::FaultGone`]: when the data say the fault is gone: the fault followed
 //!   from the alarm's onset past the window ([`crate::Detector::followed`]) does not go
-//!   on in the last w samples ([`FollowedEvidence::continues`]: they cannot see it at
-//!   level α, or are closer to no fault than to it) for `samples` consecutive samples,
-//!   and l_k is below λ·(1 − h) then (so the end is not followed at once by an alarm on
-//!   the same data). Without a followed statistic (a kind that cannot follow an onset)
-//!   it falls back to the first rule.
+//!   on in the last w samples ([`FollowedEvidence::continues`]: they are closer to no
+//!   fault than to it) for `samples` consecutive samples, and l_k is below λ·(1 − h)
+//!   then (so the end is not followed at once by an alarm on the same data). When the
+//!   last w samples cannot see the fault at all at level α (a jump the filter has
+//!   absorbed) there is nothing to wait for: the episode ends by the threshold rule. Until its followed fault has gone on for `samples`/2 samples in a
+//!   row (a fault confirmed; noise that raised a false alarm does not do that), a new
+//!   crossing (l_k > λ) whose onset r̂ comes after the alarm, at a sample where the
+//!   fault does not go on and the data do not show it reversing (z_k ≥ −z_α), is a new
+//!   change: it ends the episode and starts the next at once
+//!   ([`AlarmTransition::Replaced`]), so that a false alarm's episode does not hide a
+//!   fault that begins during it. The crossing a confirmed fault's removal causes is
+//!   its end, not a new fault. Without a
+//!   followed statistic (a kind that cannot follow an onset) it falls back to the first
+//!   rule.
 
 use crate::threshold::chi2_upper_quantile;
 use crate::window::FollowedEvidence;
@@ -66,6 +75,14 @@ pub enum AlarmTransition {
     Started,
     /// An episode is going on.
     Active,
+    /// The episode ended at this sample and a new one started at it: a crossing with
+    /// an onset after the ended episode's alarm, whose fault was not confirmed.
+    Replaced {
+        /// Index of the sample that started the ended episode.
+        started: u64,
+        /// Largest l_k during the ended episode.
+        peak: f64,
+    },
     /// The episode ended at this sample.
     Ended {
         /// Index of the sample that started it.
@@ -95,6 +112,10 @@ pub struct AlarmState {
     below: u32,
     /// Consecutive samples of the episode without evidence of the followed fault.
     gone: u32,
+    /// Consecutive samples the followed fault has gone on, and whether it has done so
+    /// for `samples`/2 of them in a row in this episode (confirmed).
+    continued: u32,
+    confirmed: bool,
     /// The normal upper quantile of the fault-gone test: (α, value).
     quantile: Option<(f64, f64)>,
 }
@@ -111,6 +132,8 @@ impl AlarmState {
             peak: 0.0,
             below: 0,
             gone: 0,
+            continued: 0,
+            confirmed: false,
             quantile: None,
         }
     }
@@ -129,11 +152,11 @@ impl AlarmState {
     /// Feeds l_k of sample k (`None` when no onset is admissible), with no followed
     /// fault: episodes end below the threshold.
     pub fn update(&mut self, k: u64, glr: Option<f64>) -> AlarmTransition {
-        self.update_followed(k, glr, None)
+        self.update_followed(k, glr, None, None)
     }
 
-    /// Feeds l_k of sample k and the followed fault's evidence of the episode, if any
-    /// ([`crate::Detector::followed`]).
+    /// Feeds l_k of sample k with its onset estimate r̂, and the followed fault's
+    /// evidence of the episode, if any ([`crate::Detector::followed`]).
     ///
     /// # Examples
     /// ```
@@ -141,17 +164,21 @@ impl AlarmState {
     /// use glrmon_core::FollowedEvidence;
     /// let mut alarm = AlarmState::new(AlarmSettings::with_threshold(10.0));
     /// alarm.set_end(EpisodeEnd::FaultGone { alpha: 0.01, samples: 2 });
-    /// let ev = |score| Some(FollowedEvidence { score, information: 25.0 });
-    /// assert_eq!(alarm.update_followed(0, Some(12.0), None), AlarmTransition::Started);
+    /// let ev = |score| Some(FollowedEvidence { score, information: 25.0, full: true });
+    /// assert_eq!(alarm.update_followed(0, Some(12.0), Some(0), None), AlarmTransition::Started);
     /// // l_k has fallen, but the followed fault is still in the data (z ≥ √δ/2 = 2.5).
-    /// assert_eq!(alarm.update_followed(1, Some(2.0), ev(4.0)), AlarmTransition::Active);
-    /// assert_eq!(alarm.update_followed(2, Some(2.0), ev(1.0)), AlarmTransition::Active);
-    /// assert!(matches!(alarm.update_followed(3, Some(2.0), ev(-0.5)), AlarmTransition::Ended { .. }));
+    /// assert_eq!(alarm.update_followed(1, Some(2.0), Some(0), ev(4.0)), AlarmTransition::Active);
+    /// assert_eq!(alarm.update_followed(2, Some(2.0), Some(0), ev(1.0)), AlarmTransition::Active);
+    /// assert!(matches!(
+    ///     alarm.update_followed(3, Some(2.0), Some(0), ev(-0.5)),
+    ///     AlarmTransition::Ended { .. }
+    /// ));
     /// ```
     pub fn update_followed(
         &mut self,
         k: u64,
         glr: Option<f64>,
+        onset: Option<u64>,
         followed: Option<FollowedEvidence>,
     ) -> AlarmTransition {
         let s = self.settings;
@@ -161,6 +188,8 @@ impl AlarmState {
                 self.peak = glr.unwrap_or(0.0);
                 self.below = 0;
                 self.gone = 0;
+                self.continued = 0;
+                self.confirmed = false;
                 return AlarmTransition::Started;
             }
             return AlarmTransition::Quiet;
@@ -174,13 +203,37 @@ impl AlarmState {
             self.below += 1;
         }
         let ended = match (self.end, followed) {
+            // The evidence is gathered over w samples from the alarm on: no decision on
+            // fewer.
+            (EpisodeEnd::FaultGone { .. }, Some(evidence)) if !evidence.full => false,
             (EpisodeEnd::FaultGone { alpha, samples }, Some(evidence)) => {
-                if !evidence.continues(self.z_alpha(alpha)) {
-                    self.gone += 1;
-                } else {
+                let z_alpha = self.z_alpha(alpha);
+                if evidence.continues(z_alpha) {
                     self.gone = 0;
+                    self.continued += 1;
+                    self.confirmed |= self.continued >= (samples / 2).max(1);
+                } else {
+                    self.gone += 1;
+                    self.continued = 0;
+                    let crossing = glr.is_some_and(|l| l > s.threshold);
+                    let new_change =
+                        onset.is_some_and(|r| r > started) && evidence.score >= -z_alpha;
+                    if !self.confirmed && crossing && new_change {
+                        let peak = self.peak;
+                        self.started = Some(k);
+                        self.peak = glr.unwrap_or(0.0);
+                        self.below = 0;
+                        self.gone = 0;
+                        return AlarmTransition::Replaced { started, peak };
+                    }
                 }
-                self.gone >= samples.max(1) && !high
+                if evidence.information.max(0.0).sqrt() < z_alpha {
+                    // The data no longer see the fault at all (a jump the filter has
+                    // absorbed): nothing to wait for, the threshold rule ends it.
+                    self.below >= s.clear_samples.max(1)
+                } else {
+                    self.gone >= samples.max(1) && !high
+                }
             }
             _ => self.below >= s.clear_samples.max(1),
         };
@@ -277,7 +330,7 @@ mod tests {
             samples: 3,
         });
         assert_eq!(
-            a.update_followed(0, Some(11.0), None),
+            a.update_followed(0, Some(11.0), Some(0), None),
             AlarmTransition::Started
         );
         // z per sample, δ = 16: the fault goes on while z ≥ 2.
@@ -298,8 +351,9 @@ mod tests {
                 let evidence = FollowedEvidence {
                     score,
                     information: 16.0,
+                    full: true,
                 };
-                a.update_followed(i as u64 + 1, l, Some(evidence))
+                a.update_followed(i as u64 + 1, l, Some(0), Some(evidence))
             })
             .collect();
         assert!(
@@ -325,11 +379,62 @@ mod tests {
             alpha: 0.01,
             samples: 50,
         });
-        a.update_followed(0, Some(2.0), None);
+        a.update_followed(0, Some(2.0), Some(0), None);
         assert!(matches!(
-            a.update_followed(1, Some(0.1), None),
+            a.update_followed(1, Some(0.1), Some(0), None),
             AlarmTransition::Ended { .. }
         ));
+    }
+
+    /// A crossing with a later onset while the followed fault has no evidence ends the
+    /// episode and starts a new one; with the episode's own onset, or with the data
+    /// showing the fault reversing, it does not; and once the fault is confirmed, no
+    /// crossing replaces the episode.
+    #[test]
+    fn a_new_change_replaces_an_episode_whose_fault_is_gone() {
+        let mut a = AlarmState::new(AlarmSettings::with_threshold(10.0));
+        a.set_end(EpisodeEnd::FaultGone {
+            alpha: 0.01,
+            samples: 50,
+        });
+        let ev = |score| {
+            Some(FollowedEvidence {
+                score,
+                information: 16.0,
+                full: true,
+            })
+        };
+        a.update_followed(5, Some(12.0), Some(3), None);
+        // No evidence, but the crossing's onset is before the alarm: same episode.
+        assert_eq!(
+            a.update_followed(7, Some(30.0), Some(4), ev(0.0)),
+            AlarmTransition::Active
+        );
+        // A later onset, but the data show the fault reversing (z < −2.33).
+        assert_eq!(
+            a.update_followed(7, Some(30.0), Some(7), ev(-3.0)),
+            AlarmTransition::Active
+        );
+        assert_eq!(
+            a.update_followed(8, Some(30.0), Some(8), ev(0.0)),
+            AlarmTransition::Replaced {
+                started: 5,
+                peak: 30.0
+            }
+        );
+        assert!(a.is_active());
+        // The new episode's fault goes on for 25 = 50/2 samples: confirmed, no
+        // crossing replaces it.
+        for k in 9..34 {
+            assert_eq!(
+                a.update_followed(k, Some(30.0), Some(8), ev(4.0)),
+                AlarmTransition::Active
+            );
+        }
+        assert_eq!(
+            a.update_followed(34, Some(30.0), Some(34), ev(0.0)),
+            AlarmTransition::Active
+        );
     }
 
     #[test]

@@ -644,9 +644,10 @@ impl IsolationCalibration {
     }
 }
 
-/// The χ² (1 − α) quantile with the degrees of freedom of `test` (a group's size, 1
-/// for a fault) at `channel`'s `isolation_alpha`: the isolation threshold without a
-/// calibrated one; NaN when it cannot be computed.
+/// The χ² upper quantile with the degrees of freedom of `test` (a group's size, 1 for
+/// a fault) at `channel`'s `isolation_alpha` divided among its `isolation_onsets` (the
+/// law `isolation_law` puts in force, as the monitor applies it): the isolation
+/// threshold without a calibrated one; NaN when it cannot be computed.
 #[must_use]
 pub fn chi2_isolation_threshold(channel: &Channel, test: &str) -> f64 {
     let dof = channel
@@ -654,8 +655,8 @@ pub fn chi2_isolation_threshold(channel: &Channel, test: &str) -> f64 {
         .iter()
         .find(|(n, _)| n == test)
         .map_or(1, |(_, f)| f.len().max(1));
-    glrmon_core::threshold::chi2_upper_quantile(dof as f64, channel.isolation_alpha)
-        .unwrap_or(f64::NAN)
+    let alpha = channel.isolation_alpha / channel.isolation_onsets.max(1) as f64;
+    glrmon_core::threshold::chi2_upper_quantile(dof as f64, alpha).unwrap_or(f64::NAN)
 }
 
 /// The isolation threshold `channel` uses now for `test`: its calibrated one, else
@@ -1038,7 +1039,10 @@ inputs = ["sin(0.1*k)", "cos(0.07*k)", "0.5*sin(0.03*k)"]
                 why.to_string().contains("span of the other faults'"),
                 "{why}"
             );
-            assert!((i.chi2 - 6.6349).abs() < 1e-3, "{i:?}");
+            // The law in force: χ²(1) at α/(w − s) (Bonferroni over the window).
+            let onsets = channel.isolation_onsets as f64;
+            let want = glrmon_core::threshold::chi2_upper_quantile(1.0, alpha / onsets).unwrap();
+            assert!((i.chi2 - want).abs() < 1e-9, "{i:?}: {want}");
         }
         // Without the actuators (n = 2 ≥ 0 inputs under test) the sensors are isolable.
         let text = SPANNED.replace("[[channels.faults]]\nkind = \"all_actuators\"\n", "");

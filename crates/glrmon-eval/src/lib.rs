@@ -29,6 +29,9 @@ pub struct Run {
     pub onset_estimate: Option<u64>,
     /// Faults isolated by that alarm's last isolation.
     pub isolated: Vec<String>,
+    /// Faults that isolation reported ambiguous (not told apart once the onset is
+    /// free; none of them isolated).
+    pub ambiguous: Vec<String>,
     /// The sample of that isolation: the alarm's `k`, or its update's.
     pub isolated_at: Option<u64>,
     /// Alarms raised before the onset.
@@ -52,7 +55,8 @@ pub struct MinmaxOutcome {
     /// Degrees of freedom of l_a's centred χ² under θ_a = 0: the numerical rank of the
     /// test's Fisher information F*_a, as the monitor took it for the threshold.
     pub dof: u32,
-    /// Whether the test declared θ_a ≠ 0 (l_a above the threshold).
+    /// Whether the test declared θ_a ≠ 0 (l_a above the threshold; whether the fault
+    /// was then isolated also depends on the onset-free check, [`Run::ambiguous`]).
     pub fired: bool,
 }
 
@@ -289,12 +293,14 @@ pub fn one_run(
                     run.crossing = Some(a.k);
                     run.onset_estimate = Some(a.onset);
                     run.isolated = isolated(&a.isolation);
+                    run.ambiguous = ambiguous(&a.isolation);
                     run.isolated_at = Some(a.k);
                     run.minmax = minmax_outcomes(&mon, &tests, a.onset, &a.isolation);
                 }
                 Record::Isolation(u) if run.crossing == Some(u.alarm_k) => {
                     run.onset_estimate = Some(u.onset);
                     run.isolated = isolated(&u.isolation);
+                    run.ambiguous = ambiguous(&u.isolation);
                     run.isolated_at = Some(u.k);
                     run.minmax = minmax_outcomes(&mon, &tests, u.onset, &u.isolation);
                 }
@@ -333,6 +339,14 @@ fn isolated(tests: &[glrmon_wire::IsolationResult]) -> Vec<String> {
         .collect()
 }
 
+fn ambiguous(tests: &[glrmon_wire::IsolationResult]) -> Vec<String> {
+    tests
+        .iter()
+        .filter(|i| !i.ambiguous_with.is_empty())
+        .map(|i| i.fault.clone())
+        .collect()
+}
+
 /// The minmax outcomes of an isolation the monitor just made at onset estimate `onset`:
 /// statistic, threshold and decision from its record, the degrees of freedom from the
 /// detector, still at the sample of that isolation (the record does not carry them).
@@ -359,7 +373,9 @@ fn minmax_outcomes(
                 statistic: r.minmax,
                 threshold: r.threshold,
                 dof: u32::try_from(dof).unwrap_or(u32::MAX),
-                fired: r.isolated,
+                // The minmax test's own decision (Fig. 8), before the onset-free check
+                // that may leave a fault ambiguous.
+                fired: r.minmax > r.threshold,
             }
         })
         .collect()
@@ -443,7 +459,7 @@ fn most_common(pairs: impl Iterator<Item = (f64, u32)>) -> Option<(f64, u32)> {
 #[must_use]
 pub fn outcome_columns(faults: &[String], results: &[FaultResult]) -> Vec<String> {
     let mut columns: Vec<String> = faults.to_vec();
-    let fixed = ["none", "several", "undetected"];
+    let fixed = ["ambiguous", "none", "several", "undetected"];
     let mut others: Vec<String> = results
         .iter()
         .flat_map(|r| r.runs.iter().map(isolated_label))
@@ -546,11 +562,12 @@ fn quantile(mut v: Vec<f64>, p: f64) -> Option<f64> {
     v.get(i).copied()
 }
 
-/// Column of the confusion matrix for a run: the isolated fault, `none`, or
-/// `several`.
+/// Column of the confusion matrix for a run: the isolated fault, `ambiguous` (none
+/// isolated, some not told apart yet), `none`, or `several`.
 fn isolated_label(r: &Run) -> String {
     match r.isolated.as_slice() {
         [] if r.onset_estimate.is_none() => "undetected".into(),
+        [] if !r.ambiguous.is_empty() => "ambiguous".into(),
         [] => "none".into(),
         [one] => one.clone(),
         _ => "several".into(),
@@ -559,7 +576,7 @@ fn isolated_label(r: &Run) -> String {
 
 /// The `--json` file: the channel, the onset, the channel's fault dictionary and every
 /// run of every injected fault, `{"channel", "onset", "faults", "results": [{"fault",
-/// "magnitude", "runs": [{"crossing", "onset_estimate", "isolated", "isolated_at",
+/// "magnitude", "runs": [{"crossing", "onset_estimate", "isolated", "ambiguous", "isolated_at",
 /// "false_alarms"}], "minmax": [{"test", "faults", "threshold", "dof", "statistics",
 /// "fired", "type_i_rate" or "type_ii_rate"}]}]}` (`minmax`: [`MinmaxTest`], Zhang &
 /// Basseville 2014, Fig. 8).
@@ -611,6 +628,7 @@ mod tests {
                     crossing: Some(12),
                     onset_estimate: Some(10),
                     isolated: vec!["a\"b".into(), "c\\d".into()],
+                    ambiguous: Vec::new(),
                     isolated_at: Some(14),
                     false_alarms: 0,
                     minmax: Vec::new(),
@@ -632,8 +650,8 @@ mod tests {
             text,
             concat!(
                 r#"{"channel":"m\u0001é","onset":10,"faults":["a\"b"],"results":[{"fault":"a\"b","magnitude":0.5,"runs":["#,
-                r#"{"crossing":12,"onset_estimate":10,"isolated":["a\"b","c\\d"],"isolated_at":14,"false_alarms":0},"#,
-                r#"{"crossing":null,"onset_estimate":null,"isolated":[],"isolated_at":null,"false_alarms":0}],"#,
+                r#"{"crossing":12,"onset_estimate":10,"isolated":["a\"b","c\\d"],"ambiguous":[],"isolated_at":14,"false_alarms":0},"#,
+                r#"{"crossing":null,"onset_estimate":null,"isolated":[],"ambiguous":[],"isolated_at":null,"false_alarms":0}],"#,
                 r#""minmax":[{"test":"a\"b","faults":["a\"b"],"threshold":6.5,"dof":1,"statistics":[7.25,null],"fired":1,"type_ii_rate":0.5}]}]}"#,
                 "\n"
             )

@@ -293,6 +293,10 @@ fn settings(channel: &Channel) -> String {
         .map(|(n, o)| format!("{n} ({})", format!("{o:?}").to_lowercase()))
         .collect();
     let _ = writeln!(s, "  faults: {}", faults.join(", "));
+    if channel.detector_kind == DetectorKind::Glr {
+        let _ = writeln!(s, "  isolation: {}", isolation_law_text(channel));
+    }
+    let _ = writeln!(s, "  episodes: {}", episode_end_text(channel));
     let diag = &channel.diagnosis;
     if diag.enabled {
         let span = diag.span.map_or_else(
@@ -378,6 +382,64 @@ fn settings(channel: &Channel) -> String {
         );
     }
     s
+}
+
+/// Which law the isolation tests' thresholds follow, in words: calibrated ones, and
+/// the χ² quantile (Bonferroni over the window's onsets or nominal) for the others.
+fn isolation_law_text(channel: &Channel) -> String {
+    let onsets = channel.isolation_onsets.max(1);
+    let law = if onsets > 1 {
+        format!(
+            "χ²(dof) upper quantile at {:e}/(w − s) = {:e} (Bonferroni over the {onsets} \
+             onsets: the tests run at the onset r̂ the data chose, where the quantile at \
+             {:e} is exceeded more often than that under no fault; `isolation_law = \
+             \"chi2\"` for the nominal law)",
+            channel.isolation_alpha,
+            channel.isolation_alpha / onsets as f64,
+            channel.isolation_alpha
+        )
+    } else {
+        format!(
+            "χ²(dof) upper quantile at {:e} (the nominal law of a test at a known onset)",
+            channel.isolation_alpha
+        )
+    };
+    let calibrated: Vec<&str> = (channel.isolation_thresholds.iter())
+        .map(|(n, _)| n.as_str())
+        .collect();
+    let tests = channel.groups.len().max(channel.fault_names.len());
+    match calibrated.len() {
+        0 => format!("every test at the {law}; calibrate them with `glrmon calibrate`"),
+        n if n >= tests => format!(
+            "every test at its calibrated threshold ({})",
+            calibrated.join(", ")
+        ),
+        _ => format!(
+            "calibrated thresholds for {}; the others at the {law}",
+            calibrated.join(", ")
+        ),
+    }
+}
+
+/// How an alarm episode ends, in words.
+fn episode_end_text(channel: &Channel) -> String {
+    match channel.episode_end {
+        glrmon_core::EpisodeEnd::FaultGone { alpha, samples }
+            if channel.detector_kind == DetectorKind::Glr =>
+        {
+            format!(
+                "one per fault: an episode ends when the fault followed from its onset has \
+                 not gone on (not visible at {alpha:e}, or closer to none than to its \
+                 magnitude) in the last w samples for {samples} samples and l_k is below \
+                 λ(1 − h)"
+            )
+        }
+        _ => format!(
+            "an episode ends when l_k stays below λ(1 − h) = {:.4} for {} samples",
+            channel.alarm.threshold * (1.0 - channel.alarm.hysteresis),
+            channel.alarm.clear_samples
+        ),
+    }
 }
 
 /// How the threshold was set, in words.

@@ -723,21 +723,16 @@ impl Monitor {
         } else {
             None
         };
-        match self.alarm.update_followed(k, self.out.glr, followed) {
+        match (self.alarm).update_followed(k, self.out.glr, self.out.onset, followed) {
             AlarmTransition::Started => self.emit_alarm(k, t, records),
+            AlarmTransition::Replaced { started, peak } => {
+                // A new change while the episode's fault had no evidence left: the
+                // episode ends here and the crossing is the next one's alarm.
+                self.end_episode(k, t, started, peak, records);
+                self.emit_alarm(k, t, records);
+            }
             AlarmTransition::Ended { started, peak } => {
-                self.detector.follow(None);
-                // An episode shorter than the isolation delay: its alarm, raised at
-                // the crossing, stays its isolation (see the crate documentation).
-                self.pending = None;
-                records.push(Record::AlarmEnd(AlarmEnd {
-                    channel: self.channel.clone(),
-                    k,
-                    t,
-                    onset: self.reported_onset,
-                    duration: k - started,
-                    peak_glr: peak,
-                }));
+                self.end_episode(k, t, started, peak, records);
             }
             AlarmTransition::Active | AlarmTransition::Quiet => {}
         }
@@ -752,6 +747,29 @@ impl Monitor {
             self.pending = None;
             self.emit_update(p, k, t, glr, onset, records);
         }
+    }
+
+    /// The `alarm_end` of the episode that started at `started` with peak l_k `peak`,
+    /// ending at k. An episode shorter than the isolation delay: its alarm, raised at
+    /// the crossing, stays its isolation (see the crate documentation).
+    fn end_episode(
+        &mut self,
+        k: u64,
+        t: Option<f64>,
+        started: u64,
+        peak: f64,
+        records: &mut Vec<Record>,
+    ) {
+        self.detector.follow(None);
+        self.pending = None;
+        records.push(Record::AlarmEnd(AlarmEnd {
+            channel: self.channel.clone(),
+            k,
+            t,
+            onset: self.reported_onset,
+            duration: k.saturating_sub(started),
+            peak_glr: peak,
+        }));
     }
 
     /// The `alarm` record of the crossing at k (l_k > λ just started an episode), its
@@ -978,15 +996,9 @@ impl Monitor {
         records: &mut Vec<Record>,
     ) {
         if let Some((started, peak)) = self.alarm.reset() {
-            records.push(Record::AlarmEnd(AlarmEnd {
-                channel: self.channel.clone(),
-                k,
-                t,
-                onset: self.reported_onset,
-                // A sequence reset restarts at a k before the episode began.
-                duration: k.saturating_sub(started),
-                peak_glr: peak,
-            }));
+            // A sequence reset restarts at a k before the episode began: the duration
+            // saturates at 0.
+            self.end_episode(k, t, started, peak, records);
         }
         self.pending = None;
         self.counters.restarts += 1;

@@ -104,7 +104,8 @@ pub struct Evaluation {
     /// Seed of the first run (run i uses seed + i).
     pub seed: u64,
     /// Columns of the confusion matrix: the channel's faults in dictionary order, then
-    /// the outcomes without a single isolated fault (`none`, `several`, `undetected`).
+    /// the outcomes without a single isolated fault (`ambiguous`, `none`, `several`,
+    /// `undetected`).
     pub outcomes: Vec<String>,
     /// One entry per injected fault, in the order evaluated.
     pub faults: Vec<FaultEvaluation>,
@@ -339,7 +340,7 @@ impl Evaluation {
             }
             let _ = writeln!(s, "<td class=\"num\">{}</td></tr>", f.runs);
         }
-        s.push_str("</table>\n<p class=\"note\">Rows: the injected fault; columns: what the isolation tests of the first alarm at or after the onset declared present. <code>none</code>: an alarm but no fault isolated; <code>several</code>: more than one fault isolated; <code>undetected</code>: no alarm at or after the onset. Percentages are of the row's runs; green: the injected fault isolated alone.</p>\n");
+        s.push_str("</table>\n<p class=\"note\">Rows: the injected fault; columns: what the isolation tests of the first alarm at or after the onset declared present. <code>ambiguous</code>: no fault isolated, some not yet told apart from others once the onset is free; <code>none</code>: an alarm but no fault isolated; <code>several</code>: more than one fault isolated; <code>undetected</code>: no alarm at or after the onset. Percentages are of the row's runs; green: the injected fault isolated alone.</p>\n");
         s
     }
 

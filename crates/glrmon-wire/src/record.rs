@@ -1031,7 +1031,7 @@ mod tests {
             text.starts_with(r#"{"type":"alarm","channel":"pump3","k":140,"t":null,"glr":87.5"#),
             "{text}"
         );
-        assert!(text.contains(r#""isolation":[{"fault":"leak","minmax":40.25,"sensitivity":39.0,"threshold":6.63,"isolated":true},"#), "{text}");
+        assert!(text.contains(r#""isolation":[{"fault":"leak","minmax":40.25,"sensitivity":39.0,"threshold":6.63,"isolated":true,"ambiguous_with":[]},"#), "{text}");
         assert!(
             text.ends_with(r#""faults":["leak","bias"],"update_k":150}"#),
             "{text}"
@@ -1047,7 +1047,7 @@ mod tests {
 
         assert_eq!(
             json(&isolation_update().into()),
-            r#"{"type":"isolation","channel":"pump3","k":150,"t":15.0,"alarm_k":140,"glr":80.25,"threshold":13.8,"onset":100,"magnitude":[0.5,-1e-300],"isolation":[{"fault":"leak","minmax":60.5,"sensitivity":61.0,"threshold":6.63,"isolated":true}],"faults":["leak","bias"]}"#
+            r#"{"type":"isolation","channel":"pump3","k":150,"t":15.0,"alarm_k":140,"glr":80.25,"threshold":13.8,"onset":100,"magnitude":[0.5,-1e-300],"isolation":[{"fault":"leak","minmax":60.5,"sensitivity":61.0,"threshold":6.63,"isolated":true,"ambiguous_with":[]}],"faults":["leak","bias"]}"#
         );
 
         let text = json(&diagnosis().into());

@@ -81,6 +81,8 @@ pub struct FollowedEvidence {
     pub score: f64,
     /// δ: what the samples can tell of the fault at its earlier magnitude θ°.
     pub information: f64,
+    /// Whether the evidence spans w samples (it starts empty at the follow).
+    pub full: bool,
 }
 
 impl FollowedEvidence {
@@ -281,15 +283,18 @@ impl FollowedOnset {
             let row: f64 = column.iter().zip(theta).map(|(c, t)| c * t).sum();
             information += t * row;
         }
+        let full = self.held == self.window;
         if information > 0.0 && information.is_finite() {
             FollowedEvidence {
                 score: along / information.sqrt(),
                 information,
+                full,
             }
         } else {
             FollowedEvidence {
                 score: 0.0,
                 information: 0.0,
+                full,
             }
         }
     }
@@ -424,7 +429,11 @@ mod tests {
 
     #[test]
     fn a_fault_continues_when_visible_and_closer_to_its_magnitude_than_to_none() {
-        let e = |score, information| FollowedEvidence { score, information };
+        let e = |score, information| FollowedEvidence {
+            score,
+            information,
+            full: true,
+        };
         // √δ = 4: continues from z = 2 on.
         assert!(e(2.0, 16.0).continues(2.33));
         assert!(!e(1.9, 16.0).continues(2.33));
