@@ -156,7 +156,9 @@ impl AlarmState {
     }
 
     /// Feeds l_k of sample k with its onset estimate r̂, and the followed fault's
-    /// evidence of the episode, if any ([`crate::Detector::followed`]).
+    /// evidence of the episode, if any ([`crate::Detector::followed`]). The caller
+    /// passes r̂ only when it dates a change inside the window (`None` for the window's
+    /// oldest onset: a change older than the window, a fault going on).
     ///
     /// # Examples
     /// ```

@@ -723,7 +723,11 @@ impl Monitor {
         } else {
             None
         };
-        match (self.alarm).update_followed(k, self.out.glr, self.out.onset, followed) {
+        // An onset at the window's oldest slot says the change is older than the window
+        // (a fault going on), not that a new one began: the alarm state sees none.
+        let w = self.detector.memory() as u64;
+        let onset = self.out.onset.filter(|&r| k.saturating_sub(r) + 1 < w);
+        match (self.alarm).update_followed(k, self.out.glr, onset, followed) {
             AlarmTransition::Started => self.emit_alarm(k, t, records),
             AlarmTransition::Replaced { started, peak } => {
                 // A new change while the episode's fault had no evidence left: the
