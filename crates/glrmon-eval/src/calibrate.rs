@@ -42,7 +42,7 @@ use std::path::{Path, PathBuf};
 
 use glrmon_core::alarm::AlarmSettings;
 use glrmon_core::threshold::calibration::{
-    Calibration, CalibrationError, Quantile, Target, calibrate, calibrate_sample_far,
+    self, Calibration, CalibrationError, Quantile, Target, calibrate, calibrate_sample_far,
     count_episodes, upper_quantile,
 };
 use glrmon_input::{InputError, InputFormat, McapInput, Samples, Skipped};
@@ -758,44 +758,6 @@ impl ChannelCalibration {
     }
 }
 
-/// Garwood 95 % interval of a Poisson mean with `events` (possibly fractional, an
-/// equivalent number) counted, as [`Calibration::rate_interval`] takes it.
-fn garwood(events: f64) -> (f64, f64) {
-    use glrmon_core::threshold::chi2_quantile;
-    let low = if events <= 0.0 {
-        0.0
-    } else {
-        chi2_quantile(2.0 * events, 0.025).map_or(0.0, |q| q / 2.0)
-    };
-    let high = chi2_quantile(2.0 * events + 2.0, 0.975).map_or(f64::INFINITY, |q| q / 2.0);
-    (low, high)
-}
-
-/// Exceedances of λ in `glr`, their clusters (exceedances at most `memory` samples
-/// apart) and the sum of the squared cluster sizes: the compound Poisson count of
-/// [`calibrate_sample_far`].
-fn exceedance_clusters(glr: &[f64], threshold: f64, memory: usize) -> (u64, u64, f64) {
-    let (mut exceedances, mut clusters, mut squares, mut size) = (0u64, 0u64, 0.0, 0.0);
-    let mut since: Option<usize> = None;
-    for &l in glr {
-        if l.is_nan() {
-            since = None;
-        } else if l > threshold {
-            exceedances += 1;
-            if since.is_none_or(|s| s >= memory) {
-                clusters += 1;
-                squares += size * size;
-                size = 0.0;
-            }
-            size += 1.0;
-            since = Some(0);
-        } else if let Some(s) = &mut since {
-            *s += 1;
-        }
-    }
-    (exceedances, clusters, squares + size * size)
-}
-
 /// Each run's rate at `threshold` with its 95 % interval (see [`RunRate`]).
 fn run_rates(
     runs: &[Run],
@@ -810,11 +772,11 @@ fn run_rates(
             let l = &glr[run.range.clone()];
             let samples = l.iter().filter(|v| !v.is_nan()).count() as u64;
             let n = samples.max(1) as f64;
-            let (exceedances, clusters, squares) = exceedance_clusters(l, threshold, memory);
+            let (exceedances, clusters, squares) = calibration::clusters(l, threshold, memory);
             let (events, rate, interval) = match target {
                 Target::Mtbfa(_) => {
                     let episodes = count_episodes(l, AlarmSettings { threshold, ..alarm });
-                    let (low, high) = garwood(episodes as f64);
+                    let (low, high) = calibration::garwood_events(episodes as f64);
                     let rate = if episodes == 0 {
                         f64::INFINITY
                     } else {
@@ -829,7 +791,7 @@ fn run_rates(
                     } else {
                         (exceedances as f64).powi(2) / squares
                     };
-                    let (low, high) = garwood(effective);
+                    let (low, high) = calibration::garwood_events(effective);
                     let per_event = if clusters == 0 {
                         1.0 / n
                     } else {

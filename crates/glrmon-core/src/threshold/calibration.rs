@@ -59,8 +59,10 @@ pub fn count_exceedances(glr: &[f64], threshold: f64, memory: usize) -> (u64, u6
     (exceedances, clusters)
 }
 
-/// [`count_exceedances`] with the sum of the squared cluster sizes.
-fn clusters(glr: &[f64], threshold: f64, memory: usize) -> (u64, u64, f64) {
+/// [`count_exceedances`] with the sum of the squared cluster sizes: the compound Poisson
+/// count whose equivalent number of events is exceedances² / Σ size².
+#[must_use]
+pub fn clusters(glr: &[f64], threshold: f64, memory: usize) -> (u64, u64, f64) {
     let (mut exceedances, mut clusters, mut squares) = (0, 0, 0.0);
     let mut size = 0.0;
     let mut since: Option<usize> = None;
@@ -182,8 +184,10 @@ fn garwood(events: u64) -> (f64, f64) {
     garwood_events(events as f64)
 }
 
-/// [`garwood`] for a count that may be fractional (an equivalent number of events).
-fn garwood_events(e: f64) -> (f64, f64) {
+/// The Garwood 95 % interval `(low, high)` of a Poisson mean with `e` events counted, a
+/// count that may be fractional (an equivalent number of events).
+#[must_use]
+pub fn garwood_events(e: f64) -> (f64, f64) {
     let low = if e <= 0.0 {
         0.0
     } else {
