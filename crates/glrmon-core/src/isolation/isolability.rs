@@ -312,10 +312,12 @@ pub fn isolability(
     let mut correlation = DMatrix::zeros(m, m);
     for &i in &detectable {
         for &j in &detectable {
+            // √F_ii·√F_jj, not √(F_ii·F_jj): the product of two informations of size
+            // 1e-200 underflows to 0 and made the correlation ±∞.
             correlation[(i, j)] = if i == j {
                 1.0
             } else {
-                f[(i, j)] / (d[i] * d[j]).sqrt()
+                f[(i, j)] / (d[i].sqrt() * d[j].sqrt())
             };
         }
     }
@@ -566,6 +568,20 @@ mod tests {
         assert_eq!((r.c2, r.c3), (0.0, 0.0));
         // C1 = K(5I, I) = ½ q (5 − 1 − ln 5).
         assert!(close(r.c1, 1.5 * (4.0 - 5.0_f64.ln()), 1e-14));
+    }
+
+    /// Informations of size 1e-200 (signatures of size 1e-100) have a finite
+    /// correlation; their product underflows, and once gave "correlation inf".
+    #[test]
+    fn tiny_informations_have_a_finite_correlation() {
+        let f = DMatrix::from_row_slice(2, 2, &[1e-200, 0.5e-200, 0.5e-200, 1e-200]);
+        let r = isolability(&f, DEFAULT_CORRELATION_LIMIT).unwrap();
+        assert!(
+            close(r.correlation[(0, 1)], 0.5, 1e-12),
+            "{}",
+            r.correlation
+        );
+        assert!(r.isolable(), "{:?}", r.verdicts(&["a", "b"], 10));
     }
 
     #[test]
