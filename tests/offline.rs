@@ -527,6 +527,20 @@ fn bad_rows_become_error_records_and_the_replay_continues() {
         ],
         "{errors:#?}"
     );
+    // ... and names each code with its count.
+    for code in [
+        "wrong_dimension",
+        "wrong_type",
+        "non_finite",
+        "duplicate",
+        "out_of_order",
+    ] {
+        let n = errors.iter().filter(|e| e.0 == code).count();
+        assert!(
+            summary.contains(&format!("{code} {n}")),
+            "{code}: {summary}"
+        );
+    }
     // Each rejected row leaves a one-sample gap, filled by a predict-only step.
     assert_eq!(
         errors.iter().filter(|e| e.0 == "gap").count(),

@@ -171,6 +171,8 @@ pub struct Monitor {
     reported_onset: u64,
     counters: MonitorCounters,
     arrivals: u64,
+    /// The time of the last processed sample, for an episode cut by a sequence reset.
+    last_t: Option<f64>,
     diagnosis: Option<DiagnosisEngine>,
     /// The residual filter must restart from the detector's prediction before the next
     /// sample (after a gap or a filter failure).
@@ -242,6 +244,7 @@ impl Monitor {
             reported_onset: 0,
             counters: MonitorCounters::default(),
             arrivals: 0,
+            last_t: None,
             diagnosis: None,
             diagnosis_restart: false,
             diagnosis_failing: false,
@@ -473,6 +476,7 @@ impl Monitor {
             return;
         }
         self.counters.samples += 1;
+        self.last_t = sample.t;
         self.check_consistency(k, sample.t, records);
         self.step_diagnosis(&core_sample, records);
         if self.stat_records {
@@ -510,6 +514,10 @@ impl Monitor {
                 next - 1,
                 self.settings.max_reorder
             );
+            // An episode going on ran to the last processed sample, not to the new k.
+            if let Some((started, peak)) = self.alarm.reset() {
+                self.end_episode(next - 1, self.last_t, started, peak, records);
+            }
             self.restart(k, t, ErrorCode::SequenceReset, why, records);
             self.arrivals = k + 1;
         }
@@ -1000,8 +1008,6 @@ impl Monitor {
         records: &mut Vec<Record>,
     ) {
         if let Some((started, peak)) = self.alarm.reset() {
-            // A sequence reset restarts at a k before the episode began: the duration
-            // saturates at 0.
             self.end_episode(k, t, started, peak, records);
         }
         self.pending = None;

@@ -154,6 +154,40 @@ fn a_publisher_that_numbers_from_zero_again_loses_nothing() {
     assert!(seen.glr_values >= 495, "{}", seen.glr_values);
 }
 
+/// A publisher that restarts its numbering in the middle of an episode: the episode's
+/// `alarm_end` is at the last sample it processed, with the episode's duration (it
+/// once said k = 0, duration 0 for an episode that ran from its alarm to k = 399).
+#[test]
+fn an_episode_cut_by_a_publisher_restart_ends_at_its_last_sample() {
+    let mut samples = stream(0, 400, Some(200), 8);
+    for (i, s) in samples.iter_mut().enumerate() {
+        s.t = Some(0.5 * i as f64);
+    }
+    samples.extend(stream(0, 100, None, 9));
+    let mut mon = glrmon_monitor::Monitor::from_channel(&channel()).unwrap();
+    let mut records = Vec::new();
+    for s in &samples {
+        mon.on_sample(s, &mut records);
+    }
+    let alarm = records
+        .iter()
+        .find_map(|r| match r {
+            Record::Alarm(a) => Some(a.clone()),
+            _ => None,
+        })
+        .expect("an alarm");
+    let ends: Vec<_> = records
+        .iter()
+        .filter_map(|r| match r {
+            Record::AlarmEnd(e) => Some(e.clone()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(ends.len(), 1, "{ends:?}");
+    assert_eq!((ends[0].k, ends[0].t), (399, Some(199.5)), "{ends:?}");
+    assert_eq!(ends[0].duration, 399 - alarm.k, "{ends:?}");
+}
+
 #[test]
 fn small_reorderings_are_refused_one_by_one() {
     let mut samples = stream(0, 100, None, 7);

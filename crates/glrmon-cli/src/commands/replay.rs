@@ -172,13 +172,10 @@ fn replay_csv(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
     let CsvReplayed { rows, .. } =
         glrmon_input::replay_csv(csv, &mut pipeline, &mut fanout).map_err(replay_error)?;
     close(fanout)?;
-    let c = pipeline.monitor().counters();
     eprintln!(
-        "glrmon replay: channel \"{}\": {rows} rows, {} samples, {} alarms, {} errors",
+        "glrmon replay: channel \"{}\": {rows} rows, {}",
         channel.name,
-        c.samples,
-        c.alarms,
-        pipeline.error_total(),
+        counts(&pipeline),
     );
     if lines_on_stderr(args) {
         for line in &take_lines(&lines) {
@@ -277,13 +274,7 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
         input.messages(),
     );
     for (name, pipeline) in order.iter().zip(&channels) {
-        let c = pipeline.monitor().counters();
-        eprintln!(
-            "  channel \"{name}\": {} samples, {} alarms, {} errors",
-            c.samples,
-            c.alarms,
-            pipeline.error_total()
-        );
+        eprintln!("  channel \"{name}\": {}", counts(pipeline));
     }
     // A recording's topics may name any channel: shown escaped.
     for (name, n) in &unknown {
@@ -312,4 +303,26 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
         .into());
     }
     Ok(())
+}
+
+/// `N samples, 1 alarm, 2 errors (non_finite 1, too_large 1)`: a channel's counts for the
+/// summary line, each error code with its count.
+fn counts(pipeline: &ChannelPipeline) -> String {
+    let c = pipeline.monitor().counters();
+    let plural = |n: u64, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
+    let errors = pipeline.error_total();
+    let codes: Vec<String> = (pipeline.stats().errors.lock())
+        .map(|m| m.iter().map(|(code, n)| format!("{code} {n}")).collect())
+        .unwrap_or_default();
+    let by_code = if codes.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", codes.join(", "))
+    };
+    format!(
+        "{}, {}, {}{by_code}",
+        plural(c.samples, "sample"),
+        plural(c.alarms, "alarm"),
+        plural(errors, "error")
+    )
 }
