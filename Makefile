@@ -23,7 +23,8 @@ deps-zenohd: ## zenohd (the Zenoh router) from crates.io, built once (~7 min on 
 build: deps ## build everything (release)
 	$(CARGO) build --release --workspace
 
-test: deps fmt-check lint unit doc check-deps check-config check-install fuzz-build ## everything CI runs: fmt, clippy, all tests, docs, dependency rules, configs, install layout, fuzz targets build
+test: deps fmt-check lint unit doc check-deps check-config check-install fuzz-build ## everything CI runs: fmt, clippy, all tests, docs, dependency rules, configs, install layout, fuzz targets build; ends with the tests' totals
+	@cat $(TEST_TOTALS)
 
 fmt: ## format the code
 	$(CARGO) fmt --all
@@ -34,10 +35,21 @@ fmt-check:
 lint:
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 
+# The tests' output is kept beside the build, and their totals (passed, failed, ignored,
+# over every `test result` line) written to TEST_TOTALS, which `make test` prints last.
+# WARN lines in the output come from the tests that feed bad input on purpose.
+TEST_TOTALS := $(or $(CARGO_TARGET_DIR),target)/test-totals.txt
 unit:
-	$(CARGO) test --workspace
-	# The router-mesh test again on an in-process router session (the first run used zenohd).
-	GLRMON_TEST_ROUTER=session $(CARGO) test -p glrmon-cli --test mesh
+	@mkdir -p $(dir $(TEST_TOTALS))
+	@set -o pipefail; { \
+	  $(CARGO) test --workspace && \
+	  echo "# The router-mesh test again on an in-process router session (the first run used zenohd)." && \
+	  GLRMON_TEST_ROUTER=session $(CARGO) test -p glrmon-cli --test mesh; \
+	} 2>&1 | tee $(TEST_TOTALS).log; status=$$?; \
+	awk '/^test result:/ { p += $$4; f += $$6; i += $$8 } \
+	  END { printf "tests: %d passed, %d failed, %d ignored (WARN lines above come from the tests that feed bad input on purpose; full output: %s)\n", p, f, i, out }' \
+	  out=$(TEST_TOTALS).log $(TEST_TOTALS).log > $(TEST_TOTALS); \
+	cat $(TEST_TOTALS); exit $$status
 
 doc:
 	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --workspace --no-deps
