@@ -55,6 +55,8 @@ enum Slot {
 #[derive(Debug)]
 pub struct CsvReader<R> {
     input: R,
+    /// The field separator, found in the header ([`separator_of`]).
+    separator: char,
     slots: Vec<Slot>,
     /// The header's column names, for messages.
     names: Vec<String>,
@@ -201,7 +203,8 @@ impl<R: BufRead> CsvReader<R> {
         let mut slots = Vec::new();
         let mut names = Vec::new();
         let mut seen = std::collections::HashSet::new();
-        for name in header.split(',').map(str::trim) {
+        let separator = separator_of(header);
+        for name in header.split(separator).map(str::trim) {
             if !seen.insert(name.to_owned()) {
                 return Err(HeaderError::Duplicate(name.to_owned()));
             }
@@ -250,6 +253,7 @@ impl<R: BufRead> CsvReader<R> {
         }
         Ok(Self {
             input,
+            separator,
             slots,
             names,
             line: String::new(),
@@ -307,14 +311,14 @@ impl<R: BufRead> CsvReader<R> {
         sample.y.resize(self.dims.outputs, 0.0);
         sample.p.resize(self.dims.signals, 0.0);
         let line = self.line.trim_end_matches(['\n', '\r']);
-        let fields = line.split(',').count();
+        let fields = line.split(self.separator).count();
         if fields != self.slots.len() {
             let msg = format!("has {fields} columns, the header has {}", self.slots.len());
             return Some(Err(self.err(None, ErrorCode::WrongDimension, msg)));
         }
         // k first, so that errors in other columns can name it.
         let mut k = None;
-        for (text, slot) in line.split(',').zip(&self.slots) {
+        for (text, slot) in line.split(self.separator).zip(&self.slots) {
             if let Slot::K = slot {
                 match text.trim().parse::<u64>() {
                     Ok(v) => k = Some(v),
@@ -329,7 +333,8 @@ impl<R: BufRead> CsvReader<R> {
             }
         }
         sample.k = k;
-        for ((text, slot), name) in line.split(',').zip(&self.slots).zip(&self.names) {
+        let separator = self.separator;
+        for ((text, slot), name) in line.split(separator).zip(&self.slots).zip(&self.names) {
             let target: &mut f64 = match *slot {
                 Slot::K | Slot::Skip => continue,
                 Slot::T => sample.t.insert(0.0),
@@ -338,7 +343,7 @@ impl<R: BufRead> CsvReader<R> {
                 Slot::P(i) => &mut sample.p[i],
             };
             // The column's name is only formatted for an error (not for every value).
-            match text.trim().parse::<f64>() {
+            match parse_value(text.trim(), separator) {
                 Ok(v) if v.is_finite() => *target = v,
                 Ok(_) => {
                     let msg = format!("column {name}: \"{}\" is not finite", text.trim());
@@ -365,6 +370,60 @@ impl<R: BufRead> CsvReader<R> {
             k,
             code,
             message: format!("row {}: {message}", self.row),
+        }
+    }
+}
+
+/// The field separator of a CSV file, from its header: `,` unless the header has
+/// none and has `;` (the export of a spreadsheet or historian set to a locale whose
+/// decimal mark is a comma) or a tab.
+///
+/// ```
+/// use glrmon_input::separator_of;
+/// assert_eq!(separator_of("k,t,FIC101"), ',');
+/// assert_eq!(separator_of("k;t;FIC101"), ';');
+/// assert_eq!(separator_of("k\tt\tFIC101"), '\t');
+/// ```
+#[must_use]
+pub fn separator_of(header: &str) -> char {
+    if header.contains(',') {
+        ','
+    } else if header.contains(';') {
+        ';'
+    } else if header.contains('\t') {
+        '\t'
+    } else {
+        ','
+    }
+}
+
+/// A value of a field: a number with a decimal point, or, in a file whose separator
+/// is not `,`, with a decimal comma (`71,2` as 71.2). Allocates nothing.
+///
+/// ```
+/// use glrmon_input::parse_value;
+/// assert_eq!(parse_value("71.2", ','), Ok(71.2));
+/// assert_eq!(parse_value("71,2", ';'), Ok(71.2));
+/// assert_eq!(parse_value("-1,5e-3", ';'), Ok(-1.5e-3));
+/// assert!(parse_value("71,2", ',').is_err());
+/// ```
+///
+/// # Errors
+/// The text is not a number.
+pub fn parse_value(text: &str, separator: char) -> Result<f64, std::num::ParseFloatError> {
+    match text.parse::<f64>() {
+        Ok(v) => Ok(v),
+        Err(e) if separator == ',' || !text.contains(',') || text.len() > 64 => Err(e),
+        Err(_) => {
+            let mut buf = [0u8; 64];
+            let bytes = text.as_bytes();
+            for (b, c) in buf.iter_mut().zip(bytes) {
+                *b = if *c == b',' { b'.' } else { *c };
+            }
+            // The bytes are those of `text` with one ASCII byte for another: UTF-8 still.
+            std::str::from_utf8(&buf[..bytes.len()])
+                .unwrap_or("")
+                .parse::<f64>()
         }
     }
 }
@@ -450,6 +509,24 @@ mod tests {
             rows.push(row.map(|()| sample.clone()));
         }
         Ok(rows)
+    }
+
+    /// A `;`-separated export with decimal commas reads as the `,`-separated one (it
+    /// once failed with "column … is missing": the whole header read as one column);
+    /// a tab-separated one too.
+    #[test]
+    fn semicolon_and_tab_exports_read_as_comma_separated_ones() {
+        let comma = "k,t,u0,y0,y1,p0\n0,0.5,1.25,-3.5,2e-3,7\n1,1.0,1.5,-3.25,1e3,7\n";
+        let semicolon = "k;t;u0;y0;y1;p0\n0;0,5;1,25;-3,5;2e-3;7\n1;1,0;1,5;-3,25;1e3;7\n";
+        let tab = comma.replace(',', "\t");
+        let want = read_all(comma.as_bytes()).unwrap();
+        assert_eq!(want.len(), 2);
+        assert!(want.iter().all(Result::is_ok));
+        assert_eq!(read_all(semicolon.as_bytes()).unwrap(), want);
+        assert_eq!(read_all(tab.as_bytes()).unwrap(), want);
+        // A decimal comma in a comma-separated file is a column too many, as before.
+        let bad = read_all("k,t,u0,y0,y1,p0\n0,0,5,1,2,3,4\n".as_bytes()).unwrap();
+        assert_eq!(bad[0].as_ref().unwrap_err().code, ErrorCode::WrongDimension);
     }
 
     /// What `write_header`/`write_row` write reads back to the same bits.

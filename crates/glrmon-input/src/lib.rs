@@ -10,7 +10,10 @@ mod replay;
 mod samples;
 mod table;
 
-pub use csv::{CsvReader, HeaderError, RowError, write_header, write_header_named, write_row};
+pub use csv::{
+    CsvReader, HeaderError, RowError, parse_value, separator_of, write_header, write_header_named,
+    write_row,
+};
 pub use error::{InputError, InputErrorKind};
 pub use format::{InputFormat, OutputFormat, embedded_config};
 pub use mcap::{McapInput, RecordedInput};

@@ -77,7 +77,10 @@ fn read_csv(path: &Path) -> Result<Vec<Table>, String> {
         Some(line) => line.map_err(|e| format!("cannot read: {e}"))?,
         None => return Err("the file is empty: expected a header row".into()),
     };
-    let header: Vec<String> = header.split(',').map(|s| s.trim().to_owned()).collect();
+    let separator = crate::separator_of(&header);
+    let header: Vec<String> = (header.split(separator))
+        .map(|s| s.trim().to_owned())
+        .collect();
     for (i, name) in header.iter().enumerate() {
         if name.is_empty() {
             return Err(format!("column {} of the header has no name", i + 1));
@@ -103,7 +106,7 @@ fn read_csv(path: &Path) -> Result<Vec<Table>, String> {
         if line.trim().is_empty() {
             continue;
         }
-        let fields: Vec<&str> = line.split(',').collect();
+        let fields: Vec<&str> = line.split(separator).collect();
         if fields.len() != header.len() {
             return Err(format!(
                 "row {row}: has {} columns, the header has {}",
@@ -120,7 +123,7 @@ fn read_csv(path: &Path) -> Result<Vec<Table>, String> {
                 })?);
                 continue;
             }
-            values[i] = match text.parse::<f64>() {
+            values[i] = match crate::parse_value(text, separator) {
                 Ok(v) if v.is_finite() => v,
                 Ok(_) => {
                     return Err(format!(
@@ -318,6 +321,22 @@ mod tests {
         let path = write("k,a\n3,1\n2,1\n");
         let e = read_table(&path, None).unwrap_err().to_string();
         assert!(e.contains("k = 2 does not follow k = 3"), "{e}");
+    }
+
+    /// Identification reads a `;`-separated export with decimal commas as the
+    /// `,`-separated one.
+    #[test]
+    fn semicolon_exports_with_decimal_commas_read_as_comma_separated_ones() {
+        let comma =
+            read_table(&write("t,FIC101,LI201\n0,1.5,20.25\n20,1.75,20.5\n"), None).unwrap();
+        let semicolon =
+            read_table(&write("t;FIC101;LI201\n0;1,5;20,25\n20;1,75;20,5\n"), None).unwrap();
+        assert_eq!(comma.len(), 1);
+        assert_eq!(semicolon.len(), 1);
+        for name in ["FIC101", "LI201"] {
+            assert_eq!(semicolon[0].column(name), comma[0].column(name), "{name}");
+        }
+        assert_eq!(comma[0].column("LI201"), Some(&[20.25, 20.5][..]));
     }
 
     #[test]
