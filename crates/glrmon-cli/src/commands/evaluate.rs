@@ -124,7 +124,13 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     } else {
         print!(
             "{}",
-            text(&channel.name, &columns, &summaries, onset, samples)
+            text(
+                &channel.name,
+                &columns,
+                &summaries,
+                (onset, samples),
+                channel.period
+            )
         );
     }
     if let Some(path) = &args.json_out {
@@ -156,13 +162,17 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The evaluation as text: detection table (and, when the channel's sampling period is
+/// known, the delays in time), confusion matrix, Fig. 8 table. `protocol` is the onset
+/// and the samples per run.
 fn text(
     channel: &str,
     columns: &[String],
     results: &[FaultEvaluation],
-    onset: u64,
-    samples: u64,
+    protocol: (u64, u64),
+    period: Option<f64>,
 ) -> String {
+    let (onset, samples) = protocol;
     let mut s = format!(
         "channel \"{channel}\": fault injected at k = {onset}, {samples} samples per run\n\n"
     );
@@ -192,6 +202,25 @@ fn text(
             r.false_alarms
         );
     }
+    if let Some(period) = period.filter(|p| p.is_finite() && *p > 0.0) {
+        let _ = writeln!(
+            s,
+            "\ndelays in time (period {} s):",
+            crate::print::magnitude(period)
+        );
+        for r in results {
+            if let Some(q) = r.delay_quantiles {
+                let _ = writeln!(
+                    s,
+                    "  {}: p50 {}, p10–p90 {}–{}",
+                    r.fault,
+                    duration(q[1] * period),
+                    duration(q[0] * period),
+                    duration(q[2] * period)
+                );
+            }
+        }
+    }
     // Confusion matrix: rows injected, columns isolated.
     let _ = writeln!(
         s,
@@ -212,6 +241,18 @@ fn text(
     }
     s.push_str(&minmax_table(results));
     s
+}
+
+/// A duration in the unit that reads best: seconds below two minutes, minutes below
+/// two hours, hours above.
+fn duration(seconds: f64) -> String {
+    if seconds < 120.0 {
+        format!("{} s", crate::print::magnitude(seconds))
+    } else if seconds < 7200.0 {
+        format!("{:.1} min", seconds / 60.0)
+    } else {
+        format!("{:.2} h", seconds / 3600.0)
+    }
 }
 
 /// Zhang & Basseville 2014, Fig. 8 in numbers: per injected fault and isolation test,
@@ -262,4 +303,46 @@ fn minmax_table(results: &[FaultEvaluation]) -> String {
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// With the sampling period known, the delays are given in time too (the
+    /// evaluation once spoke only in samples).
+    #[test]
+    fn delays_are_given_in_time_when_the_period_is_known() {
+        let r = FaultEvaluation {
+            fault: "leak".into(),
+            magnitude: 1.0,
+            runs: 10,
+            detected: 10,
+            delays: vec![58; 10],
+            delay_quantiles: Some([40.0, 58.0, 85.0]),
+            onset_errors: vec![9; 10],
+            onset_error_median_abs: Some(9.0),
+            false_alarms: 0,
+            runs_with_false_alarms: 0,
+            isolated: vec![10],
+            minmax: Vec::new(),
+        };
+        let columns = ["leak".to_owned()];
+        let with = text(
+            "pipe",
+            &columns,
+            std::slice::from_ref(&r),
+            (300, 500),
+            Some(120.0),
+        );
+        assert!(
+            with.contains(
+                "delays in time (period 120.0 s):\n  leak: p50 116.0 min, p10–p90 80.0 min–2.83 h"
+            ),
+            "{with}"
+        );
+        let without = text("pipe", &columns, &[r], (300, 500), None);
+        assert!(!without.contains("delays in time"), "{without}");
+        assert_eq!(duration(0.58), "0.5800 s");
+    }
 }
