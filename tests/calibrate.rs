@@ -295,31 +295,7 @@ fn two_recordings_and_a_sample_far_target_are_written_and_validated() {
 /// on fault-free data. `--write` still writes the detection threshold, names each
 /// isolation test it could not calibrate and why, writes no isolation threshold, and
 /// the file validates.
-const SPANNED: &str = r#"# identified, n < l
-[[channels]]
-name = "plant"
-
-[channels.model]
-F = [[0.8, 0.1], [0.0, 0.7]]
-G = [[1.0, 0.0, 0.5], [0.0, 1.0, 0.3]]
-H = [[1.0, 0.0], [0.0, 1.0], [0.5, 0.5], [1.0, -1.0]]
-J = [[0.1, -0.2, 0.05], [0.3, 0.1, -0.1], [0.0, 0.2, 0.1], [-0.1, 0.05, 0.2]]
-Q = [[0.0011, 0.0001], [0.0001, 0.0006]]
-S = [[0.003, 0.001, 0.0, 0.001], [0.0, 0.002, 0.001, -0.001]]
-R = 0.01
-
-[[channels.faults]]
-kind = "all_sensors"
-
-[[channels.faults]]
-kind = "all_actuators"
-
-[channels.glr]
-window = 20
-
-[channels.simulation]
-inputs = ["sin(0.1*k)", "cos(0.07*k)", "0.5*sin(0.03*k)"]
-"#;
+const SPANNED: &str = include_str!("data/spanned.toml");
 
 #[test]
 fn isolation_tests_that_are_not_isolable_are_named_and_the_rest_is_written() {

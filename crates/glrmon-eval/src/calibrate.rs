@@ -960,26 +960,7 @@ mod tests {
     /// dictionary is in such a dependence, so every minmax statistic is 0 (no degree
     /// of freedom) on every sample: none is calibrated, each says why, and the χ²
     /// threshold is what stays.
-    const SPANNED: &str = r#"
-[[channels]]
-name = "plant"
-[channels.model]
-F = [[0.8, 0.1], [0.0, 0.7]]
-G = [[1.0, 0.0, 0.5], [0.0, 1.0, 0.3]]
-H = [[1.0, 0.0], [0.0, 1.0], [0.5, 0.5], [1.0, -1.0]]
-J = [[0.1, -0.2, 0.05], [0.3, 0.1, -0.1], [0.0, 0.2, 0.1], [-0.1, 0.05, 0.2]]
-Q = [[0.0011, 0.0001], [0.0001, 0.0006]]
-S = [[0.003, 0.001, 0.0, 0.001], [0.0, 0.002, 0.001, -0.001]]
-R = 0.01
-[[channels.faults]]
-kind = "all_sensors"
-[[channels.faults]]
-kind = "all_actuators"
-[channels.glr]
-window = 20
-[channels.simulation]
-inputs = ["sin(0.1*k)", "cos(0.07*k)", "0.5*sin(0.03*k)"]
-"#;
+    const SPANNED: &str = include_str!("../../../tests/data/spanned.toml");
 
     #[test]
     fn a_test_spanned_by_the_other_faults_is_not_calibrated_and_says_why() {
