@@ -156,6 +156,13 @@ pub struct Columns {
     /// The names were given (`[channels.columns]`): a file's other columns are skipped.
     /// Otherwise they are the numbered names and an unknown column is an error.
     pub named: bool,
+    /// The raw unit of each input (`columns.u_units`), empty strings when not given.
+    pub u_units: Vec<String>,
+    /// The raw unit of each output (`columns.y_units`), empty strings when not given.
+    pub y_units: Vec<String>,
+    /// The raw unit of each scheduling signal (`columns.p_units`), empty strings when
+    /// not given.
+    pub p_units: Vec<String>,
 }
 
 impl Columns {
@@ -169,7 +176,42 @@ impl Columns {
             y: names('y', dims.outputs),
             p: names('p', dims.signals),
             named: false,
+            u_units: vec![String::new(); dims.inputs],
+            y_units: vec![String::new(); dims.outputs],
+            p_units: vec![String::new(); dims.signals],
         }
+    }
+
+    /// The name of input i followed by its unit in brackets when known: `FIC101 [m³/h]`.
+    #[must_use]
+    pub fn input_label(&self, i: usize) -> String {
+        label(&self.u, &self.u_units, i, 'u')
+    }
+
+    /// The name of output i followed by its unit in brackets when known: `LI201 [cm]`.
+    #[must_use]
+    pub fn output_label(&self, i: usize) -> String {
+        label(&self.y, &self.y_units, i, 'y')
+    }
+
+    /// The raw unit of output i, if given.
+    #[must_use]
+    pub fn output_unit(&self, i: usize) -> Option<&str> {
+        self.y_units.get(i).map(String::as_str).filter(|u| !u.is_empty())
+    }
+
+    /// The raw unit of input i, if given.
+    #[must_use]
+    pub fn input_unit(&self, i: usize) -> Option<&str> {
+        self.u_units.get(i).map(String::as_str).filter(|u| !u.is_empty())
+    }
+}
+
+fn label(names: &[String], units: &[String], i: usize, prefix: char) -> String {
+    let name = names.get(i).cloned().unwrap_or_else(|| format!("{prefix}{i}"));
+    match units.get(i).filter(|u| !u.is_empty()) {
+        Some(unit) => format!("{name} [{unit}]"),
+        None => name,
     }
 }
 

@@ -381,7 +381,7 @@ expressions, limits) is checked by `glrmon validate`.
 name = "tank"
 [channels.model]        #   required: F, H, Q, R (G, J, E, S, x0, P0)
 [channels.scaling]      #   optional: natural units
-[channels.columns]      #   optional: CSV column names
+[channels.columns]      #   optional: signal names (CSV columns) and units
 [[channels.faults]]     #   the fault dictionary, one table per fault
 [channels.glr]          #   optional: window, threshold, alarms, isolation
 [[channels.glr.groups]] #     optional: isolation groups
@@ -500,7 +500,18 @@ y_scale = [0.1, 0.05]
 …, `y0`, …, `p0`, … and every column must be one of them; with
 `[channels.columns]` (`u`, `y`, `p`: lists of l, p and q names), those columns are read
 and any other column of the file is skipped. The names also name the faults of the
-`all_sensors`/`all_actuators` shortcuts.
+`all_sensors`/`all_actuators` shortcuts and label the signals in reports and alarm
+lines. `u_units`, `y_units`, `p_units` give each signal's raw unit (as the plant
+gives it, before `[channels.scaling]`): reports and `validate` show
+`LI201 [cm]`, and a bias fault's magnitude is then in that unit.
+
+```toml
+[channels.columns]
+u = ["FIC101", "FIC102"]
+y = ["LI201", "LI202", "FI301"]
+u_units = ["m³/h", "m³/h"]
+y_units = ["cm", "cm", "m³/h"]
+```
 "#;
 
 const EXPRESSIONS: &str = r#"

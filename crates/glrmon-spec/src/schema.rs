@@ -383,8 +383,9 @@ pub struct ScalingSpec {
 }
 
 /// `[channels.columns]`: the CSV header names read into u0…, y0…, p0… (in that
-/// order); other columns of such a file are skipped. An absent list keeps the numbered
-/// names (`u0`, `u1`, …).
+/// order), which also name the signals in reports and alarm lines, and their units;
+/// with names given, other columns of such a file are skipped. An absent list keeps
+/// the numbered names (`u0`, `u1`, …).
 #[derive(Debug, Clone, Default, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ColumnsSpec {
@@ -395,6 +396,15 @@ pub struct ColumnsSpec {
     /// CSV column names of the scheduling signals p0…p{q−1} (q names). Default `p0`,
     /// `p1`, …
     pub p: Option<Vec<String>>,
+    /// Units of the inputs as the plant gives them (raw units, before
+    /// `[channels.scaling]`), e.g. `["m³/h", "m³/h"]`: l labels, shown by reports,
+    /// `validate` and the alarm lines beside raw-unit magnitudes. Default: none.
+    pub u_units: Option<Vec<String>>,
+    /// Units of the outputs in raw units (p labels), e.g. `["cm", "cm", "m³/h"]`.
+    /// Default: none.
+    pub y_units: Option<Vec<String>>,
+    /// Units of the scheduling signals (q labels). Default: none.
+    pub p_units: Option<Vec<String>>,
 }
 
 /// A matrix: scalar × identity, dense rows, or LPV table.

@@ -608,3 +608,30 @@ fn scales_and_offsets_beyond_the_limits_name_the_scaling_field_not_a_fault() {
     ))
     .unwrap();
 }
+
+#[test]
+fn units_label_the_signals_and_are_checked() {
+    let cfg = glrmon_spec::parse(&with(
+        "[channels.glr]",
+        "[channels.columns]\ny_units = [\"cm\"]\n\n[channels.glr]",
+    ))
+    .unwrap();
+    let columns = &cfg.channels[0].columns;
+    assert_eq!(columns.output_label(0), "y0 [cm]");
+    assert_eq!(columns.input_label(0), "u0");
+    assert!(!columns.named, "units alone do not name the columns");
+    assert_error(
+        &with(
+            "[channels.glr]",
+            "[channels.columns]\ny_units = [\"cm\", \"m\"]\n\n[channels.glr]",
+        ),
+        "columns.y_units has 2 units but the channel has 1 outputs",
+    );
+    assert_error(
+        &with(
+            "[channels.glr]",
+            "[channels.columns]\nu_units = [\"m\\u0007\"]\n\n[channels.glr]",
+        ),
+        "columns.u_units[0] is not a unit label",
+    );
+}

@@ -21,7 +21,32 @@ impl Validator {
         let Some(spec) = spec else {
             return columns;
         };
-        columns.named = true;
+        columns.named = spec.u.is_some() || spec.y.is_some() || spec.p.is_some();
+        for (field, given, target, count, what) in [
+            ("u_units", &spec.u_units, &mut columns.u_units, dims.inputs, "inputs"),
+            ("y_units", &spec.y_units, &mut columns.y_units, dims.outputs, "outputs"),
+            ("p_units", &spec.p_units, &mut columns.p_units, dims.signals, "signals"),
+        ] {
+            let Some(units) = given else { continue };
+            let path = join(prefix, &format!("columns.{field}"));
+            if units.len() == count {
+                target.clone_from(units);
+            } else {
+                self.error(
+                    path.clone(),
+                    format!("has {} units but the channel has {count} {what}", units.len()),
+                );
+            }
+            for (i, unit) in units.iter().enumerate() {
+                if unit.chars().any(char::is_control) || unit.chars().count() > 32 {
+                    self.error(
+                        format!("{path}[{i}]"),
+                        "is not a unit label (a control character, or longer than 32 characters)"
+                            .to_string(),
+                    );
+                }
+            }
+        }
         let mut all: Vec<(String, String)> = Vec::new();
         for (field, given, target, count, what) in [
             ("u", &spec.u, &mut columns.u, dims.inputs, "inputs"),
