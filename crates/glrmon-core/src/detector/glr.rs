@@ -964,6 +964,13 @@ impl GlrDetector {
         self.followed.statistic()
     }
 
+    /// The followed fault's magnitude over every sample from its onset on (see
+    /// [`Detector::followed_magnitude`]).
+    #[must_use]
+    pub fn followed_magnitude(&self) -> Option<&[f64]> {
+        self.followed.magnitude()
+    }
+
     /// Rank of C_k(r) and the statistic d_k(r)ᵀC_k(r)⁺d_k(r) at the last step.
     #[must_use]
     pub fn onset_statistic(&self, onset: u64) -> Option<(f64, usize)> {
@@ -1029,5 +1036,9 @@ impl Detector for GlrDetector {
 
     fn followed(&self) -> Option<FollowedEvidence> {
         GlrDetector::followed(self)
+    }
+
+    fn followed_magnitude(&self) -> Option<&[f64]> {
+        GlrDetector::followed_magnitude(self)
     }
 }

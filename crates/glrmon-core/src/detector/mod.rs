@@ -128,6 +128,16 @@ pub trait Detector: std::fmt::Debug + Send {
     fn followed(&self) -> Option<FollowedEvidence> {
         None
     }
+
+    /// The followed fault's magnitude θ̂ = C_k(r)⁺d_k(r) at the followed onset r over
+    /// every sample from r to the last one (eq. (34) continued past the window), one
+    /// value per fault of [`Detector::faults`]: the episode's estimate, which stays
+    /// that of a fault that persists, where [`StepOutput::magnitude`] slides with the
+    /// window once r has left it. `None` when nothing is followed or no sample has been
+    /// measured since. Allocation-free.
+    fn followed_magnitude(&self) -> Option<&[f64]> {
+        None
+    }
 }
 
 impl<D: Detector + ?Sized> Detector for Box<D> {
@@ -172,6 +182,9 @@ impl<D: Detector + ?Sized> Detector for Box<D> {
     }
     fn followed(&self) -> Option<FollowedEvidence> {
         (**self).followed()
+    }
+    fn followed_magnitude(&self) -> Option<&[f64]> {
+        (**self).followed_magnitude()
     }
 }
 

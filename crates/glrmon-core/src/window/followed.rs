@@ -32,6 +32,13 @@
 //! all (δ = 0: a state jump the filter has absorbed). [`FollowedEvidence::continues`]
 //! turns (z, δ) into the decision an episode's end needs.
 //!
+//! The same sums give the fault's magnitude over the whole episode: θ̂ = (C° + C̄)⁺
+//! (d° + d̄), eq. (34) at r̂ over every sample from r̂ on ([`FollowedOnset::magnitude`]).
+//! The window's own θ̂ at its best onset slides with the window once r̂ has left it, and
+//! fits the settled response of a fault that persists with the transient of one that
+//! starts inside the window: it shrinks while the fault does not. The followed θ̂ does
+//! not.
+//!
 //! The past evidence starts with the bank's C_k(r̂), d_k(r̂) at the alarm, so θ° is
 //! first the alarm's θ̂ and then improves as samples leave the recent ring. C̄ and d̄ are
 //! summed afresh from the ring at every step (no running subtraction, whose rounding
@@ -71,6 +78,11 @@ pub(crate) struct FollowedOnset {
     past_score: Vec<f64>,
     factor: Vec<f64>,
     solved: Vec<f64>,
+    /// C° + C̄, d° + d̄ and θ̂ = (C° + C̄)⁺(d° + d̄): the magnitude over every sample from
+    /// r̂ on.
+    total_info: Vec<f64>,
+    total_score: Vec<f64>,
+    magnitude: Vec<f64>,
     statistic: Option<FollowedEvidence>,
 }
 
@@ -125,6 +137,9 @@ impl FollowedOnset {
             past_score: vec![0.0; m],
             factor: vec![0.0; m * m],
             solved: vec![0.0; m],
+            total_info: vec![0.0; m * m],
+            total_score: vec![0.0; m],
+            magnitude: vec![0.0; m],
             statistic: None,
         }
     }
@@ -157,6 +172,13 @@ impl FollowedOnset {
     /// The evidence after the last measured step (`None` before the first).
     pub(crate) fn statistic(&self) -> Option<FollowedEvidence> {
         self.statistic
+    }
+
+    /// θ̂ = C_k(r̂)⁺d_k(r̂) over every sample from the followed onset r̂ to the last
+    /// measured one (eq. (34), past and recent evidence together), one value per fault;
+    /// `None` before the first measured step.
+    pub(crate) fn magnitude(&self) -> Option<&[f64]> {
+        self.statistic.map(|_| self.magnitude.as_slice())
     }
 
     /// Measured step k: S_k(r̂), its terms into the ring, T_k, then Γ_{k+1}(r̂).
@@ -273,6 +295,7 @@ impl FollowedOnset {
                 *d += x;
             }
         }
+        self.solve_total();
         self.solve_past();
         let theta = &self.solved;
         let mut along = 0.0;
@@ -299,45 +322,82 @@ impl FollowedOnset {
         }
     }
 
-    /// θ° = C°⁻d° into `solved`: LDLᵀ of C° in `factor` (L below the diagonal, D on
-    /// it, pivots D_j ≤ τ·C°_jj dropped), then L⁻¹, D⁻¹ on the kept pivots, L⁻ᵀ.
+    /// θ° = C°⁻d° into `solved` ([`ldl_solve`]).
     fn solve_past(&mut self) {
-        let m = self.m;
-        let (c, f, x) = (&self.past_info, &mut self.factor, &mut self.solved);
-        for j in 0..m {
-            let mut dj = c[at(m, j, j)];
+        ldl_solve(
+            self.m,
+            self.tol,
+            &self.past_info,
+            &self.past_score,
+            &mut self.factor,
+            &mut self.solved,
+        );
+    }
+
+    /// θ̂ = (C° + C̄)⁺(d° + d̄) into `magnitude`, with C̄, d̄ summed already.
+    fn solve_total(&mut self) {
+        for ((t, p), r) in self
+            .total_info
+            .iter_mut()
+            .zip(&self.past_info)
+            .zip(&self.info)
+        {
+            *t = p + r;
+        }
+        for ((t, p), r) in (self.total_score.iter_mut())
+            .zip(&self.past_score)
+            .zip(&self.score)
+        {
+            *t = p + r;
+        }
+        ldl_solve(
+            self.m,
+            self.tol,
+            &self.total_info,
+            &self.total_score,
+            &mut self.factor,
+            &mut self.magnitude,
+        );
+    }
+}
+
+/// x = C⁻d for the m×m positive semi-definite C (column-major): LDLᵀ of C in `f` (L
+/// below the diagonal, D on it, pivots D_j ≤ τ·C_jj dropped), then L⁻¹, D⁻¹ on the
+/// kept pivots, L⁻ᵀ: a generalised inverse, scale-free as the bank's.
+fn ldl_solve(m: usize, tol: f64, c: &[f64], d: &[f64], f: &mut [f64], x: &mut [f64]) {
+    for j in 0..m {
+        let mut dj = c[at(m, j, j)];
+        for l in 0..j {
+            let ljl = f[at(m, j, l)];
+            dj -= ljl * ljl * f[at(m, l, l)];
+        }
+        let keep = dj > tol * c[at(m, j, j)] && dj > 0.0;
+        f[at(m, j, j)] = if keep { dj } else { 0.0 };
+        for i in j + 1..m {
+            let mut v = c[at(m, i, j)];
             for l in 0..j {
-                let ljl = f[at(m, j, l)];
-                dj -= ljl * ljl * f[at(m, l, l)];
+                v -= f[at(m, i, l)] * f[at(m, j, l)] * f[at(m, l, l)];
             }
-            let keep = dj > self.tol * c[at(m, j, j)] && dj > 0.0;
-            f[at(m, j, j)] = if keep { dj } else { 0.0 };
-            for i in j + 1..m {
-                let mut v = c[at(m, i, j)];
-                for l in 0..j {
-                    v -= f[at(m, i, l)] * f[at(m, j, l)] * f[at(m, l, l)];
-                }
-                f[at(m, i, j)] = if keep { v / dj } else { 0.0 };
-            }
+            f[at(m, i, j)] = if keep { v / dj } else { 0.0 };
         }
-        for j in 0..m {
-            let mut v = self.past_score[j];
-            for l in 0..j {
-                v -= f[at(m, j, l)] * x[l];
-            }
-            x[j] = v;
+    }
+    for j in 0..m {
+        let mut v = d[j];
+        for l in 0..j {
+            v -= f[at(m, j, l)] * x[l];
         }
-        for j in 0..m {
-            let d = f[at(m, j, j)];
-            x[j] = if d > 0.0 { x[j] / d } else { 0.0 };
+        x[j] = v;
+    }
+    for j in 0..m {
+        let dj = f[at(m, j, j)];
+        x[j] = if dj > 0.0 { x[j] / dj } else { 0.0 };
+    }
+    for j in (0..m).rev() {
+        let mut v = x[j];
+        for i in j + 1..m {
+            v -= f[at(m, i, j)] * x[i];
         }
-        for j in (0..m).rev() {
-            let mut v = x[j];
-            for i in j + 1..m {
-                v -= f[at(m, i, j)] * x[i];
-            }
-            x[j] = v;
-        }
+        x[j] = v;
     }
 }
 
@@ -389,6 +449,14 @@ mod tests {
             );
             let delta = theta * theta * c;
             assert!((got.information - delta).abs() <= 1e-12 * delta, "{got:?}");
+            // The magnitude over every sample from the onset on, the start's evidence
+            // included: (2 + ΣS²)⁻¹(1 + ΣSε).
+            let whole = (1.0 + s.dot(&z)) / (2.0 + s.dot(&s));
+            let magnitude = fo.magnitude().unwrap()[0];
+            assert!(
+                (magnitude - whole).abs() <= 1e-12 * whole.abs(),
+                "k = {k}: {magnitude} vs {whole}"
+            );
         }
         let settled = 1.0 - fk / (1.0 - a);
         assert!((sigs.last().unwrap() - settled).abs() < 0.01, "{sigs:?}");
@@ -415,12 +483,18 @@ mod tests {
         // Four samples with S = 1 along θ°: z = Σε/√4 = 2/2.
         let z = fo.statistic().unwrap().score;
         assert!((z - 1.0).abs() < 1e-12, "{z}");
+        // The second fault's pivot is dropped: θ̂ = (C₁₁ + 4)⁻¹(d₁ + Σε)·e₁ = 3/5 e₁,
+        // whose fit C θ̂ equals that of any other solution.
+        let magnitude = fo.magnitude().unwrap();
+        assert!((magnitude[0] - 0.6).abs() < 1e-12, "{magnitude:?}");
+        assert_eq!(magnitude[1], 0.0);
     }
 
     #[test]
     fn without_past_evidence_z_is_zero() {
         let mut fo = FollowedOnset::new(1, 1, vec![Onset::Step], 4, 1e-9);
         fo.start(0, &[0.0], &[0.0], &[0.0]);
+        assert_eq!(fo.magnitude(), None, "nothing measured yet");
         fo.measure(0, &[1.0], &[1.0], &[3.0], &[0.5], &[0.0], &[0.0]);
         let e = fo.statistic().unwrap();
         assert_eq!((e.score, e.information), (0.0, 0.0));
