@@ -16,6 +16,7 @@ pub mod channel;
 pub mod rng;
 pub mod scenarios;
 pub mod tank;
+pub mod two_tanks;
 
 use glrmon_core::{
     Dims, FaultDictionary, LpvMatrix, Onset, SignalScaling, Signals, StateSpace, SystemMatrices,

@@ -197,18 +197,27 @@ impl Columns {
     /// The raw unit of output i, if given.
     #[must_use]
     pub fn output_unit(&self, i: usize) -> Option<&str> {
-        self.y_units.get(i).map(String::as_str).filter(|u| !u.is_empty())
+        self.y_units
+            .get(i)
+            .map(String::as_str)
+            .filter(|u| !u.is_empty())
     }
 
     /// The raw unit of input i, if given.
     #[must_use]
     pub fn input_unit(&self, i: usize) -> Option<&str> {
-        self.u_units.get(i).map(String::as_str).filter(|u| !u.is_empty())
+        self.u_units
+            .get(i)
+            .map(String::as_str)
+            .filter(|u| !u.is_empty())
     }
 }
 
 fn label(names: &[String], units: &[String], i: usize, prefix: char) -> String {
-    let name = names.get(i).cloned().unwrap_or_else(|| format!("{prefix}{i}"));
+    let name = names
+        .get(i)
+        .cloned()
+        .unwrap_or_else(|| format!("{prefix}{i}"));
     match units.get(i).filter(|u| !u.is_empty()) {
         Some(unit) => format!("{name} [{unit}]"),
         None => name,

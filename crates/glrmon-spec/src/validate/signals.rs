@@ -23,9 +23,27 @@ impl Validator {
         };
         columns.named = spec.u.is_some() || spec.y.is_some() || spec.p.is_some();
         for (field, given, target, count, what) in [
-            ("u_units", &spec.u_units, &mut columns.u_units, dims.inputs, "inputs"),
-            ("y_units", &spec.y_units, &mut columns.y_units, dims.outputs, "outputs"),
-            ("p_units", &spec.p_units, &mut columns.p_units, dims.signals, "signals"),
+            (
+                "u_units",
+                &spec.u_units,
+                &mut columns.u_units,
+                dims.inputs,
+                "inputs",
+            ),
+            (
+                "y_units",
+                &spec.y_units,
+                &mut columns.y_units,
+                dims.outputs,
+                "outputs",
+            ),
+            (
+                "p_units",
+                &spec.p_units,
+                &mut columns.p_units,
+                dims.signals,
+                "signals",
+            ),
         ] {
             let Some(units) = given else { continue };
             let path = join(prefix, &format!("columns.{field}"));
@@ -34,7 +52,10 @@ impl Validator {
             } else {
                 self.error(
                     path.clone(),
-                    format!("has {} units but the channel has {count} {what}", units.len()),
+                    format!(
+                        "has {} units but the channel has {count} {what}",
+                        units.len()
+                    ),
                 );
             }
             for (i, unit) in units.iter().enumerate() {
