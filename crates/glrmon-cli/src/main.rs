@@ -9,6 +9,7 @@ mod common;
 mod flags;
 mod log;
 mod print;
+mod span;
 mod version;
 
 use std::process::ExitCode;

@@ -258,7 +258,8 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
         d: model.d.clone(),
         k: model.k.clone(),
         re: model.re.clone(),
-        p0: initial_covariance(model),
+        p0: state_spread(model, &experiments, scaling, &u_offset, &y_offset)
+            .unwrap_or_else(|| initial_covariance(model)),
         inputs: kept_inputs,
         outputs: kept_outputs,
         other_columns,
@@ -702,6 +703,59 @@ fn summary(
     }
     lines.extend(dropped.iter().cloned());
     lines
+}
+
+/// P0 from the data: the second moment about zero of the steady predictor's state
+/// x̂⁺ = A x̂ + B u + K (y − C x̂ − D u) run over the identification experiments in the
+/// written channel's coordinates ((raw − pooled operating point)/scale). The filter
+/// starts at x̂_0 = 0 on any sample of any day, where the plant's state holds the
+/// response to inputs the filter never saw (the setpoint moves of the hours before) as
+/// well as the noise: a P0 of the noise part alone (`initial_covariance`) made the
+/// first window of a file a false alarm whenever the day began away from the operating
+/// point. The first 10 % of each experiment (the predictor's own start from zero) is
+/// left out. `None` when A is unstable or the data give no finite, positive definite
+/// moment.
+fn state_spread(
+    model: &InnovationModel,
+    experiments: &[glrmon_ident::Experiment],
+    scaling: &glrmon_ident::Scaling,
+    u_offset: &[f64],
+    y_offset: &[f64],
+) -> Option<DMatrix<f64>> {
+    if glrmon_ident::spectral_radius(&model.a) >= 0.999 {
+        return None;
+    }
+    let n = model.order();
+    let (l, p) = (scaling.input_columns.len(), scaling.output_columns.len());
+    let mut moment = DMatrix::<f64>::zeros(n, n);
+    let mut count = 0usize;
+    let mut u = nalgebra::DVector::<f64>::zeros(l);
+    let mut y = nalgebra::DVector::<f64>::zeros(p);
+    for e in experiments {
+        let mut x = nalgebra::DVector::<f64>::zeros(n);
+        let skip = e.samples() / 10;
+        for k in 0..e.samples() {
+            for (j, &c) in scaling.input_columns.iter().enumerate() {
+                u[j] = (e.inputs[(k, c)] - u_offset[j]) / scaling.input_scale[j];
+            }
+            for (j, &c) in scaling.output_columns.iter().enumerate() {
+                y[j] = (e.outputs[(k, c)] - y_offset[j]) / scaling.output_scale[j];
+            }
+            if k >= skip {
+                moment += &x * x.transpose();
+                count += 1;
+            }
+            let innovation = &y - &model.c * &x - &model.d * &u;
+            x = &model.a * &x + &model.b * &u + &model.k * innovation;
+        }
+    }
+    if count == 0 {
+        return None;
+    }
+    let moment = moment / count as f64;
+    let floor = 1e-6 * moment.diagonal().max().max(1e-12);
+    let p0 = (&moment + moment.transpose()) * 0.5 + DMatrix::identity(n, n) * floor;
+    (p0.iter().all(|v| v.is_finite()) && p0.clone().cholesky().is_some()).then_some(p0)
 }
 
 /// P0: the stationary state covariance of x⁺ = A x + K e (the spread of an unknown

@@ -21,6 +21,7 @@ use glrmon_input::embedded_config;
 
 use crate::common::pick;
 use crate::common::{InvalidInput, input_error, load_config};
+use crate::span::{Span, samples_and_time};
 
 #[derive(Debug, Args)]
 #[command(group(clap::ArgGroup::new("target").required(true).args(["mtbfa", "sample_far"])))]
@@ -43,9 +44,11 @@ pub(crate) struct CalibrateArgs {
     /// Seed of the first simulated part.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Target mean number of samples between false-alarm episodes (or --sample-far).
-    #[arg(long)]
-    mtbfa: Option<f64>,
+    /// Target mean time between false-alarm episodes: a time (`1d`, `8h`, `90min`,
+    /// `1w`; needs the channel's `period`) or a number of samples (`4320`). An
+    /// operator's target: one false alarm a day at most (or --sample-far).
+    #[arg(long, value_name = "TIME|SAMPLES", value_parser = crate::span::parse)]
+    mtbfa: Option<Span>,
     /// Target fraction of fault-free samples whose l_k exceeds the threshold, e.g. 0.01:
     /// the (1 − f) quantile of l_k (or --mtbfa).
     #[arg(long)]
@@ -60,11 +63,6 @@ pub(crate) struct CalibrateArgs {
 }
 
 pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
-    let target = match (args.mtbfa, args.sample_far) {
-        (Some(m), None) => Target::Mtbfa(m),
-        (None, Some(f)) => Target::SampleFar(f),
-        _ => unreachable!("clap requires exactly one of --mtbfa and --sample-far"),
-    };
     let embedded = match (&args.config, args.input.first()) {
         (None, Some(input)) => embedded_config(input).map_err(input_error)?,
         _ => None,
@@ -83,6 +81,23 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         return Err(InvalidInput("--write needs --config: the file to update".into()).into());
     }
     let channel = pick(&cfg, args.channel.as_deref())?;
+    let target = match (args.mtbfa, args.sample_far) {
+        (Some(m), None) => Target::Mtbfa(m.samples(channel.period).ok_or_else(|| {
+            InvalidInput(format!(
+                "--mtbfa {m} is a time, and channel \"{}\" has no `period` (seconds per \
+                 sample) to turn it into samples: set `period` in its configuration, or give \
+                 the number of samples",
+                channel.name
+            ))
+        })?),
+        (None, Some(f)) => Target::SampleFar(f),
+        _ => unreachable!("clap requires exactly one of --mtbfa and --sample-far"),
+    };
+    if let Some(config) = &args.config {
+        for w in identification_overlap(config, &args.input) {
+            eprintln!("glrmon calibrate: warning: {w}");
+        }
+    }
     let (stats, source) = match args.simulate {
         Some(n) => (
             simulated(channel, n, args.seed)?,
@@ -134,7 +149,14 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         print!(
             "{}",
-            text(&channel.name, c, g.threshold, *current_episodes, &source)
+            text(
+                &channel.name,
+                c,
+                g.threshold,
+                *current_episodes,
+                &source,
+                channel.period
+            )
         );
         print!("{}", runs_text(runs, c));
         print!("{}", isolation_text(isolation, alpha, args.write));
@@ -157,6 +179,72 @@ pub(crate) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The files `glrmon identify` fitted the model of `config` to (its header line
+/// "Identified by … from a.csv, b.csv.") that are among `inputs`, each as a warning: a
+/// model's innovations are smaller on the data it was fitted to than on new data, so a
+/// threshold calibrated there gives more false alarms on new data than it promises.
+/// A listed file is the same as an input when both paths name one file, or, when the
+/// listed path does not exist from here, when their file names are equal.
+fn identification_overlap(config: &Path, inputs: &[PathBuf]) -> Vec<String> {
+    let Ok(text) = std::fs::read_to_string(config) else {
+        return Vec::new();
+    };
+    // The two notes identify writes: the subspace path's header, and `--model`'s
+    // note on the noise it estimated.
+    let listed: Vec<String> = text
+        .lines()
+        .filter_map(|l| {
+            let files = if let Some(rest) = l.strip_prefix("# Identified by `glrmon identify") {
+                rest.split_once("` from ")?.1
+            } else {
+                let rest = l.trim_start().strip_prefix('#')?;
+                rest.split_once("(autocovariance least squares) on ")?.1
+            };
+            Some(
+                files
+                    .trim()
+                    .strip_suffix('.')
+                    .unwrap_or(files.trim())
+                    .to_owned(),
+            )
+        })
+        .collect();
+    let same = |listed: &Path, input: &Path| match (listed.canonicalize(), input.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        (Err(_), _) => listed.file_name().is_some() && listed.file_name() == input.file_name(),
+        _ => false,
+    };
+    let used: Vec<&PathBuf> = inputs
+        .iter()
+        .filter(|input| {
+            listed
+                .iter()
+                .flat_map(|files| files.split(", "))
+                .any(|l| same(Path::new(l), input))
+        })
+        .collect();
+    if used.is_empty() {
+        return Vec::new();
+    }
+    vec![format!(
+        "{} {} the model of {} was identified from: its innovations are smaller there than \
+         on new data, so a threshold calibrated on {} gives more false alarms on new data \
+         than it promises; calibrate on other fault-free recordings (other days) for a \
+         rate you can trust",
+        used.iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", "),
+        if used.len() == 1 {
+            "is data"
+        } else {
+            "are data"
+        },
+        config.display(),
+        if used.len() == 1 { "it" } else { "them" },
+    )]
 }
 
 /// A run's skipped rows: how many of its rows, by reason with the first of each.
@@ -517,6 +605,7 @@ fn text(
     current: f64,
     current_episodes: u64,
     source: &str,
+    period: Option<f64>,
 ) -> String {
     let events = match c.target {
         Target::Mtbfa(_) => c.episodes,
@@ -526,14 +615,18 @@ fn text(
     let per_event = samples_per_event(c);
     let (head, found, rate, target_line) = match c.target {
         Target::Mtbfa(m) => (
-            format!("one false-alarm episode per {m} samples"),
+            format!(
+                "one false-alarm episode per {}",
+                samples_and_time(m, period)
+            ),
             format!(
                 "{} episodes at the threshold (the target expects {:.1})",
                 c.episodes, c.expected
             ),
             format!(
-                "mean samples between false alarms {:.0}–{:.0}",
-                c.rate_interval.0, c.rate_interval.1
+                "mean time between false alarms {}–{}",
+                samples_and_time(c.rate_interval.0, period),
+                samples_and_time(c.rate_interval.1, period)
             ),
             format!("mtbfa = {m:?}\n"),
         ),

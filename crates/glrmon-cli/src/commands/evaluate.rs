@@ -214,9 +214,9 @@ fn text(
                     s,
                     "  {}: p50 {}, p10–p90 {}–{}",
                     r.fault,
-                    duration(q[1] * period),
-                    duration(q[0] * period),
-                    duration(q[2] * period)
+                    crate::span::duration(q[1] * period),
+                    crate::span::duration(q[0] * period),
+                    crate::span::duration(q[2] * period)
                 );
             }
         }
@@ -241,18 +241,6 @@ fn text(
     }
     s.push_str(&minmax_table(results));
     s
-}
-
-/// A duration in the unit that reads best: seconds below two minutes, minutes below
-/// two hours, hours above.
-fn duration(seconds: f64) -> String {
-    if seconds < 120.0 {
-        format!("{} s", crate::print::magnitude(seconds))
-    } else if seconds < 7200.0 {
-        format!("{:.1} min", seconds / 60.0)
-    } else {
-        format!("{:.2} h", seconds / 3600.0)
-    }
 }
 
 /// Zhang & Basseville 2014, Fig. 8 in numbers: per injected fault and isolation test,
@@ -343,6 +331,6 @@ mod tests {
         );
         let without = text("pipe", &columns, &[r], (300, 500), None);
         assert!(!without.contains("delays in time"), "{without}");
-        assert_eq!(duration(0.58), "0.5800 s");
+        assert_eq!(crate::span::duration(0.58), "0.5800 s");
     }
 }

@@ -171,14 +171,12 @@ pub(crate) fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
                 files.join(", ")
             ),
             format!(
-                "Next: glrmon calibrate --config {} --channel {} {} --sample-far 0.01 --write",
-                args.output.display(),
-                channel,
-                files.join(" ")
+                "Next: {}",
+                next_calibrate(&args.output.display().to_string(), &channel, Some(1.0))
             ),
         ],
     };
-    let identified = identify_channel(&request).map_err(|e| match e {
+    let mut identified = identify_channel(&request).map_err(|e| match e {
         IdentifyError::Written(_) => anyhow::Error::from(e),
         IdentifyError::Input(e) => crate::common::input_error(e),
         IdentifyError::Request { option, why } => InvalidInput(format!(
@@ -191,6 +189,13 @@ pub(crate) fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
         .into(),
         other => InvalidInput(other.to_string()).into(),
     })?;
+    if identified.channel.period.is_none() {
+        // The header's Next line was written before the period was known.
+        identified.config = identified.config.replace(
+            &next_calibrate(&args.output.display().to_string(), &channel, Some(1.0)),
+            &next_calibrate(&args.output.display().to_string(), &channel, None),
+        );
+    }
     std::fs::write(&args.output, &identified.config)
         .map_err(|e| anyhow::anyhow!("writing {}: {e}", args.output.display()))?;
     warn_if_invalid(&identified, &args.output);
@@ -202,8 +207,9 @@ pub(crate) fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
     } else {
         print_report(&identified);
         println!(
-            "\nwrote {} (a valid configuration{}). Next, thresholds from fault-free data:\n  \
-             glrmon calibrate --config {} --channel {} {} --sample-far 0.01 --write\n\
+            "\nwrote {} (a valid configuration{}). Next, its threshold from fault-free \
+             recordings other than these (a threshold set on the data the model was fitted \
+             to gives more false alarms on new data than it promises):\n  {}\n\
              then monitor: glrmon replay --config {} NEW.csv   or   glrmon run --config {}",
             args.output.display(),
             if identified.validation_failures.is_empty() {
@@ -211,14 +217,27 @@ pub(crate) fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
             } else {
                 "; its model FAILED the held-out validation: see the WARNING"
             },
-            args.output.display(),
-            channel,
-            files.join(" "),
+            next_calibrate(
+                &args.output.display().to_string(),
+                &channel,
+                identified.channel.period
+            ),
             args.output.display(),
             args.output.display(),
         );
     }
     Ok(())
+}
+
+/// The calibration to run next, on fault-free recordings other than the identification
+/// data, for an operator's target: at most one false alarm a day on average (`1d` when
+/// the channel has a period, else 10 000 samples).
+fn next_calibrate(config: &str, channel: &str, period: Option<f64>) -> String {
+    format!(
+        "glrmon calibrate --config {config} --channel {channel} OTHER-DAYS.csv --mtbfa {} \
+         --write",
+        if period.is_some() { "1d" } else { "10000" }
+    )
 }
 
 /// The loud warning of a model that fails its validation: written all the same (a
@@ -577,11 +596,15 @@ mod noise {
         let report = estimate_channel_noise(&request).map_err(|e| error(e, args))?;
         std::fs::write(&args.output, &report.config)
             .map_err(|e| anyhow::anyhow!("writing {}: {e}", args.output.display()))?;
-        let next = format!(
-            "glrmon calibrate --config {} --channel {} {} --sample-far 0.01 --write",
-            args.output.display(),
-            report.channel,
-            files.join(" ")
+        let next = super::next_calibrate(
+            &args.output.display().to_string(),
+            &report.channel,
+            glrmon_spec::parse(&report.config).ok().and_then(|c| {
+                c.channels
+                    .iter()
+                    .find(|ch| ch.name == report.channel)
+                    .and_then(|ch| ch.period)
+            }),
         );
         if args.json {
             println!(
