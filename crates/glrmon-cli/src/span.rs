@@ -132,7 +132,7 @@ mod tests {
 
     #[test]
     fn durations_read_in_their_best_unit() {
-        assert_eq!(duration(40.0), "40 s");
+        assert_eq!(duration(40.0), "40.00 s");
         assert_eq!(duration(600.0), "10.0 min");
         assert_eq!(duration(86_400.0), "24.00 h");
         assert_eq!(duration(5.0 * 86_400.0), "5.00 d");
