@@ -25,6 +25,7 @@ pub use detector::{
 pub use error::{ModelError, StepError};
 pub use filter::innovation::InnovationFilter;
 pub use isolation::{FisherStatistics, TestStatistic};
+pub use model::continuous::{ContinuousError, Discretisation};
 pub use model::fault::{Column, ColumnFn, Fault, FaultDictionary, Onset};
 pub use model::scaling::SignalScaling;
 pub use model::{Dims, Lpv, LpvMatrix, Signals, StateSpace, SystemMatrices};

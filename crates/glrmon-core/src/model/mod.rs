@@ -11,6 +11,7 @@
 //! (constant, or affine in scheduling signals: M_k = M_0 + Σ_i p_i(k) M_i, as in
 //! the paper's eq. (53)); any other law is a [`StateSpace`] implementation.
 
+pub mod continuous;
 pub mod fault;
 pub mod scaling;
 
