@@ -15,6 +15,8 @@ use glrmon_wire::text::Escaped;
 use crate::print;
 use tracing_subscriber::fmt::format::Writer;
 use tracing_subscriber::fmt::time::FormatTime;
+use tracing_subscriber::layer::SubscriberExt as _;
+use tracing_subscriber::util::SubscriberInitExt as _;
 
 /// How log lines are written to standard error.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -61,10 +63,20 @@ impl FormatTime for Timestamps {
     }
 }
 
-/// Installs the log: `GLRMON_LOG` filters it (default `info,zenoh=warn`).
+/// The log's filter when neither `GLRMON_LOG` nor `RUST_LOG` sets one.
+const DEFAULT_FILTER: &str = "info,zenoh=warn";
+
+/// Installs the log: `GLRMON_LOG` filters it, else `RUST_LOG`, else
+/// [`DEFAULT_FILTER`]. Under the default filter, Zenoh's own WARN lines about an endpoint
+/// it cannot connect to or listen on are left out ([`ReportedByGlrmon`]): glrmon says
+/// the same in one line with the reason and the flag to change. A filter the user sets
+/// (`GLRMON_LOG=info,zenoh=debug`) shows them as Zenoh writes them.
 pub(crate) fn init(format: LogFormat, color: ColorChoice, zone: Zone) {
-    let filter = tracing_subscriber::EnvFilter::try_from_env("GLRMON_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,zenoh=warn"));
+    let user = ["GLRMON_LOG", "RUST_LOG"]
+        .into_iter()
+        .find_map(|var| tracing_subscriber::EnvFilter::try_from_env(var).ok());
+    let replaced = user.is_none().then_some(ReportedByGlrmon);
+    let filter = user.unwrap_or_else(|| tracing_subscriber::EnvFilter::new(DEFAULT_FILTER));
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
@@ -73,14 +85,71 @@ pub(crate) fn init(format: LogFormat, color: ColorChoice, zone: Zone) {
         LogFormat::Text => {
             let no_color = std::env::var("NO_COLOR").ok();
             let ansi = color.colors(std::io::stderr().is_terminal(), no_color.as_deref());
-            builder.with_ansi(ansi).init();
+            builder.with_ansi(ansi).finish().with(replaced).init();
         }
         LogFormat::Json => builder
             .json()
             .flatten_event(true)
             .with_current_span(false)
             .with_span_list(false)
+            .finish()
+            .with(replaced)
             .init(),
+    }
+}
+
+/// Leaves out Zenoh's WARN events that glrmon reports itself, better: an endpoint it
+/// cannot connect to (`Unable to connect to tcp/…! … at ~/.cargo/registry/…`, then
+/// `Unable to connect to any of [Single(tcp/…)]!`), a listener it cannot open (whose
+/// reason the error then repeats), and a peer's start without its connect endpoints
+/// (`Scouting delay elapsed before start conditions are met.`). glrmon's own line names
+/// the endpoint, the reason and the flag; Zenoh's name its source files and Rust's debug
+/// notation, and a client that retries writes them at every try.
+#[derive(Debug, Clone, Copy)]
+struct ReportedByGlrmon;
+
+/// The beginnings of the messages [`ReportedByGlrmon`] leaves out.
+const REPORTED_BY_GLRMON: [&str; 4] = [
+    "Unable to connect to ",
+    "Unable to open listener ",
+    "Error connecting to ",
+    "Scouting delay elapsed before start conditions are met",
+];
+
+impl ReportedByGlrmon {
+    fn leaves_out(target: &str, level: tracing::Level, message: &str) -> bool {
+        level == tracing::Level::WARN
+            && (target == "zenoh" || target.starts_with("zenoh::") || target.starts_with("zenoh_"))
+            && REPORTED_BY_GLRMON.iter().any(|m| message.starts_with(m))
+    }
+}
+
+impl<S: tracing::Subscriber> tracing_subscriber::Layer<S> for ReportedByGlrmon {
+    fn event_enabled(
+        &self,
+        event: &tracing::Event<'_>,
+        _: tracing_subscriber::layer::Context<'_, S>,
+    ) -> bool {
+        let meta = event.metadata();
+        if *meta.level() != tracing::Level::WARN || !meta.target().starts_with("zenoh") {
+            return true;
+        }
+        struct Message(String);
+        impl tracing::field::Visit for Message {
+            fn record_str(&mut self, field: &tracing::field::Field, value: &str) {
+                if field.name() == "message" {
+                    value.clone_into(&mut self.0);
+                }
+            }
+            fn record_debug(&mut self, field: &tracing::field::Field, value: &dyn std::fmt::Debug) {
+                if field.name() == "message" {
+                    self.0 = format!("{value:?}");
+                }
+            }
+        }
+        let mut message = Message(String::new());
+        event.record(&mut message);
+        !Self::leaves_out(meta.target(), *meta.level(), &message.0)
     }
 }
 
@@ -174,6 +243,45 @@ mod tests {
         assert!(!ColorChoice::Auto.colors(false, None));
         assert!(ColorChoice::Always.colors(false, Some("1")));
         assert!(!ColorChoice::Never.colors(true, None));
+    }
+
+    /// Zenoh's WARN lines about an endpoint glrmon reports itself are left out, and
+    /// nothing else: not glrmon's own, not Zenoh's other warnings, nor its ERROR lines.
+    #[test]
+    fn only_zenohs_endpoint_warnings_are_left_out() {
+        use std::sync::{Arc, Mutex};
+
+        #[derive(Clone, Default)]
+        struct Captured(Arc<Mutex<Vec<u8>>>);
+        impl std::io::Write for Captured {
+            fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+                self.0.lock().unwrap().extend_from_slice(buf);
+                Ok(buf.len())
+            }
+            fn flush(&mut self) -> std::io::Result<()> {
+                Ok(())
+            }
+        }
+        let captured = Captured::default();
+        let writer = captured.clone();
+        let subscriber = tracing_subscriber::fmt()
+            .with_ansi(false)
+            .with_writer(move || writer.clone())
+            .finish()
+            .with(Some(ReportedByGlrmon));
+        tracing::subscriber::with_default(subscriber, || {
+            tracing::warn!(target: "zenoh::net::runtime::orchestrator", "Unable to connect to tcp/127.0.0.1:1! refused");
+            tracing::warn!(target: "zenoh::net::runtime::orchestrator", "Unable to connect to any of [Single(tcp/127.0.0.1:1)]! ");
+            tracing::warn!(target: "zenoh::net::runtime::orchestrator", "Unable to open listener tcp/127.0.0.1:1: busy");
+            tracing::warn!(target: "zenoh::net::runtime::orchestrator", "Scouting delay elapsed before start conditions are met.");
+            tracing::warn!(target: "zenoh::net::runtime::orchestrator", "kept: another warning");
+            tracing::error!(target: "zenoh::net::runtime::orchestrator", "Unable to connect to kept, an error");
+            tracing::warn!(target: "glrmon::commands::run", "Unable to connect to kept, glrmon's own");
+        });
+        let log = String::from_utf8(captured.0.lock().unwrap().clone()).unwrap();
+        let lines: Vec<&str> = log.lines().collect();
+        assert_eq!(lines.len(), 3, "{log}");
+        assert!(lines.iter().all(|l| l.contains("kept")), "{log}");
     }
 
     /// A rejection whose channel and message hold control sequences and a line break

@@ -17,6 +17,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use glrmon_runtime::{ChannelStats, Intake, Output, Payload, Sink, SinkError};
+use glrmon_wire::text::Escaped;
 use glrmon_wire::{InstanceStatus, Record, ZenohSessions, status};
 use zenoh::bytes::Encoding;
 use zenoh::liveliness::LivelinessToken;
@@ -40,6 +41,12 @@ pub struct SessionSettings {
     pub listen: Vec<String>,
     /// Multicast scouting; off unless set to true.
     pub multicast_scouting: Option<bool>,
+    /// How the user sets the endpoints to connect to, as the message of a failure to
+    /// connect names it (`--connect`, or `--connect or [zenoh] connect in plant.toml`):
+    /// the fix is in the message. Without it, the message says to check the endpoints.
+    pub connect_hint: Option<String>,
+    /// How the user sets the endpoints to listen on, likewise (`--listen`, …).
+    pub listen_hint: Option<String>,
 }
 
 /// Errors of the Zenoh adapter.
@@ -60,6 +67,72 @@ pub enum ZenohError {
     /// Another live instance already monitors a channel of this one, or has its name.
     #[error("{0}")]
     Overlap(String),
+    /// No endpoint to connect to could be reached when the session opened (a client
+    /// session, which needs one; a peer goes on and keeps trying).
+    #[error("{}", connect_message(failures, hint))]
+    Connect {
+        /// Each endpoint with why it could not be reached ("connection refused", …).
+        failures: Vec<(String, String)>,
+        /// How the user sets the endpoints ([`SessionSettings::connect_hint`]).
+        hint: Option<String>,
+    },
+    /// An endpoint could not be listened on (a session listens on all of its
+    /// endpoints or does not open).
+    #[error("{}", listen_message(endpoint, reason, hint))]
+    Listen {
+        /// The endpoint.
+        endpoint: String,
+        /// Why ("address already in use", …).
+        reason: String,
+        /// How the user sets the endpoints ([`SessionSettings::listen_hint`]).
+        hint: Option<String>,
+    },
+}
+
+/// "cannot connect to tcp/127.0.0.1:1 (connection refused): is `glrmon run` or a
+/// Zenoh router listening there? Give its endpoint with --connect": what failed, why,
+/// and what to check, in one line (endpoints from a file are escaped).
+fn connect_message(failures: &[(String, String)], hint: &Option<String>) -> String {
+    let list = failures
+        .iter()
+        .map(|(e, why)| format!("{} ({why})", Escaped(e)))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let (any, there) = if failures.len() > 1 {
+        ("any of ", "at one of them")
+    } else {
+        ("", "there")
+    };
+    let fix = hint.as_deref().map_or_else(
+        || "Check the endpoints to connect to".to_owned(),
+        |h| format!("Give its endpoint with {h}"),
+    );
+    format!(
+        "cannot connect to {any}{list}: is `glrmon run` or a Zenoh router listening {there}? {fix}"
+    )
+}
+
+/// "cannot listen on tcp/127.0.0.1:7447 (address already in use): another process
+/// listens there (a `glrmon run` or a Zenoh router?); choose another endpoint with
+/// --listen".
+fn listen_message(endpoint: &str, reason: &str, hint: &Option<String>) -> String {
+    let lower = reason.to_ascii_lowercase();
+    let why = if lower.contains("already in use") {
+        "another process listens there (a `glrmon run` or a Zenoh router?); "
+    } else if lower.contains("assign requested address") {
+        "that address is not one of this machine's; "
+    } else if lower.contains("permission denied") {
+        "ports below 1024 need privileges; "
+    } else {
+        ""
+    };
+    let fix = hint
+        .as_deref()
+        .map_or_else(|| " to listen on".to_owned(), |h| format!(" with {h}"));
+    format!(
+        "cannot listen on {} ({reason}): {why}choose another endpoint{fix}",
+        Escaped(endpoint)
+    )
 }
 
 fn session_err(what: &'static str) -> impl Fn(zenoh::Error) -> ZenohError {
@@ -235,11 +308,145 @@ fn json_string(v: &str) -> String {
 /// Opens a session.
 ///
 /// # Errors
-/// [`ZenohError`] when the configuration is invalid or the session cannot open (e.g. a
-/// listen endpoint already in use).
+/// [`ZenohError::Connect`] when no endpoint to connect to answers (client mode),
+/// [`ZenohError::Listen`] when an endpoint cannot be listened on (e.g. already in use),
+/// each naming the endpoint, the reason and the setting to change; [`ZenohError`]
+/// otherwise when the configuration is invalid or the session cannot open.
 pub async fn open(s: &SessionSettings) -> Result<Session, ZenohError> {
     let cfg = build_config(s)?;
-    zenoh::open(cfg).await.map_err(session_err("open"))
+    let endpoints = Endpoints::from_config(&cfg);
+    match zenoh::open(cfg).await {
+        Ok(session) => Ok(session),
+        Err(e) => Err(open_error(&e.to_string(), &endpoints, s)),
+    }
+}
+
+/// Zenoh's error of a session that did not open, made into what an operator can act on.
+/// Zenoh's own text (`Unable to connect to any of [Single(tcp/…)]!`) names the endpoints
+/// in Rust's debug notation and without the reason, which only its WARN log lines give:
+/// a connect failure is told by probing each endpoint ([`unreachable_reason`]), a listen
+/// failure by the system's reason in Zenoh's message.
+fn open_error(message: &str, endpoints: &Endpoints, s: &SessionSettings) -> ZenohError {
+    let message = without_source_locations(message);
+    if message.starts_with("Unable to connect to any of") && !endpoints.connect.is_empty() {
+        return ZenohError::Connect {
+            failures: endpoints
+                .connect
+                .iter()
+                .map(|e| (e.clone(), unreachable_reason(e)))
+                .collect(),
+            hint: s.connect_hint.clone(),
+        };
+    }
+    let listen_failure = message.contains("listener") || message.contains("not supported for");
+    if listen_failure && !endpoints.listen.is_empty() {
+        let named = endpoints
+            .listen
+            .iter()
+            .find(|e| message.contains(e.as_str()))
+            .or_else(|| {
+                // "Unicast not supported for udp protocol": the endpoint of that protocol.
+                endpoints.listen.iter().find(|e| {
+                    e.split_once('/')
+                        .is_some_and(|(p, _)| message.contains(&format!(" {p} protocol")))
+                })
+            })
+            .or(endpoints.listen.first());
+        if let Some(endpoint) = named {
+            return ZenohError::Listen {
+                endpoint: endpoint.clone(),
+                reason: listen_reason(&message, endpoint),
+                hint: s.listen_hint.clone(),
+            };
+        }
+    }
+    ZenohError::Session {
+        what: "open",
+        message,
+    }
+}
+
+/// The system's reason in Zenoh's message of a listener that could not be opened
+/// (`…: [127.0.0.1:7447: Address already in use (os error 98)]` → "address already in
+/// use"), or a transport this build lacks.
+fn listen_reason(message: &str, endpoint: &str) -> String {
+    if let Some(end) = message.find(" (os error") {
+        let start = message[..end].rfind(": ").map_or(0, |i| i + 2);
+        return lower_first(&message[start..end]);
+    }
+    if message.contains("not supported for") {
+        return unsupported_transport(endpoint);
+    }
+    lower_first(message.trim().trim_end_matches(['!', '.']))
+}
+
+/// "the udp transport is not built into glrmon (tcp only)".
+fn unsupported_transport(endpoint: &str) -> String {
+    let protocol = endpoint.split_once('/').map_or(endpoint, |(p, _)| p);
+    format!(
+        "the {} transport is not built into glrmon (tcp only)",
+        Escaped(protocol)
+    )
+}
+
+fn lower_first(s: &str) -> String {
+    let mut c = s.chars();
+    match c.next() {
+        Some(first) => first.to_lowercase().chain(c).collect(),
+        None => String::new(),
+    }
+}
+
+/// How long [`unreachable_reason`] waits for a TCP connection.
+const PROBE_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// Why `endpoint` cannot be reached, found by trying it as Zenoh did: its name resolved,
+/// then a TCP connection (closed at once) with a 1 s timeout to its first
+/// address. "connection refused" (nothing listens there), "no answer within 1 s" (a
+/// firewall, a host that is down), "cannot resolve …", or, when the connection opens, that
+/// the node there is no Zenoh node or refused the session. It blocks for at most the
+/// name look-up and 1 s.
+#[must_use]
+pub fn unreachable_reason(endpoint: &str) -> String {
+    use std::net::ToSocketAddrs as _;
+    let Ok(parsed) = endpoint.parse::<zenoh::config::EndPoint>() else {
+        return "not a Zenoh endpoint (PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447)".to_owned();
+    };
+    if parsed.protocol().as_str() != "tcp" {
+        return unsupported_transport(endpoint);
+    }
+    let address = parsed.address();
+    let address = address.as_str();
+    let first = match address.to_socket_addrs() {
+        Ok(mut addrs) => addrs.next(),
+        Err(e) => {
+            return format!("cannot resolve {}: {}", Escaped(address), system_reason(&e));
+        }
+    };
+    let Some(addr) = first else {
+        return format!("{} resolves to no address", Escaped(address));
+    };
+    match std::net::TcpStream::connect_timeout(&addr, PROBE_TIMEOUT) {
+        Ok(_) => "a TCP connection opens, but no Zenoh session: not a Zenoh node, or one \
+                  that refused this session"
+            .to_owned(),
+        Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {
+            format!("no answer within {} s", PROBE_TIMEOUT.as_secs())
+        }
+        Err(e) => system_reason(&e),
+    }
+}
+
+/// An I/O error as a reason within a sentence: "connection refused", without Rust's
+/// " (os error 111)" or "failed to lookup address information: ".
+fn system_reason(e: &std::io::Error) -> String {
+    let text = e.to_string();
+    let text = text
+        .split(" (os error")
+        .next()
+        .unwrap_or(&text)
+        .trim_start_matches("failed to lookup address information: ");
+    lower_first(text)
 }
 
 /// The subscribers feeding the runtime; dropping it undeclares them (stops intake).
@@ -875,6 +1082,120 @@ mod tests {
             without_source_locations("look at the router at tcp/10.0.0.1:7447"),
             "look at the router at tcp/10.0.0.1:7447"
         );
+    }
+
+    /// A free loopback port (bound, then released).
+    fn free_port() -> u16 {
+        std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port()
+    }
+
+    /// A client whose endpoint has nothing listening fails with the endpoint, the
+    /// system's reason and the setting to change, in one line without Zenoh's debug
+    /// notation or source paths.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_dead_endpoint_is_named_with_its_reason_and_hint() {
+        let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+        let e = open(&SessionSettings {
+            mode: Some("client".into()),
+            connect: vec![endpoint.clone()],
+            connect_hint: Some("--connect".into()),
+            ..SessionSettings::default()
+        })
+        .await
+        .unwrap_err();
+        assert!(matches!(e, ZenohError::Connect { .. }), "{e:?}");
+        let m = e.to_string();
+        assert_eq!(
+            m,
+            format!(
+                "cannot connect to {endpoint} (connection refused): is `glrmon run` or a \
+                 Zenoh router listening there? Give its endpoint with --connect"
+            )
+        );
+    }
+
+    /// A listen endpoint in use fails once, naming it, the reason and the setting.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_busy_listen_endpoint_is_named_with_its_reason_and_hint() {
+        let busy = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let endpoint = format!("tcp/{}", busy.local_addr().unwrap());
+        let e = open(&SessionSettings {
+            listen: vec![endpoint.clone()],
+            listen_hint: Some("--listen".into()),
+            ..SessionSettings::default()
+        })
+        .await
+        .unwrap_err();
+        assert!(matches!(e, ZenohError::Listen { .. }), "{e:?}");
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "cannot listen on {endpoint} (address already in use): another process \
+                 listens there (a `glrmon run` or a Zenoh router?); choose another endpoint \
+                 with --listen"
+            )
+        );
+    }
+
+    #[test]
+    fn open_errors_are_classified() {
+        let endpoints = Endpoints {
+            mode: "client".into(),
+            listen: vec!["tcp/127.0.0.1:7448".into(), "udp/127.0.0.1:7449".into()],
+            connect: vec!["udp/127.0.0.1:1".into()],
+        };
+        let s = SessionSettings::default();
+        let e = open_error(
+            "Unable to connect to any of [Single(udp/127.0.0.1:1)]! ",
+            &endpoints,
+            &s,
+        );
+        assert_eq!(
+            e.to_string(),
+            "cannot connect to udp/127.0.0.1:1 (the udp transport is not built into glrmon \
+             (tcp only)): is `glrmon run` or a Zenoh router listening there? Check the \
+             endpoints to connect to"
+        );
+        let e = open_error("Unicast not supported for udp protocol", &endpoints, &s);
+        assert_eq!(
+            e.to_string(),
+            "cannot listen on udp/127.0.0.1:7449 (the udp transport is not built into \
+             glrmon (tcp only)): choose another endpoint to listen on"
+        );
+        let e = open_error(
+            "Can not create a new TCP listener bound to tcp/127.0.0.1:7448: [127.0.0.1:7448: \
+             Cannot assign requested address (os error 99)]",
+            &endpoints,
+            &s,
+        );
+        assert!(
+            e.to_string().starts_with(
+                "cannot listen on tcp/127.0.0.1:7448 (cannot assign requested address): \
+                 that address is not one of this machine's"
+            ),
+            "{e}"
+        );
+        let e = open_error("something else entirely", &endpoints, &s);
+        assert!(matches!(e, ZenohError::Session { .. }), "{e:?}");
+    }
+
+    #[test]
+    fn unreachable_reasons() {
+        assert_eq!(
+            unreachable_reason(&format!("tcp/127.0.0.1:{}", free_port())),
+            "connection refused"
+        );
+        assert!(
+            unreachable_reason("tcp/nonexistent.invalid:7447")
+                .starts_with("cannot resolve nonexistent.invalid:7447: "),
+        );
+        let open = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let r = unreachable_reason(&format!("tcp/{}", open.local_addr().unwrap()));
+        assert!(r.contains("not a Zenoh node"), "{r}");
     }
 
     #[test]

@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 
 use clap::Args;
 use glrmon_daemon::{Daemon, DaemonBuilder};
+use glrmon_wire::text::Escaped;
 
 use crate::common::load_config;
 use crate::flags::ZenohArgs;
@@ -78,8 +79,11 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
     if settings.config_file.is_none() && settings.listen.is_empty() && settings.connect.is_empty() {
         settings.listen = vec![crate::common::DEFAULT_ENDPOINT.to_owned()];
     }
+    settings.connect_hint = Some(endpoint_hint(args, &cfg.zenoh, "connect"));
+    settings.listen_hint = Some(endpoint_hint(args, &cfg.zenoh, "listen"));
     let session = open_session(&settings).await?;
     let endpoints = glrmon_zenoh::Endpoints::of(&settings)?;
+    warn_if_unconnected(&session, &endpoints, &settings).await;
     let channels = cfg.channels.len();
     let timeout = Duration::from_secs_f64(cfg.daemon.shutdown_timeout);
     let metrics = args.metrics.clone().or_else(|| cfg.daemon.metrics.clone());
@@ -312,16 +316,48 @@ fn reload(path: &std::path::Path, daemon: &mut Daemon) {
     }
 }
 
+/// How the user sets the endpoints `which` (`connect` or `listen`) of this run, for the
+/// message of a failure: the flag, and the configuration's key (`[zenoh] connect in
+/// plant.toml`, or the Zenoh JSON5 file's `connect/endpoints` when one is used).
+fn endpoint_hint(args: &RunArgs, zenoh: &glrmon_spec::schema::ZenohSpec, which: &str) -> String {
+    let flag = format!("--{which}");
+    let given = if which == "connect" {
+        &args.zenoh.connect
+    } else {
+        &args.zenoh.listen
+    };
+    if !given.is_empty() {
+        return flag;
+    }
+    let json5 = args.zenoh.zenoh_config.as_ref().or(zenoh.config.as_ref());
+    let in_file = |key: &str, file: &std::path::Path| {
+        format!("{flag} or {key} in {}", Escaped(&file.to_string_lossy()))
+    };
+    let listed = if which == "connect" {
+        &zenoh.connect
+    } else {
+        &zenoh.listen
+    };
+    match json5 {
+        Some(file) if listed.is_empty() => in_file(&format!("{which}/endpoints"), file),
+        _ => in_file(&format!("[zenoh] {which}"), &args.config),
+    }
+}
+
 /// Opens the session; in client mode, retries until a router answers (the daemon may
-/// start before its router), logging each failure, until SIGINT/SIGTERM.
+/// start before its router), logging each failure in one line (the endpoints, why, the
+/// setting to check), until SIGINT/SIGTERM.
 async fn open_session(settings: &glrmon_zenoh::SessionSettings) -> anyhow::Result<zenoh::Session> {
     let client = settings.mode.as_deref() == Some("client");
     let mut delay = Duration::from_millis(250);
     loop {
         match glrmon_zenoh::open(settings).await {
             Ok(s) => return Ok(s),
-            Err(e) if client => {
-                tracing::warn!(error = %e, retry_in_ms = delay.as_millis() as u64, connect = ?settings.connect, "No Zenoh router reachable yet; retrying.");
+            Err(e @ glrmon_zenoh::ZenohError::Connect { .. }) if client => {
+                tracing::warn!(
+                    retry_in_ms = delay.as_millis() as u64,
+                    "No Zenoh router reachable yet, retrying: {e}."
+                );
                 tokio::select! {
                     () = tokio::time::sleep(delay) => {}
                     () = wait_for_signal() => anyhow::bail!("stopped before a Zenoh router was reachable"),
@@ -331,6 +367,41 @@ async fn open_session(settings: &glrmon_zenoh::SessionSettings) -> anyhow::Resul
             Err(e) => return Err(e.into()),
         }
     }
+}
+
+/// A peer (or router) session opens without its connect endpoints when none answers
+/// (Zenoh goes on trying in the background): says so once, with why and the setting to
+/// check, instead of Zenoh's `Scouting delay elapsed before start conditions are met.`
+async fn warn_if_unconnected(
+    session: &zenoh::Session,
+    endpoints: &glrmon_zenoh::Endpoints,
+    settings: &glrmon_zenoh::SessionSettings,
+) {
+    if endpoints.mode == "client" || endpoints.connect.is_empty() {
+        return;
+    }
+    let info = session.info();
+    if info.routers_zid().await.next().is_some() || info.peers_zid().await.next().is_some() {
+        return;
+    }
+    let connect = endpoints.connect.clone();
+    let Ok(reasons) = tokio::task::spawn_blocking(move || {
+        connect
+            .iter()
+            .map(|e| format!("{} ({})", Escaped(e), glrmon_zenoh::unreachable_reason(e)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    })
+    .await
+    else {
+        return;
+    };
+    tracing::warn!(
+        mode = %endpoints.mode,
+        "Not connected to {reasons}: monitoring starts, and Zenoh keeps trying in the background. \
+         Is `glrmon run` or a Zenoh router listening there? Check {}.",
+        settings.connect_hint.as_deref().unwrap_or("the endpoints to connect to")
+    );
 }
 
 /// SIGINT or SIGTERM.
