@@ -102,7 +102,7 @@ pub(crate) enum Command {
     /// alarms or a per-sample false-alarm fraction, on fault-free data (recordings,
     /// each an independent run, or simulated).
     #[command(
-        after_help = "Examples:\n  glrmon calibrate --config tank.toml run1.csv run2.csv --sample-far 0.01 --write\n  glrmon calibrate --config plant.toml --simulate 200000 --mtbfa 10000"
+        after_help = "Examples:\n  glrmon calibrate --config tank.toml thu.csv fri.csv sat.csv --mtbfa 1d --write\n  glrmon calibrate --config plant.toml --simulate 200000 --mtbfa 10000\n  glrmon calibrate --config tank.toml run1.csv run2.csv --sample-far 0.01\n\nCalibrate on fault-free data the model was not identified from: a threshold set on the\nidentification data gives more false alarms on new data than it promises."
     )]
     Calibrate(calibrate::CalibrateArgs),
     /// Monte-Carlo fault injection through the simulator and the monitor: detection

@@ -277,6 +277,9 @@ fn settings(channel: &Channel) -> String {
     }
     let threshold = threshold_text(channel);
     let _ = writeln!(s, "  model: {model}; {window}; threshold {threshold}");
+    if let Some(advice) = threshold_advice(channel) {
+        let _ = writeln!(s, "  threshold: {advice}");
+    }
     if channel.detector_kind != DetectorKind::Glr {
         let _ = writeln!(
             s,
@@ -352,20 +355,39 @@ fn settings(channel: &Channel) -> String {
         );
     }
     if let Some(scaling) = &channel.scaling {
-        let list = |names: &[String], offset: &[f64], scale: &[f64]| {
-            names
+        let list = |label: &dyn Fn(usize) -> String, offset: &[f64], scale: &[f64]| {
+            offset
                 .iter()
-                .zip(offset.iter().zip(scale))
-                .map(|(n, (o, s))| format!("{n} {o:.4} ± {s:.4}"))
+                .zip(scale)
+                .enumerate()
+                .map(|(i, (o, s))| format!("{}: operating point {o:.4}, scale {s:.4}", label(i)))
                 .collect::<Vec<_>>()
-                .join(", ")
+                .join("; ")
         };
         let _ = writeln!(
             s,
-            "  natural units: model = (raw − offset)/scale on intake; inputs [{}], outputs [{}]; \
-             sensor/actuator bias magnitudes in raw units",
-            list(&channel.columns.u, scaling.u_offset(), scaling.u_scale()),
-            list(&channel.columns.y, scaling.y_offset(), scaling.y_scale())
+            "  natural units: on intake each raw value becomes (raw − operating point)/scale, \
+             the model's units, in which Q, R and the innovations are; inputs {}; outputs {}; \
+             sensor/actuator bias magnitudes are in raw units",
+            list(
+                &|i| channel.columns.input_label(i),
+                scaling.u_offset(),
+                scaling.u_scale()
+            ),
+            list(
+                &|i| channel.columns.output_label(i),
+                scaling.y_offset(),
+                scaling.y_scale()
+            )
+        );
+    } else if channel.columns.y_units.iter().any(|u| !u.is_empty()) {
+        let labels: Vec<String> = (0..channel.dims.outputs)
+            .map(|i| channel.columns.output_label(i))
+            .collect();
+        let _ = writeln!(
+            s,
+            "  units: the model is in the plant's units ({}); Q, R and magnitudes too",
+            labels.join(", ")
         );
     }
     if channel.columns.named {
@@ -479,9 +501,13 @@ fn threshold_text(channel: &Channel) -> String {
             interval,
             ..
         } => format!(
-            "{:.4} (calibrated for one false-alarm episode per {mtbfa} samples on {samples} \
-             fault-free samples, {episodes} episodes; 95 % interval {:.4}–{:.4})",
-            channel.alarm.threshold, interval[0], interval[1]
+            "{:.4} (calibrated for one false-alarm episode per {} on {}, {episodes} \
+             episodes; 95 % interval {:.4}–{:.4})",
+            channel.alarm.threshold,
+            in_time(mtbfa, "samples", channel.period),
+            in_time(samples as f64, "fault-free samples", channel.period),
+            interval[0],
+            interval[1]
         ),
         ThresholdSource::Calibrated {
             target: Target::SampleFar(fraction),
@@ -497,6 +523,51 @@ fn threshold_text(channel: &Channel) -> String {
             exceedances.map_or_else(|| "?".to_owned(), |n| n.to_string()),
             interval[0],
             interval[1]
+        ),
+    }
+}
+
+/// A number of samples with the time it spans when the period is known:
+/// `4320 samples (1.00 d)`.
+fn in_time(samples: f64, what: &str, period: Option<f64>) -> String {
+    let Some(p) = period.filter(|p| *p > 0.0 && samples.is_finite()) else {
+        return format!("{samples} {what}");
+    };
+    let seconds = samples * p;
+    let time = if seconds < 120.0 {
+        format!("{seconds:.0} s")
+    } else if seconds < 7200.0 {
+        format!("{:.1} min", seconds / 60.0)
+    } else if seconds < 172_800.0 {
+        format!("{:.2} h", seconds / 3600.0)
+    } else {
+        format!("{:.2} d", seconds / 86_400.0)
+    };
+    format!("{samples} {what} ({time})")
+}
+
+/// What to do about a threshold that was not calibrated on data, or was calibrated
+/// for a per-sample fraction (which does not fix how often an operator is alarmed);
+/// `None` for a threshold calibrated for a mean time between false alarms, or given.
+fn threshold_advice(channel: &Channel) -> Option<&'static str> {
+    match channel.threshold_source {
+        ThresholdSource::Calibrated {
+            target: Target::Mtbfa(_),
+            ..
+        }
+        | ThresholdSource::Explicit => None,
+        ThresholdSource::Calibrated {
+            target: Target::SampleFar(_),
+            ..
+        } => Some(
+            "calibrated for a fraction of samples, which does not set how often alarms \
+             come (exceedances cluster into episodes); for an operator's target calibrate \
+             with --mtbfa (e.g. 1d: one false alarm a day at most)",
+        ),
+        _ => Some(
+            "not calibrated on data: a χ² level is exact only for a model that is exactly \
+             right; run `glrmon calibrate --mtbfa 1d --write` on fault-free recordings other \
+             than the model's identification data",
         ),
     }
 }
@@ -615,6 +686,74 @@ fn isolability_section(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    const SCALED: &str = r#"
+[[channels]]
+name = "tank"
+period = 20.0
+
+[channels.model]
+F = 0.9
+G = [[1.0]]
+H = [[1.0]]
+Q = 0.01
+R = 0.04
+
+[channels.scaling]
+u_offset = [2.0]
+u_scale = [0.25]
+y_offset = [60.0]
+y_scale = [1.5]
+
+[channels.columns]
+u = ["FIC101"]
+y = ["LI201"]
+u_units = ["m³/h"]
+y_units = ["cm"]
+
+[[channels.faults]]
+kind = "all_sensors"
+"#;
+
+    #[test]
+    fn units_are_named_and_a_scale_is_not_a_spread() {
+        let cfg = glrmon_spec::parse(SCALED).unwrap();
+        let text = settings(&cfg.channels[0]);
+        assert!(
+            text.contains("inputs FIC101 [m³/h]: operating point 2.0000, scale 0.2500"),
+            "{text}"
+        );
+        assert!(
+            text.contains("outputs LI201 [cm]: operating point 60.0000, scale 1.5000"),
+            "{text}"
+        );
+        assert!(!text.contains('±'), "{text}");
+    }
+
+    #[test]
+    fn a_threshold_not_calibrated_for_a_time_says_what_to_run() {
+        let cfg = glrmon_spec::parse(SCALED).unwrap();
+        let text = settings(&cfg.channels[0]);
+        assert!(
+            text.contains("threshold: not calibrated on data")
+                && text.contains("glrmon calibrate --mtbfa 1d --write"),
+            "{text}"
+        );
+        let calibrated = format!(
+            "{SCALED}\n[channels.glr.calibrated]\nthreshold = 30.0\nmtbfa = 4320.0\n\
+             samples = 12960\nepisodes = 3\ninterval = [25.0, 40.0]\n"
+        );
+        let cfg = glrmon_spec::parse(&calibrated).unwrap();
+        let text = settings(&cfg.channels[0]);
+        assert!(!text.contains("  threshold:"), "{text}");
+        assert!(
+            text.contains(
+                "one false-alarm episode per 4320 samples (24.00 h) on 12960 fault-free \
+                 samples (3.00 d)"
+            ),
+            "{text}"
+        );
+    }
 
     #[test]
     fn small_matrices_stay_on_one_line() {

@@ -1,12 +1,10 @@
 //! A week of a two-tank plant's history as a historian exports it (see
 //! `glrmon_sim::two_tanks`): `mon.csv` … `sun.csv` fault-free, and `fault.csv`, a
-//! day with a +1.5 cm bias on LI202 from sample 1200 (08:00 UTC at 20-s samples).
+//! day with a +1.5 cm bias on LI202 from sample 1200 (06:40 UTC at 20-s samples).
 //!
 //! ```sh
 //! cargo run -q -p glrmon-sim --example two_tanks -- DIR [SAMPLES_PER_DAY]
 //! ```
-
-use glrmon_sim::two_tanks::{PlantFault, TwoTanks};
 
 fn main() {
     let mut args = std::env::args().skip(1);
@@ -23,32 +21,19 @@ fn main() {
         }
     };
     let dir = std::path::Path::new(&dir);
-    if let Err(e) = std::fs::create_dir_all(dir) {
-        eprintln!("{}: {e}", dir.display());
-        std::process::exit(1);
-    }
-    let plant = TwoTanks::default();
-    let days = ["mon", "tue", "wed", "thu", "fri", "sat", "sun"];
-    let fault = PlantFault::SensorBias {
-        output: 1,
-        bias: 1.5,
-    };
-    let runs = days
-        .iter()
-        .enumerate()
-        .map(|(i, name)| (format!("{name}.csv"), i as u32, None))
-        .chain(std::iter::once((
-            "fault.csv".to_string(),
-            7,
-            Some((fault, 1200)),
-        )));
-    for (name, day, fault) in runs {
-        let path = dir.join(&name);
-        let text = plant.day(day, samples, 1000 + u64::from(day), fault).csv();
-        if let Err(e) = std::fs::write(&path, text) {
-            eprintln!("{}: {e}", path.display());
+    match std::fs::create_dir_all(dir)
+        .and_then(|()| glrmon_sim::two_tanks::write_week(dir, samples))
+    {
+        Ok(paths) => {
+            let names: Vec<String> = paths
+                .iter()
+                .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+                .collect();
+            println!("wrote {} in {}", names.join(", "), dir.display());
+        }
+        Err(e) => {
+            eprintln!("{}: {e}", dir.display());
             std::process::exit(1);
         }
-        println!("wrote {}", path.display());
     }
 }

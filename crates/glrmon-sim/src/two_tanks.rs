@@ -225,6 +225,39 @@ impl Day {
     }
 }
 
+/// The names of the days [`write_week`] writes, in order, then `fault`.
+pub const WEEK: [&str; 7] = ["mon", "tue", "wed", "thu", "fri", "sat", "sun"];
+
+/// Writes a week of the default plant's history into `dir` as `mon.csv` … `sun.csv`
+/// (fault-free, days 0–6, seeds 1000–1006) and `fault.csv` (day 7, seed 1007, a
+/// +1.5 cm bias on LI202 from sample 1200), each of `samples` samples (4320: a day at
+/// 20 s); returns the paths written.
+///
+/// # Errors
+/// The first file that cannot be written.
+pub fn write_week(
+    dir: &std::path::Path,
+    samples: usize,
+) -> std::io::Result<Vec<std::path::PathBuf>> {
+    let plant = TwoTanks::default();
+    let fault = PlantFault::SensorBias {
+        output: 1,
+        bias: 1.5,
+    };
+    let mut written = Vec::new();
+    for (day, name) in WEEK.iter().chain(&["fault"]).enumerate() {
+        let day = day as u32;
+        let path = dir.join(format!("{name}.csv"));
+        let fault = (day == 7).then_some((fault, 1200));
+        std::fs::write(
+            &path,
+            plant.day(day, samples, 1000 + u64::from(day), fault).csv(),
+        )?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
 /// `seconds` since the Unix epoch as `YYYY-MM-DDThh:mm:ssZ` (proleptic Gregorian, UTC),
 /// by the days-to-civil algorithm of H. Hinnant ("chrono-Compatible Low-Level Date
 /// Algorithms").
