@@ -16,9 +16,10 @@ deps: deps-zenohd ## the toolchain (rustfmt, clippy) and zenohd for the router-m
 
 ZENOHD_VERSION := 1.10.2
 ZENOHD := $(or $(CARGO_HOME),$(HOME)/.cargo)/bin/zenohd
-deps-zenohd: ## zenohd (the Zenoh router) from crates.io, built once (~7 min on 2 cores), then kept
+deps-zenohd: ## zenohd (the Zenoh router) from crates.io, built once (about 15 min on 2 cores), then kept in ~/.cargo/bin
 	@if $(ZENOHD) --version 2>/dev/null | grep -q "v$(ZENOHD_VERSION)"; then echo "zenohd $(ZENOHD_VERSION): $(ZENOHD)"; \
-	else echo "building zenohd $(ZENOHD_VERSION) (once)"; $(CARGO) install zenohd --version $(ZENOHD_VERSION) --locked; fi
+	else echo "zenohd $(ZENOHD_VERSION) (the Zenoh router the router-mesh test runs) is not installed: building it from crates.io once, about 15 min on 2 cores; it is kept in $(ZENOHD)"; \
+	$(CARGO) install zenohd --version $(ZENOHD_VERSION) --locked; fi
 
 build: deps ## build everything (release)
 	$(CARGO) build --release --workspace
@@ -151,8 +152,10 @@ check-install: ## install (debug build) into a scratch prefix and check the layo
 	$$d/usr/bin/glrmon validate --config $$d/etc/glrmon/glrmon.toml >/dev/null && \
 	$$d/usr/bin/glrmon --version && echo "make install: layout, units, example configuration checked"
 
-demo: ## the main job on built-in simulated channels with an injected fault
-	$(CARGO) run --release -q -p glrmon-cli -- demo
+demo: ## the main job on built-in simulated channels with an injected fault (the first release build takes about 18 min on 2 cores)
+	@[ -x $${CARGO_TARGET_DIR:-target}/release/glrmon ] || echo "building glrmon (release, about 400 crates): about 18 min on 2 cores the first time, seconds afterwards"
+	$(CARGO) build --release -p glrmon-cli
+	$${CARGO_TARGET_DIR:-target}/release/glrmon demo
 
 reproduce: ## regenerate the command blocks of docs/REPRODUCTION.md: Zhang 2021 Tables I and II, the 2014 gas-pipeline Monte Carlo, Willsky–Jones (~6 min on 2 cores after the release build)
 	bash scripts/reproduce.sh
