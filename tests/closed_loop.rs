@@ -228,6 +228,12 @@ fn identify_finds_the_feedback_chooses_pbsid_and_the_monitor_holds_its_rate() {
         warned.contains("→ y0 innovations not white (at 1 % over 2 outputs"),
         "{warned}"
     );
+    // A failed check comes with what to do about it.
+    assert!(
+        warned.contains("WARNING: what to do: innovations that are not white")
+            && warned.contains("--method pbsid if a controller acts on these outputs"),
+        "{warned}"
+    );
     assert!(other.exists());
     let written = std::fs::read_to_string(&other).unwrap();
     assert!(written.contains("# WARNING: this model fails"), "{written}");

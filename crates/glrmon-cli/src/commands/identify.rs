@@ -258,9 +258,29 @@ fn warn_if_invalid(id: &Identified, output: &std::path::Path) {
     for line in &id.validation_failures {
         eprintln!("WARNING:   {line}");
     }
+    let v = &id.identification.validation;
+    let level = v.per_output_level();
+    if v.ljung_box.iter().any(|t| t.p_value < level) {
+        eprintln!(
+            "WARNING: what to do: innovations that are not white mean dynamics the model \
+             misses: try a higher order (--order N, or a larger --max-order), --detrend for \
+             slow drifts, --method pbsid if a controller acts on these outputs, or longer or \
+             more varied recordings (inputs that move)"
+        );
+    }
+    if v.nis_mean
+        .is_none_or(|m| m < v.nis_interval.0 || m > v.nis_interval.1)
+    {
+        eprintln!(
+            "WARNING: what to do: innovations of another size than Re says make a χ² \
+             threshold wrong: a threshold calibrated on fault-free data absorbs that \
+             (below); if the plant's noise changes from day to day, identify from more days"
+        );
+    }
     eprintln!(
-        "WARNING: calibrate its threshold on fault-free data (glrmon calibrate --write) and \
-         check the false-alarm rate on an independent run before trusting its alarms"
+        "WARNING: calibrate its threshold on fault-free data other than these (glrmon \
+         calibrate --mtbfa 1d --write) and check the false-alarm rate on an independent run \
+         before trusting its alarms"
     );
 }
 
@@ -359,7 +379,15 @@ fn print_report(id: &Identified) {
         v.samples,
         if v.passed() { "passed" } else { "FAILED" }
     );
-    println!("  one-step NRMSE: {}", fits.join(", "));
+    println!(
+        "  one-step NRMSE (prediction error over the output's spread; 0 perfect, 1 no \
+         better than the mean): {}",
+        fits.join(", ")
+    );
+    println!(
+        "    {}",
+        nrmse_verdict(&id.channel.outputs, v.nrmse.as_slice())
+    );
     if let Some(first) = v.ljung_box.first() {
         println!(
             "  innovation whiteness (Ljung–Box, {} lags) and consistency (NIS):",
@@ -382,6 +410,44 @@ fn print_report(id: &Identified) {
         "  the written channel's Kalman filter: Σ = Re to {:.1e} (relative)",
         id.sigma_mismatch
     );
+}
+
+/// What the one-step NRMSE says, in words: how much of each output's spread the
+/// model predicts one sample ahead. A high NRMSE is not a failure in itself (an output
+/// driven mostly by noise cannot be predicted, and the whiteness and NIS checks say
+/// whether the model has captured what can be); it says which sensors will show small
+/// faults and which only large ones.
+fn nrmse_verdict(outputs: &[String], nrmse: &[f64]) -> String {
+    let part = |name: &String, e: f64| {
+        if e.is_finite() {
+            format!("{name} {:.0} %", 100.0 * (1.0 - (e * e).min(1.0)))
+        } else {
+            format!("{name} (no spread)")
+        }
+    };
+    let list: Vec<String> = outputs
+        .iter()
+        .zip(nrmse)
+        .map(|(n, &e)| part(n, e))
+        .collect();
+    let noisy: Vec<&str> = outputs
+        .iter()
+        .zip(nrmse)
+        .filter(|(_, e)| **e > 0.7)
+        .map(|(n, _)| n.as_str())
+        .collect();
+    let mut s = format!(
+        "→ share of each output's variance predicted one sample ahead: {}",
+        list.join(", ")
+    );
+    if !noisy.is_empty() {
+        s.push_str(&format!(
+            "; {} mostly noise, so only faults large against that noise show there (not a \
+             failure: whiteness and NIS decide whether the model is right)",
+            noisy.join(", ")
+        ));
+    }
+    s
 }
 
 /// `--json`: what was found, in the terms of the printed report.
