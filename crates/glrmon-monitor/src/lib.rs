@@ -398,6 +398,7 @@ impl Monitor {
             rank: self.out.rank,
             innovation: self.out.innovation.iter().copied().collect(),
             threshold: Some(self.settings.tuning.alarm.threshold),
+            episode: None,
         }));
     }
 

@@ -357,6 +357,10 @@ mod tests {
             rank: 1,
             innovation: vec![0.1, -0.2],
             threshold: Some(20.0),
+            episode: Some(glrmon_wire::EpisodeEstimate {
+                onset: 5,
+                magnitude: vec![1.25],
+            }),
         };
         let alarm = Alarm {
             channel: "a".into(),
@@ -386,6 +390,7 @@ mod tests {
                 magnitude: vec![],
                 rank: 0,
                 threshold: None,
+                episode: None,
                 ..stat
             }
             .into(),

@@ -537,6 +537,7 @@ mod tests {
             rank: 1,
             innovation: vec![0.0],
             threshold: None,
+            episode: None,
         }));
         pipeline.hand_on_records(0, &mut fanout).unwrap();
         fanout.close(&mut |e| panic!("{e}"));

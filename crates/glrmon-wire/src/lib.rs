@@ -20,8 +20,8 @@ pub use key::{
     validate_channel_name,
 };
 pub use record::{
-    Alarm, AlarmEnd, Consistency, Diagnosis, ErrorRecord, IsolationResult, IsolationUpdate,
-    RECORD_KINDS, Record, Stat, decode_record, encode_json,
+    Alarm, AlarmEnd, Consistency, Diagnosis, EpisodeEstimate, ErrorRecord, IsolationResult,
+    IsolationUpdate, RECORD_KINDS, Record, Stat, decode_record, encode_json,
 };
 pub use sample::{DecodeLimits, Sample, decode_samples, encode_sample, encode_samples};
 pub use status::{ChannelStatus, InstanceStatus, StatusError, ZenohSessions};

@@ -14,8 +14,17 @@ use crate::key::result_key;
 use crate::sample::{is_out_of_range, write_json};
 
 /// Per-sample detection statistics (`type: "stat"`): the windowed GLR statistic l_k, the
-/// onset r̂ and magnitude θ̂ that maximise it, and the innovation ε_k; on Zenoh decimated
-/// as configured.
+/// onset r̂ and magnitude θ̂ that maximise it, the innovation ε_k and, during an alarm
+/// episode, the episode's own estimate; on Zenoh decimated as configured.
+///
+/// `onset` and `magnitude` are the window's: they describe the best change *inside the
+/// last w samples*. Once a fault that persists is older than the window, its onset has
+/// left it: `onset` slides with the window (its oldest admissible onset, or another
+/// inside it) and no longer dates the fault, and `magnitude` fits the settled response
+/// of the old fault with the transient of one starting inside the window, so it shrinks
+/// while the fault does not (a 1.32 cm sensor bias read as 0.5 cm). `episode` holds the
+/// estimate at the episode's own onset instead: plot `episode.magnitude` while it is
+/// present, `magnitude` otherwise.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(title = "glrmon stat")]
 pub struct Stat {
@@ -28,10 +37,14 @@ pub struct Stat {
     /// GLR statistic l_k = max over the window of d_k(r)ᵀ C_k(r)⁺ d_k(r) (Zhang &
     /// Basseville 2014, eq. (35)); `None` (`null`) while no onset is admissible.
     pub glr: Option<f64>,
-    /// Maximising onset r̂ (eq. (36)), if any.
+    /// Maximising onset r̂ (eq. (36)) among the window's onsets, if any. It slides with
+    /// the window once a persisting fault is older than the window: `episode.onset`
+    /// dates an episode's fault.
     pub onset: Option<u64>,
-    /// Magnitude estimate θ̂ = C_k(r̂)⁺ d_k(r̂) (eq. (34)), one value per fault in
-    /// dictionary order; empty while no onset is admissible.
+    /// Magnitude estimate θ̂ = C_k(r̂)⁺ d_k(r̂) (eq. (34)) at the window's r̂, one value
+    /// per fault in dictionary order; empty while no onset is admissible. Once a
+    /// persisting fault's onset has left the window it shrinks while the fault does
+    /// not: during an episode, `episode.magnitude` is the one to plot.
     pub magnitude: Vec<f64>,
     /// Numerical rank of C_k(r̂) (fewer than the number of faults when some are not
     /// separable over the window).
@@ -40,6 +53,28 @@ pub struct Stat {
     pub innovation: Vec<f64>,
     /// Alarm threshold on l_k, if configured.
     pub threshold: Option<f64>,
+    /// The alarm episode's estimate while an episode is on: from its alarm's sample
+    /// (the crossing) to its `alarm_end`'s, both included. `None` (`null`, or absent in
+    /// records of versions before it) outside episodes and for detectors that cannot
+    /// follow an onset past the window (`chi2`).
+    #[serde(default)]
+    pub episode: Option<EpisodeEstimate>,
+}
+
+/// The estimate of an alarm episode's fault at sample k of a `stat` record: at the
+/// episode's onset, over every sample since, however long ago it left the window.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct EpisodeEstimate {
+    /// The episode's onset r̂: its alarm's, and after its `isolation` record's sample,
+    /// that record's (the onset `alarm_end` reports). It stays put while the episode
+    /// lasts, unlike the window's `onset`.
+    pub onset: u64,
+    /// θ̂ = C_k(r̂)⁺ d_k(r̂) at the episode's onset over every sample from r̂ to k (eq.
+    /// (34) continued past the window), one value per fault in the order of the record's
+    /// `magnitude`: what a persisting fault's magnitude is, where the window's
+    /// `magnitude` shrinks once r̂ has left the window. At the crossing it equals the
+    /// alarm's `magnitude`.
+    pub magnitude: Vec<f64>,
 }
 
 /// Minmax / sensitivity isolation test for one fault at an alarm.
@@ -289,7 +324,7 @@ impl ErrorRecord {
 /// JSON has no NaN or infinity. `null` has exactly one meaning per field and is written
 /// only for `None`: `glr: null` means no onset is admissible yet (the window is not
 /// filled), `t: null` that the sample had no time, `threshold: null` that none is
-/// configured. A non-finite float anywhere, inside an `Option` or not, is an
+/// configured, `episode: null` that no alarm episode is on. A non-finite float anywhere, inside an `Option` or not, is an
 /// [`EncodeError`] naming the field, rather than a silent `null` (serde_json's own
 /// behaviour) that would read as "no onset". Callers turn "no value" into `None` first.
 /// So prefer [`encode_json`] to serializing this type with serde directly.
@@ -407,7 +442,10 @@ impl Record {
                 c.opt("glr", r.glr)?;
                 c.all("magnitude", &r.magnitude)?;
                 c.all("innovation", &r.innovation)?;
-                c.opt("threshold", r.threshold)
+                c.opt("threshold", r.threshold)?;
+                r.episode
+                    .as_ref()
+                    .map_or(Ok(()), |e| c.all("episode.magnitude", &e.magnitude))
             }
             Record::Alarm(r) => {
                 c.opt("t", r.t)?;
@@ -783,6 +821,10 @@ mod tests {
             rank: 3,
             innovation: vec![0.1, -1.7976931348623157e308],
             threshold: Some(13.8),
+            episode: Some(EpisodeEstimate {
+                onset: 3,
+                magnitude: vec![1.25, -5e-324, 0.0],
+            }),
         }
     }
 
@@ -794,6 +836,7 @@ mod tests {
             rank: 0,
             t: None,
             threshold: None,
+            episode: None,
             ..stat()
         }
     }
@@ -939,6 +982,7 @@ mod tests {
                 r.magnitude
                     .iter()
                     .chain(&r.innovation)
+                    .chain(r.episode.iter().flat_map(|e| &e.magnitude))
                     .copied()
                     .for_each(&mut push);
             }
@@ -1011,7 +1055,7 @@ mod tests {
         encode_json(&stat().into(), &mut out).unwrap();
         assert_eq!(
             std::str::from_utf8(&out).unwrap(),
-            r#"{"type":"stat","channel":"pump3","k":12,"t":1732200000.25,"glr":0.30000000000000004,"onset":7,"magnitude":[1e-300,-0.0,2.5],"rank":3,"innovation":[0.1,-1.7976931348623157e+308],"threshold":13.8}"#
+            r#"{"type":"stat","channel":"pump3","k":12,"t":1732200000.25,"glr":0.30000000000000004,"onset":7,"magnitude":[1e-300,-0.0,2.5],"rank":3,"innovation":[0.1,-1.7976931348623157e+308],"threshold":13.8,"episode":{"onset":3,"magnitude":[1.25,-5e-324,0.0]}}"#
         );
         out.clear();
         encode_json(&stat_before_onset().into(), &mut out).unwrap();
@@ -1139,6 +1183,17 @@ mod tests {
                 "innovation[1]",
             ),
             (
+                Stat {
+                    episode: Some(EpisodeEstimate {
+                        onset: 3,
+                        magnitude: vec![1.0, 2.0, f64::INFINITY],
+                    }),
+                    ..stat()
+                }
+                .into(),
+                "episode.magnitude[2]",
+            ),
+            (
                 Alarm {
                     magnitude: vec![f64::NAN],
                     ..alarm()
@@ -1239,6 +1294,53 @@ mod tests {
                 duration: 2,
                 peak_glr: 3.0
             })
+        );
+    }
+
+    /// A `stat` of a glrmon from before `episode` existed decodes with none; one with
+    /// an episode round-trips it, and a wrongly typed value in it is located.
+    #[test]
+    fn a_stat_without_episode_decodes_with_none_and_one_with_it_is_checked() {
+        let rec = decode_record(
+            br#"{"type":"stat","channel":"c","k":9,"t":null,"glr":2.5,"onset":7,"magnitude":[0.5],"rank":1,"innovation":[0.1],"threshold":13.8}"#,
+        )
+        .unwrap();
+        let Record::Stat(s) = rec else {
+            panic!("{rec:?}")
+        };
+        assert_eq!((s.k, s.onset, s.episode), (9, Some(7), None));
+
+        let text = json(&stat().into());
+        assert!(
+            text.ends_with(
+                r#""threshold":13.8,"episode":{"onset":3,"magnitude":[1.25,-5e-324,0.0]}}"#
+            ),
+            "{text}"
+        );
+        let none = json(&stat_before_onset().into());
+        assert!(
+            none.ends_with(r#""threshold":null,"episode":null}"#),
+            "{none}"
+        );
+
+        let mut value: Value = serde_json::from_str(&text).unwrap();
+        value["episode"]["magnitude"][1] = Value::from("big");
+        assert_record_error(
+            &value.to_string(),
+            ErrorCode::WrongType,
+            Some("episode.magnitude[1]"),
+        );
+        value["episode"] = serde_json::json!({"magnitude": [1.0]});
+        assert_record_error(
+            &value.to_string(),
+            ErrorCode::MissingField,
+            Some("episode.onset"),
+        );
+        value["episode"] = Value::from(3);
+        let err = assert_record_error(&value.to_string(), ErrorCode::WrongType, Some("episode"));
+        assert_eq!(
+            err.to_string(),
+            r#"channel "pump3": field episode has the wrong type: expected an object or null"#
         );
     }
 
@@ -1488,18 +1590,25 @@ mod tests {
                 proptest::option::of(finite_f64()),
                 proptest::option::of(finite_f64()),
                 floats(),
-                floats()
+                floats(),
+                proptest::option::of(floats())
             )
-                .prop_map(|(k, t, glr, magnitude, innovation)| Record::from(Stat {
-                    k,
-                    t,
-                    glr,
-                    onset: glr.map(|_| k / 2),
-                    rank: magnitude.len(),
-                    magnitude,
-                    innovation,
-                    ..stat()
-                })),
+                .prop_map(|(k, t, glr, magnitude, innovation, episode)| {
+                    Record::from(Stat {
+                        k,
+                        t,
+                        glr,
+                        onset: glr.map(|_| k / 2),
+                        rank: magnitude.len(),
+                        magnitude,
+                        innovation,
+                        episode: episode.map(|magnitude| EpisodeEstimate {
+                            onset: k / 3,
+                            magnitude,
+                        }),
+                        ..stat()
+                    })
+                }),
             (
                 finite_f64(),
                 finite_f64(),
