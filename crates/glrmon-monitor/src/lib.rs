@@ -25,6 +25,19 @@
 //! on a statistic that has fallen back towards noise would describe the noise, not the
 //! fault, and reporting them would read as an alarm below the threshold.
 //!
+//! # The episode's estimate
+//!
+//! From the alarm on, the monitor asks the detector to follow the alarm's onset r̂ past
+//! the window ([`Detector::follow`]; the isolation update's r̂ from that sample on),
+//! whatever ends the episode. While the episode lasts, each `stat` record carries in
+//! `episode` that onset and θ̂ = C_k(r̂)⁺d_k(r̂) over every sample from r̂ on
+//! ([`Detector::followed_magnitude`]): the window's own θ̂ (`magnitude`) fits a fault
+//! older than the window with the transient of one starting inside it and shrinks while
+//! the fault persists, so a dashboard that plots it reads a constant fault as a fading
+//! one. At the crossing itself the follow has not begun, and `episode` is the alarm's
+//! onset and magnitude. A detector that follows no onset (`chi2`) gives none. Nothing
+//! is allocated for it but the record's own vector.
+//!
 //! # Sparse diagnosis
 //!
 //! When the channel's `[channels.diagnosis]` table enables it, a [`DiagnosisEngine`]
@@ -65,8 +78,8 @@ use glrmon_core::{
     StepOutput,
 };
 use glrmon_wire::{
-    Alarm, AlarmEnd, ErrorCode, ErrorRecord, IsolationResult, IsolationUpdate, Record, Sample,
-    Stage, Stat,
+    Alarm, AlarmEnd, EpisodeEstimate, ErrorCode, ErrorRecord, IsolationResult, IsolationUpdate,
+    Record, Sample, Stage, Stat,
 };
 
 /// An isolation test: a named group of faults tested against all others (minmax,
@@ -169,6 +182,9 @@ pub struct Monitor {
     /// The isolation update the current episode's alarm announced.
     pending: Option<PendingUpdate>,
     reported_onset: u64,
+    /// The onset the detector follows for the episode going on (the last reported r̂
+    /// it could follow), whose estimate the `stat` records carry.
+    episode_onset: Option<u64>,
     counters: MonitorCounters,
     arrivals: u64,
     /// The time of the last processed sample, for an episode cut by a sequence reset.
@@ -242,6 +258,7 @@ impl Monitor {
             out,
             pending: None,
             reported_onset: 0,
+            episode_onset: None,
             counters: MonitorCounters::default(),
             arrivals: 0,
             last_t: None,
@@ -382,8 +399,17 @@ impl Monitor {
         self.alarm.is_active()
     }
 
-    /// The `stat` record of the step just taken at k.
+    /// The `stat` record of the step just taken at k, with the estimate of the episode
+    /// going on, if any.
     fn push_stat(&self, k: u64, t: Option<f64>, records: &mut Vec<Record>) {
+        let episode = self
+            .episode_onset
+            .filter(|_| self.alarm.is_active())
+            .zip(self.detector.followed_magnitude())
+            .map(|(onset, magnitude)| EpisodeEstimate {
+                onset,
+                magnitude: magnitude.to_vec(),
+            });
         records.push(Record::Stat(Stat {
             channel: self.channel.clone(),
             k,
@@ -398,7 +424,7 @@ impl Monitor {
             rank: self.out.rank,
             innovation: self.out.innovation.iter().copied().collect(),
             threshold: Some(self.settings.tuning.alarm.threshold),
-            episode: None,
+            episode,
         }));
     }
 
@@ -480,10 +506,22 @@ impl Monitor {
         self.last_t = sample.t;
         self.check_consistency(k, sample.t, records);
         self.step_diagnosis(&core_sample, records);
-        if self.stat_records {
+        let stat_at = self.stat_records.then(|| {
             self.push_stat(k, sample.t, records);
+            records.len() - 1
+        });
+        if let Some(onset) = self.follow_alarm(k, sample.t, records)
+            && self.episode_onset == Some(onset)
+            && let Some(Record::Stat(stat)) = stat_at.and_then(|i| records.get_mut(i))
+        {
+            // An episode began at this sample, after its stat, and its onset is
+            // followed: the crossing's estimate is the alarm's (the follow measures from
+            // the next sample on).
+            stat.episode = Some(EpisodeEstimate {
+                onset,
+                magnitude: stat.magnitude.clone(),
+            });
         }
-        self.follow_alarm(k, sample.t, records);
     }
 
     /// Checks sample index k against the last processed one: a restart of the
@@ -725,8 +763,9 @@ impl Monitor {
     }
 
     /// The alarm episode after the step at k: `alarm` at the crossing, `alarm_end`,
-    /// and the announced isolation update when its sample has come.
-    fn follow_alarm(&mut self, k: u64, t: Option<f64>, records: &mut Vec<Record>) {
+    /// and the announced isolation update when its sample has come. The onset of an
+    /// alarm raised at k, if one was.
+    fn follow_alarm(&mut self, k: u64, t: Option<f64>, records: &mut Vec<Record>) -> Option<u64> {
         let followed = if self.alarm.is_active() {
             self.detector.followed()
         } else {
@@ -736,13 +775,14 @@ impl Monitor {
         // (a fault going on), not that a new one began: the alarm state sees none.
         let w = self.detector.memory() as u64;
         let onset = self.out.onset.filter(|&r| k.saturating_sub(r) + 1 < w);
+        let mut alarm = None;
         match (self.alarm).update_followed(k, self.out.glr, onset, followed) {
-            AlarmTransition::Started => self.emit_alarm(k, t, records),
+            AlarmTransition::Started => alarm = self.emit_alarm(k, t, records),
             AlarmTransition::Replaced { started, peak } => {
                 // A new change while the episode's fault had no evidence left: the
                 // episode ends here and the crossing is the next one's alarm.
                 self.end_episode(k, t, started, peak, records);
-                self.emit_alarm(k, t, records);
+                alarm = self.emit_alarm(k, t, records);
             }
             AlarmTransition::Ended { started, peak } => {
                 self.end_episode(k, t, started, peak, records);
@@ -760,6 +800,7 @@ impl Monitor {
             self.pending = None;
             self.emit_update(p, k, t, glr, onset, records);
         }
+        alarm
     }
 
     /// The `alarm_end` of the episode that started at `started` with peak l_k `peak`,
@@ -774,6 +815,7 @@ impl Monitor {
         records: &mut Vec<Record>,
     ) {
         self.detector.follow(None);
+        self.episode_onset = None;
         self.pending = None;
         records.push(Record::AlarmEnd(AlarmEnd {
             channel: self.channel.clone(),
@@ -786,11 +828,11 @@ impl Monitor {
     }
 
     /// The `alarm` record of the crossing at k (l_k > λ just started an episode), its
-    /// isolation at the current r̂, and the update it announces.
-    fn emit_alarm(&mut self, k: u64, t: Option<f64>, records: &mut Vec<Record>) {
+    /// isolation at the current r̂, and the update it announces; its onset r̂.
+    fn emit_alarm(&mut self, k: u64, t: Option<f64>, records: &mut Vec<Record>) -> Option<u64> {
         self.pending = None;
         let (Some(glr), Some(onset)) = (self.out.glr, self.out.onset) else {
-            return;
+            return None;
         };
         self.counters.alarms += 1;
         self.reported_onset = onset;
@@ -815,17 +857,16 @@ impl Monitor {
             update_k,
         }));
         self.diagnose(k, onset, records);
+        Some(onset)
     }
 
-    /// Follows the fault from onset r̂ past the window when episodes end on its
-    /// evidence ([`EpisodeEnd::FaultGone`]); a kind that cannot follow one ends them
-    /// on l_k.
+    /// Follows the fault from onset r̂ past the window: episodes end on its evidence
+    /// under [`EpisodeEnd::FaultGone`] (a kind that cannot follow one ends them on
+    /// l_k), and under either rule the `stat` records carry its estimate. The
+    /// evidence does not change an episode that ends below the threshold.
     fn follow_fault(&mut self, onset: u64) {
-        if matches!(
-            self.settings.tuning.episode_end,
-            EpisodeEnd::FaultGone { .. }
-        ) {
-            self.detector.follow(Some(onset));
+        if self.detector.follow(Some(onset)) {
+            self.episode_onset = Some(onset);
         }
     }
 
@@ -1012,6 +1053,7 @@ impl Monitor {
             self.end_episode(k, t, started, peak, records);
         }
         self.pending = None;
+        self.episode_onset = None;
         self.counters.restarts += 1;
         if let Some(c) = &mut self.consistency {
             c.reset_block();
