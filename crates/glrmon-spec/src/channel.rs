@@ -239,6 +239,12 @@ pub struct Channel {
     pub dims: Dims,
     /// The model.
     pub model: Lpv,
+    /// How the model's F, G (and Q) were computed from a state equation written in
+    /// continuous time (`model.A`, `B`, `Qc` with `period`: a zero-order hold, Q by Van
+    /// Loan's method): the period, A, B, Qc, the results, and F's eigenvalues; its
+    /// `Display` is a one-line summary for reports (period, method, eigenvalues of F,
+    /// stability, time constants). `None` for a model written in discrete time.
+    pub discretised: Option<glrmon_core::Discretisation>,
     /// Unknown-input matrix E (n×q, constant or LPV), if given.
     pub unknown_input: Option<LpvMatrix>,
     /// Cross-covariance S = E(W_kV_kᵀ) (n×p) of the noises, if given.

@@ -379,7 +379,7 @@ expressions, limits) is checked by `glrmon validate`.
 
 [[channels]]            # one table per channel
 name = "tank"
-[channels.model]        #   required: F, H, Q, R (G, J, E, S, x0, P0)
+[channels.model]        #   required: F, H, Q, R (G, J, E, S, x0, P0); or A, B, Qc
 [channels.scaling]      #   optional: natural units
 [channels.columns]      #   optional: signal names (CSV columns) and units
 [[channels.faults]]     #   the fault dictionary, one table per fault
@@ -482,10 +482,40 @@ innovation model (`glrmon identify` writes Q = K·Re·Kᵀ, R = Re, S = K·Re). 
 positive definite. A constant matrix that misses by rounding only (its smallest
 eigenvalue is negative by at most 10⁻⁹ of its spectral radius) is repaired with a warning.
 
+**Continuous-time models (`A`, `B`, `Qc`).** A model from physics,
+dx/dt = A x + B u + w with E[w(t)w(s)ᵀ] = Qc·δ(t − s), may be written as it is: `A`
+(n×n, in 1/s), `B` (n×l) and `Qc` (n×n, the noise intensity, in state units² per
+second) instead of `F`, `G`, `Q`, with the channel's `period` T in seconds, which is
+then required. When the file is read the model is sampled with a zero-order hold (each
+input held over the period, as a control system holds a set value): F = e^{AT} and
+G = ∫₀ᵀ e^{As} ds·B from one matrix exponential of [[A, B], [0, 0]]·T, and
+Q = ∫₀ᵀ e^{As}·Qc·e^{Aᵀs} ds by Van Loan's method (1978); every command then works
+with that F, G, Q. The output equation is a point sample at t = kT and is not
+discretised: H, J and R keep their meaning, R being the variance of each sample's
+measurement noise (a continuous measurement-noise intensity means nothing for point
+samples without an anti-alias filter), and so do E, S, x0, P0 and the `psi`, `phi`
+fault columns (per sample). Each key excludes its discrete counterpart (F and A, G and
+B, Q and Qc: an error names both). `A` cannot be an LPV table (e^{A(p)T} is not affine
+in p); `B` and `Qc` can (G and Q are linear in them). With `A`, a `Q` may be given
+instead of `Qc`: the covariance per sample, as `glrmon identify --model` estimates it.
+
+```toml
+[[channels]]
+name = "tank"
+period = 20.0              # s
+[channels.model]
+A = [[-1.667e-3]]          # 1/s: a time constant of 600 s
+B = [[0.0556]]             # cm/s per m³/h: 1 m³/h into 0.5 m²
+Qc = 1.5e-4                # cm²/s
+H = [[1.0]]
+R = 0.04                   # cm², per sample
+```
+
 **Natural units (`[channels.scaling]`).** The model may be written in scaled units:
 each sample's raw inputs and outputs become (raw − offset) / scale on intake (and the
 simulator inverts this). `u_offset`, `u_scale` have l entries, `y_offset`, `y_scale` p;
-a missing list means offsets 0 or scales 1.
+a missing list means offsets 0 or scales 1. Q, Qc, R and P0 are in model units: a
+scale s turns a raw-unit variance σ² into σ²/s².
 
 ```toml
 [channels.scaling]

@@ -275,7 +275,9 @@ pub struct ChannelSpec {
     /// format docs/WIRE.md describes). Default `json`.
     #[schemars(extend("enum" = ["json"]))]
     pub payload: Option<String>,
-    /// Sample period in seconds; informative only (reports). Default: none.
+    /// Sample period in seconds (finite, positive): turns sample counts into times in
+    /// reports, and discretises a continuous-time model (`model.A`), for which it is
+    /// required. Default: none.
     pub period: Option<f64>,
     /// Number q of exogenous (scheduling) signals p0…p{q−1} per sample (at most 1024).
     /// Default: the highest index used in the model and expressions + 1.
@@ -316,15 +318,22 @@ pub struct ChannelSpec {
 /// `[channels.model]`: the model matrices, letters of Zhang & Basseville 2014,
 /// eq. (1): X_{k+1} = F X_k + G U_k + W_k + Ψ_k(r)·θ,
 /// Y_k = H X_k + J U_k + V_k + Φ_k(r)·θ, with cov(W) = Q, cov(V) = R. Each matrix is a
-/// scalar (times I, square matrices only), rows, or an LPV table.
+/// scalar (times I, square matrices only), rows, or an LPV table. The state equation
+/// may instead be written in continuous time, dx/dt = A x + B u + w with
+/// E[w(t)w(s)ᵀ] = Qc·δ(t − s): `A`, `B`, `Qc` in place of `F`, `G`, `Q`, discretised
+/// when the file is read with the channel's `period` T and a zero-order hold
+/// (F = e^{AT}, G = ∫₀ᵀ e^{As} ds·B, Q = ∫₀ᵀ e^{As}·Qc·e^{Aᵀs} ds), so that every tool
+/// sees an ordinary F, G, Q. H, J, R, E, S, x0 and P0 keep their meaning in both forms:
+/// the output equation is a point sample at t = kT and is not discretised.
 #[derive(Debug, Clone, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ModelSpec {
-    /// F: state transition, n×n (n states, at most 128). Required.
+    /// F: state transition, n×n (n states, at most 128). Default: none (required, unless
+    /// the continuous-time `A` is given instead).
     #[serde(rename = "F")]
-    pub f: MatrixSpec,
+    pub f: Option<MatrixSpec>,
     /// G: known-input matrix, n×l (l inputs, at most 64). Default: absent, no known
-    /// input enters the state.
+    /// input enters the state. Not with `A` (give `B`).
     #[serde(rename = "G")]
     pub g: Option<MatrixSpec>,
     /// H: output matrix, p×n (p outputs, at most 64). Required.
@@ -334,11 +343,13 @@ pub struct ModelSpec {
     #[serde(rename = "J")]
     pub j: Option<MatrixSpec>,
     /// Q: process-noise covariance cov(W_k), n×n, symmetric positive semi-definite; a
-    /// scalar q means q·I. Required. A constant Q whose smallest eigenvalue is negative
-    /// by at most `PSD_TOLERANCE` (1e-9) × its spectral radius (a rounded printout) is
-    /// replaced by the nearest PSD matrix, with a warning.
+    /// scalar q means q·I. A constant Q whose smallest eigenvalue is negative by at most
+    /// `PSD_TOLERANCE` (1e-9) × its spectral radius (a rounded printout) is replaced by
+    /// the nearest PSD matrix, with a warning. With `A`, a Q given instead of `Qc` is
+    /// the covariance per sample (as `glrmon identify --model` estimates it). Default:
+    /// none (required, unless `A` and `Qc` are given).
     #[serde(rename = "Q")]
-    pub q: MatrixSpec,
+    pub q: Option<MatrixSpec>,
     /// R: measurement-noise covariance cov(V_k), p×p, symmetric positive definite; a
     /// scalar r means r·I. Required. A constant R within `PSD_TOLERANCE` of that has its
     /// small eigenvalues raised to `PSD_TOLERANCE` × λ_max, with a warning.
@@ -362,6 +373,26 @@ pub struct ModelSpec {
     /// matrices as for R). Default: the identity I.
     #[serde(rename = "P0")]
     pub p0: Option<MatrixSpec>,
+    /// A: continuous-time state matrix of dx/dt = A x + B u + w, n×n, in 1/s (the
+    /// model's time unit is the second, as `period`'s), instead of F: F = e^{AT} with the
+    /// channel's `period` T, which is then required. Constant: an LPV table is refused
+    /// (e^{A(p)T} is not affine in p). Default: none (a discrete-time model).
+    #[serde(rename = "A")]
+    pub a: Option<MatrixSpec>,
+    /// B: continuous-time input matrix, n×l, in state units per second per input unit,
+    /// with `A`, instead of G: G = ∫₀ᵀ e^{As} ds·B (the inputs held over each period, a
+    /// zero-order hold). May be an LPV table (G is then too, exactly). Default: absent,
+    /// no known input enters the state.
+    #[serde(rename = "B")]
+    pub b: Option<MatrixSpec>,
+    /// Qc: continuous process-noise intensity (power spectral density) of w,
+    /// E[w(t)w(s)ᵀ] = Qc·δ(t − s), n×n, symmetric positive semi-definite, in state
+    /// units² per second; a scalar q means q·I. With `A`, instead of Q:
+    /// Q = ∫₀ᵀ e^{As}·Qc·e^{Aᵀs} ds (Van Loan 1978), about Qc·T for a period short
+    /// next to the time constants. May be an LPV table. Default: none (then Q is
+    /// required).
+    #[serde(rename = "Qc")]
+    pub qc: Option<MatrixSpec>,
 }
 
 /// `[channels.scaling]`: model value = (raw value − offset) / scale, per input and

@@ -28,6 +28,8 @@ const TEMPLATE: &str = r#"# glrmon configuration. Reference of every key: docs/C
 #   X_{k+1} = F X_k + G U_k + W_k + Psi_k(r) theta      cov(W) = Q
 #   Y_k     = H X_k + J U_k + V_k + Phi_k(r) theta      cov(V) = R
 # Matrices are written row by row: [[1.0, 0.0]] is 1x2; a number s means s*I.
+# The state equation may be written in continuous time instead, dx/dt = A x + B u + w
+# (A, B, Qc for F, G, Q; discretised with the channel's period, see [channels.model]).
 
 # [zenoh]                            # Zenoh session (glrmon run, watch, status)
 # config = "zenoh.json5"             # a Zenoh JSON5 file; default: none
@@ -71,7 +73,7 @@ const TEMPLATE: &str = r#"# glrmon configuration. Reference of every key: docs/C
 name = "@NAME@"
 # key = "@KEY@"                      # Zenoh key of the samples
 # payload = "json"                   # how the samples are encoded (docs/WIRE.md)
-# period = 0.1                       # seconds, informative
+# period = 0.1                       # seconds; required with A (continuous time)
 # signals = 0                        # scheduling signals p0...; default: highest used + 1
 
 [channels.model]                     # n = 2 states, l = 1 input, p = 2 outputs
@@ -86,6 +88,10 @@ R = 0.04
 # x0 = [0.0, 0.0]                    # default: zeros
 # P0 = 1.0                           # default: I
 # An LPV matrix: F = { base = [[0.9, 0.1], [0.0, 0.8]], p0 = [[0.0, 0.0], [0.0, 0.1]] }
+# In continuous time instead of F, G, Q (needs period; F = e^(A*T), G, Q computed):
+# A = [[-1.0, 1.0], [0.0, -2.0]]     # 1/s
+# B = [[0.0], [1.0]]                 # per second
+# Qc = 0.1                           # noise intensity per second, 0.1 * I
 
 # [channels.scaling]                 # model value = (raw - offset) / scale
 # u_offset = [0.0]
@@ -97,6 +103,9 @@ R = 0.04
 # u = ["valve"]
 # y = ["level", "flow"]
 # p = []
+# u_units = ["%"]                    # raw units, shown in reports; default: none
+# y_units = ["cm", "m3/h"]
+# p_units = []
 
 [[channels.faults]]
 name = "level_bias"

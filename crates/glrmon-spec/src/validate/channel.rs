@@ -21,7 +21,7 @@ impl Validator {
             self.error(join(prefix, "name"), e);
         }
         self.glr_ranges(prefix, &spec.glr);
-        let m = self.model(prefix, &spec.model)?;
+        let m = self.model(prefix, &spec.model, spec.period)?;
         let diagnosis = self.diagnosis(prefix, spec, &m.h, m.e.as_ref().map(LpvMatrix::base));
         let dims = self.dims(prefix, spec.signals, &m)?;
         let scaling = spec
@@ -49,6 +49,7 @@ impl Validator {
             cross,
             p0,
             x0,
+            discretised,
         } = m;
         let lpv = match Lpv::new(f, g, h, j, q, r, dims.signals) {
             Ok(model) => model,
@@ -79,6 +80,7 @@ impl Validator {
             period: spec.period,
             dims,
             model: lpv,
+            discretised,
             unknown_input: e,
             cross_covariance: cross,
             scaling,

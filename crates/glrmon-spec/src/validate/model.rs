@@ -1,7 +1,13 @@
 //! The model step of a channel (`[channels.model]`): F and H, G and J, the noise
 //! covariances Q and R, the initial state, E and S, each against the shapes the others
 //! imply; then the dimensions, and the model's observability.
+//!
+//! A state equation written in continuous time (A, B, Qc with the channel's `period`)
+//! goes through the same checks under its own letters, and is then discretised with a
+//! zero-order hold ([`glrmon_core::model::continuous`]): everything after this step sees
+//! F, G and Q.
 
+use glrmon_core::model::continuous::{self, ContinuousError, Discretisation};
 use glrmon_core::{Dims, Lpv, LpvMatrix};
 use nalgebra::{DMatrix, DVector};
 
@@ -26,17 +32,62 @@ pub(super) struct Matrices {
     pub(super) p0: Option<LpvMatrix>,
     /// X̂_0 (zeros when not given or refused).
     pub(super) x0: DVector<f64>,
+    /// How F, G (and Q) were computed from a continuous-time model, if it was one.
+    pub(super) discretised: Option<Discretisation>,
+}
+
+/// How the state equation is written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Form {
+    /// X_{k+1} = F X_k + G U_k + W_k, cov(W_k) = Q.
+    Discrete,
+    /// dx/dt = A x + B u + w, E[w(t)w(s)ᵀ] = Qc δ(t − s), sampled every `period` s.
+    Continuous,
+}
+
+impl Form {
+    /// The letters of the state and input matrices as written.
+    fn letters(self) -> (&'static str, &'static str) {
+        match self {
+            Form::Discrete => ("F", "G"),
+            Form::Continuous => ("A", "B"),
+        }
+    }
 }
 
 impl Validator {
     /// The model's matrices; `None` when F, H, G or J is refused or Q or R cannot be
-    /// read, since the shapes of the rest (and of the faults) derive from them.
-    pub(super) fn model(&mut self, prefix: &str, model: &ModelSpec) -> Option<Matrices> {
-        // Dimensions: n from F (or H), p from H, l from G (or J).
-        let (f, h) = self.state_and_outputs(prefix, model)?;
+    /// read, since the shapes of the rest (and of the faults) derive from them. A
+    /// continuous-time model (A, B, Qc) is checked the same way under its letters and
+    /// discretised with the channel's `period`.
+    pub(super) fn model(
+        &mut self,
+        prefix: &str,
+        model: &ModelSpec,
+        period: Option<f64>,
+    ) -> Option<Matrices> {
+        if let Some(t) = period
+            && !(t.is_finite() && t > 0.0)
+        {
+            self.error(
+                join(prefix, "period"),
+                format!("is {t}: the sample period must be a finite, positive number of seconds"),
+            );
+        }
+        let form = self.form(prefix, model)?;
+        // Dimensions: n from F or A (or H), p from H, l from G or B (or J).
+        let (f, h) = self.state_and_outputs(prefix, model, form)?;
         let (n, p) = (f.shape().0, h.shape().0);
-        let (g, j) = self.inputs(prefix, model, n, p)?;
-        let (q, r) = self.noise(prefix, model, n, p)?;
+        let (g, j) = self.inputs(prefix, model, form, n, p)?;
+        let (q, r) = self.noise(prefix, model, form, n, p)?;
+        let (f, g, q, discretised) = match form {
+            Form::Discrete => (f, g, q, None),
+            Form::Continuous => {
+                let (f, g, q, d) =
+                    self.discretise(prefix, period, (&f, &g, &q), model.qc.is_some())?;
+                (f, g, q, Some(d))
+            }
+        };
         let (p0, x0) = self.initial_state(prefix, model, n);
         let e = model
             .e
@@ -56,22 +107,126 @@ impl Validator {
             cross,
             p0,
             x0,
+            discretised,
         })
     }
 
-    /// F and H: F square and non-empty, H with n columns and at least one row, and n
-    /// and p within the limits.
+    /// Which form the state equation is written in: F (with G, Q) or A (with B, Qc or
+    /// Q). Each key of the other form, and each pair given twice (F and A, G and B, Q
+    /// and Qc), is an error naming both; so is a missing F or A, Q or Qc.
+    fn form(&mut self, prefix: &str, model: &ModelSpec) -> Option<Form> {
+        let before = self.errors.len();
+        let path = |key: &str| join(prefix, &format!("model.{key}"));
+        let form = if model.a.is_some() {
+            Form::Continuous
+        } else {
+            Form::Discrete
+        };
+        if form == Form::Continuous {
+            if model.f.is_some() {
+                self.error(
+                    path("A"),
+                    "is given with model.F: write the state equation either in discrete time \
+                     (F, G, Q) or in continuous time (A, B, Qc, discretised with the channel's \
+                     `period`), not both"
+                        .into(),
+                );
+            }
+            if model.g.is_some() {
+                let why = if model.b.is_some() {
+                    "is given with model.B: with the continuous-time model.A give B only \
+                     (G = ∫₀ᵀ e^{As} ds·B is computed from it)"
+                } else {
+                    "is the discrete-time input matrix but the model is written in continuous \
+                     time (model.A): give B instead (G = ∫₀ᵀ e^{As} ds·B is computed from it)"
+                };
+                self.error(path("G"), why.into());
+            }
+            if model.q.is_some() && model.qc.is_some() {
+                self.error(
+                    path("Qc"),
+                    "is given with model.Q: give the continuous intensity Qc (Q = \
+                     ∫₀ᵀ e^{As}·Qc·e^{Aᵀs} ds is computed from it) or the discrete Q per sample, \
+                     not both"
+                        .into(),
+                );
+            }
+            if model.q.is_none() && model.qc.is_none() {
+                self.error(
+                    path("Qc"),
+                    "is required with model.A: the process-noise intensity (or Q, the \
+                     covariance per sample)"
+                        .into(),
+                );
+            }
+        } else {
+            if model.f.is_none() {
+                self.error(
+                    path("F"),
+                    "is required: the state transition matrix (or model.A, to write the state \
+                     equation in continuous time)"
+                        .into(),
+                );
+            }
+            if model.b.is_some() {
+                let why = if model.g.is_some() {
+                    "is given with model.G: B is the continuous-time input matrix and needs \
+                     model.A; with model.F give G only"
+                } else {
+                    "is the continuous-time input matrix (dx/dt = A x + B u) and needs \
+                     model.A: with model.F, give the discrete G"
+                };
+                self.error(path("B"), why.into());
+            }
+            if model.qc.is_some() {
+                let why = if model.q.is_some() {
+                    "is given with model.Q: Qc is a continuous-time noise intensity and needs \
+                     model.A; with model.F give Q only"
+                } else {
+                    "is a continuous-time noise intensity and needs model.A: with model.F, \
+                     give the discrete Q"
+                };
+                self.error(path("Qc"), why.into());
+            } else if model.q.is_none() {
+                self.error(
+                    path("Q"),
+                    "is required: the process-noise covariance cov(W_k)".into(),
+                );
+            }
+        }
+        (self.errors.len() == before).then_some(form)
+    }
+
+    /// F (or A) and H: F square and non-empty, H with n columns and at least one row,
+    /// and n and p within the limits; A constant.
     fn state_and_outputs(
         &mut self,
         prefix: &str,
         model: &ModelSpec,
+        form: Form,
     ) -> Option<(LpvMatrix, LpvMatrix)> {
+        let (name, _) = form.letters();
+        let spec = match form {
+            Form::Discrete => model.f.as_ref(),
+            Form::Continuous => model.a.as_ref(),
+        }?;
+        let field = format!("model.{name}");
         let h = self.matrix(prefix, "H", &model.h, None);
         let n_hint = h.as_ref().map(|h| h.shape().1);
-        let f = self.matrix(prefix, "F", &model.f, n_hint);
+        let f = self.matrix(prefix, name, spec, n_hint);
         let (Some(f), Some(h)) = (f, h) else {
             return None;
         };
+        if form == Form::Continuous && !f.terms().is_empty() {
+            self.error(
+                join(prefix, &field),
+                "cannot depend on scheduling signals: F = e^{A(p)T} is not affine in p, so \
+                 it would not be an LPV table; discretise A(p) at the scheduling points you \
+                 need and write an LPV F (with G, Q) fitted to them"
+                    .into(),
+            );
+            return None;
+        }
         let (n, n2) = f.shape();
         if n != n2 || n == 0 {
             let hc = h.shape().1;
@@ -80,13 +235,13 @@ impl Validator {
             } else {
                 format!("is {n}×{n2}: it must be square and non-empty")
             };
-            self.error(join(prefix, "model.F"), why);
+            self.error(join(prefix, &field), why);
             return None;
         }
         let p = h.shape().0;
         if h.shape().1 != n {
             self.error(
-                join(prefix, "model.F"),
+                join(prefix, &field),
                 format!("is {n}×{n} but H has {} columns", h.shape().1),
             );
             return None;
@@ -98,25 +253,28 @@ impl Validator {
             );
             return None;
         }
-        if !self.dimension_limits(prefix, n, p) {
+        if !self.dimension_limits(prefix, name, n, p) {
             return None;
         }
         Some((f, h))
     }
 
-    /// G and J: l from G (or J), no inputs when neither is given; G n×l and J p×l,
-    /// and l within the limits.
+    /// G (or B) and J: l from G (or J), no inputs when neither is given; G n×l and J
+    /// p×l, and l within the limits.
     fn inputs(
         &mut self,
         prefix: &str,
         model: &ModelSpec,
+        form: Form,
         n: usize,
         p: usize,
     ) -> Option<(LpvMatrix, LpvMatrix)> {
-        let g = model
-            .g
-            .as_ref()
-            .and_then(|g| self.matrix(prefix, "G", g, None));
+        let (state, name) = form.letters();
+        let spec = match form {
+            Form::Discrete => model.g.as_ref(),
+            Form::Continuous => model.b.as_ref(),
+        };
+        let g = spec.and_then(|g| self.matrix(prefix, name, g, None));
         let j = model
             .j
             .as_ref()
@@ -126,7 +284,7 @@ impl Validator {
             .map(|g| g.shape().1)
             .or(j.as_ref().map(|j| j.shape().1))
             .unwrap_or(0);
-        if (model.g.is_some() && g.is_none()) || (model.j.is_some() && j.is_none()) {
+        if (spec.is_some() && g.is_none()) || (model.j.is_some() && j.is_none()) {
             // The error is recorded; l is unknown, so nothing below can be checked.
             return None;
         }
@@ -136,10 +294,10 @@ impl Validator {
         // mismatch ends the channel's checks here instead of panicking in nalgebra.
         let g_ok = self.shape(
             prefix,
-            "G",
+            name,
             &g,
             (n, l),
-            &format!("F is {n}×{n} and there are {l} inputs"),
+            &format!("{state} is {n}×{n} and there are {l} inputs"),
         );
         let j_ok = self.shape(
             prefix,
@@ -153,7 +311,7 @@ impl Validator {
         }
         if l > limits::MAX_INPUTS {
             self.error(
-                join(prefix, "model.G"),
+                join(prefix, &format!("model.{name}")),
                 format!(
                     "has {l} columns (inputs): at most {} (limits::MAX_INPUTS)",
                     limits::MAX_INPUTS
@@ -164,19 +322,27 @@ impl Validator {
         Some((g, j))
     }
 
-    /// Q (n×n, positive semi-definite) and R (p×p, positive definite), each replaced
-    /// by its projection when it is only near that (see [`Validator::covariance`]).
+    /// Q or Qc (n×n, positive semi-definite) and R (p×p, positive definite), each
+    /// replaced by its projection when it is only near that (see
+    /// [`Validator::covariance`]).
     fn noise(
         &mut self,
         prefix: &str,
         model: &ModelSpec,
+        form: Form,
         n: usize,
         p: usize,
     ) -> Option<(LpvMatrix, LpvMatrix)> {
-        let mut q = self.matrix(prefix, "Q", &model.q, Some(n))?;
+        let (state, _) = form.letters();
+        let (name, spec) = match (&model.qc, &model.q) {
+            (Some(qc), _) => ("Qc", qc),
+            (None, Some(q)) => ("Q", q),
+            (None, None) => return None,
+        };
+        let mut q = self.matrix(prefix, name, spec, Some(n))?;
         let mut r = self.matrix(prefix, "R", &model.r, Some(p))?;
-        if self.shape(prefix, "Q", &q, (n, n), &format!("F is {n}×{n}"))
-            && let Some(projected) = self.covariance(prefix, "Q", &q, false)
+        if self.shape(prefix, name, &q, (n, n), &format!("{state} is {n}×{n}"))
+            && let Some(projected) = self.covariance(prefix, name, &q, false)
         {
             q = projected;
         }
@@ -339,12 +505,90 @@ impl Validator {
         Some(s)
     }
 
-    /// n and p within [`limits::MAX_STATES`] and [`limits::MAX_OUTPUTS`].
-    fn dimension_limits(&mut self, prefix: &str, n: usize, p: usize) -> bool {
+    /// The continuous-time A, B and Qc (or Q as given) → F, G and Q, with the channel's
+    /// `period` T and a zero-order hold ([`Discretisation::zero_order_hold`]). An LPV B
+    /// or Qc gives an LPV G or Q exactly: G = ∫₀ᵀ e^{As} ds·B and Q are linear in B and
+    /// Qc, so each term M_i becomes its own discretisation (A is constant).
+    fn discretise(
+        &mut self,
+        prefix: &str,
+        period: Option<f64>,
+        (a, b, noise): (&LpvMatrix, &LpvMatrix, &LpvMatrix),
+        noise_is_intensity: bool,
+    ) -> Option<(LpvMatrix, LpvMatrix, LpvMatrix, Discretisation)> {
+        let Some(t) = period else {
+            self.error(
+                join(prefix, "period"),
+                "is required with a continuous-time model (model.A): the sample period T \
+                 in seconds, over which F = e^{AT}, G and Q are computed"
+                    .into(),
+            );
+            return None;
+        };
+        if !(t.is_finite() && t > 0.0) {
+            return None; // reported by `model`
+        }
+        let a = a.base();
+        let qc = noise_is_intensity.then(|| noise.base());
+        let fail = |v: &mut Self, e: ContinuousError| {
+            let field = match &e {
+                ContinuousError::Period { .. } => "period".to_owned(),
+                ContinuousError::Dimension { what, .. }
+                | ContinuousError::NonFinite { what }
+                | ContinuousError::NotSymmetric { what, .. } => format!("model.{what}"),
+                _ => "model.A".to_owned(),
+            };
+            v.error(join(prefix, &field), format!("{e} (T = {t} s)"));
+        };
+        let d = match Discretisation::zero_order_hold(a, b.base(), qc, t) {
+            Ok(d) => d,
+            Err(e) => {
+                fail(self, e);
+                return None;
+            }
+        };
+        let mut g_terms = Vec::new();
+        for (i, bi) in b.terms() {
+            match continuous::zero_order_hold(a, bi, t) {
+                Ok((_, gi)) => g_terms.push((*i, gi)),
+                Err(e) => {
+                    fail(self, e);
+                    return None;
+                }
+            }
+        }
+        let q = if let Some(q0) = d.q() {
+            let mut q_terms = Vec::new();
+            for (i, qci) in noise.terms() {
+                match continuous::process_noise(a, qci, t) {
+                    Ok(qi) => q_terms.push((*i, qi)),
+                    Err(e) => {
+                        fail(self, e);
+                        return None;
+                    }
+                }
+            }
+            LpvMatrix::new(q0.clone(), q_terms)
+        } else {
+            Ok(noise.clone())
+        };
+        let g = LpvMatrix::new(d.g().clone(), g_terms);
+        match (g, q) {
+            (Ok(g), Ok(q)) => Some((LpvMatrix::constant(d.f().clone()), g, q, d)),
+            (Err(e), _) | (_, Err(e)) => {
+                self.error(join(prefix, "model"), e.to_string());
+                None
+            }
+        }
+    }
+
+    /// n and p within [`limits::MAX_STATES`] and [`limits::MAX_OUTPUTS`]; `state` names
+    /// the matrix n comes from (F or A).
+    fn dimension_limits(&mut self, prefix: &str, state: &str, n: usize, p: usize) -> bool {
         let mut ok = true;
         if n > limits::MAX_STATES {
             self.error(
-                join(prefix, "model.F"),
+                join(prefix, &format!("model.{state}")),
                 format!(
                     "is {n}×{n}: at most {} states (limits::MAX_STATES)",
                     limits::MAX_STATES
