@@ -1,5 +1,7 @@
 //! Sample CSV files (numbered or named columns) and identification tables: any bytes
-//! give rows, bad rows or a header error, never a panic.
+//! give rows, bad rows or a header error, never a panic. The bytes are read as a whole
+//! file and, after a header whose time column holds ISO 8601 text (`timestamp`), as rows:
+//! any time is seconds since the epoch that are finite, or a bad row.
 #![no_main]
 
 use glrmon_core::Dims;
@@ -20,11 +22,20 @@ fuzz_target!(|data: &[u8]| {
         y: vec!["y0".into(), "TI 2".into()],
         p: vec![],
         named: true,
+        ..Columns::numbered(dims)
     };
+    let mut timed = b"timestamp,FI1,y0,TI 2\n".to_vec();
+    timed.extend_from_slice(data);
     for columns in [Columns::numbered(dims), named] {
-        if let Ok(mut rows) = CsvReader::with_columns(data, dims, &columns) {
-            let mut sample = Sample::default();
-            while rows.next_into(&mut sample).is_some() {}
+        for file in [data, &timed] {
+            if let Ok(mut rows) = CsvReader::with_columns(file, dims, &columns) {
+                let mut sample = Sample::default();
+                while let Some(row) = rows.next_into(&mut sample) {
+                    if row.is_ok() {
+                        assert!(sample.t.is_none_or(f64::is_finite));
+                    }
+                }
+            }
         }
     }
     let path = std::env::temp_dir().join(format!("glrmon-fuzz-table-{}.csv", std::process::id()));

@@ -1,5 +1,32 @@
 //! Sample CSV files: a header row, then one sample per row, columns `k` (optional),
-//! `t` (optional), `u0…`, `y0…`, `p0…`. Numbers only, no quoting.
+//! a time column (optional), `u0…`, `y0…`, `p0…`. Numbers only, no quoting, but for
+//! the time.
+//!
+//! # The time column
+//!
+//! The sample time `t` comes from the column named `t` or, in any case, `time`,
+//! `timestamp` or `datetime` (an export's name for it), unless the
+//! channel's `[channels.columns]` name that column as a signal. A file has at most one.
+//! Each of its values is either a number of seconds (`t = 12.5`, as written by
+//! [`write_row`]) or an ISO 8601 date and time, which becomes seconds since the Unix
+//! epoch, 1970-01-01T00:00:00Z:
+//!
+//! | value | t |
+//! |---|---|
+//! | `2026-11-27T08:00:20Z` | 1795766420 |
+//! | `2026-11-27T08:00:20.5+01:00` | 1795762820.5 (the offset applied: 07:00:20.5 UTC) |
+//! | `2026-11-27 08:00:20` | 1795766420 (no offset: taken as UTC) |
+//! | `2026-11-27T08:00` | 1795766400 |
+//! | `2026-11-27` | 1795737600 (midnight, UTC) |
+//!
+//! The date and the time are separated by `T` or a space; the fraction of a second by
+//! `.` or `,` (up to nanoseconds); the offset is `Z`, `±HH:MM`, `±HHMM` or `±HH`. A time
+//! without an offset is taken as UTC: a plant historian set to local time must export
+//! with its offset, or its times are off by it ([`CsvReader::naive_times`] tells whether
+//! the file had such times). A time zone name (`…[Europe/Paris]`), a time out of range
+//! (month 13, hour 25) or any other text is a bad row (`wrong_type`) naming the row, the
+//! column and why, like a bad number. Values are parsed from the line as they are, with
+//! no allocation (jiff's ISO 8601 parser).
 
 use std::fs::File;
 use std::io::{BufRead, BufReader, Write};
@@ -63,6 +90,8 @@ pub struct CsvReader<R> {
     line: String,
     row: u64,
     dims: Dims,
+    /// Whether a time without an offset was read (taken as UTC).
+    naive_times: bool,
 }
 
 /// A row that could not be turned into a sample: the monitor's answer to it is an
@@ -95,6 +124,13 @@ pub enum HeaderError {
     /// A column name that is none of `k`, `t`, `u<i>`, `y<i>`, `p<i>`.
     #[error("column \"{0}\" is not one of k, t, u<i>, y<i>, p<i>")]
     Unknown(String),
+    /// Two columns give the sample time (say `t` and `timestamp`): which to read would
+    /// be a guess.
+    #[error(
+        "columns \"{0}\" and \"{1}\" both give the sample time (t, time, timestamp, \
+         datetime): keep one"
+    )]
+    TwoTimes(String, String),
     /// A column beyond the channel's dimension (say `y3` for two outputs).
     #[error("column \"{column}\": the channel has {count} {what}")]
     OutOfRange {
@@ -182,6 +218,7 @@ impl<R: BufRead> CsvReader<R> {
     ///     y: vec!["TI205".into()],
     ///     p: vec![],
     ///     named: true,
+    ///     ..Columns::numbered(dims)
     /// };
     /// let file = "t,TI205,spare,FIC101\n0.5,71.2,9,3.1\n";
     /// let mut rows = CsvReader::with_columns(file.as_bytes(), dims, &columns)?;
@@ -201,9 +238,17 @@ impl<R: BufRead> CsvReader<R> {
             return Err(HeaderError::Empty);
         }
         let mut slots = Vec::new();
-        let mut names = Vec::new();
+        let mut names: Vec<String> = Vec::new();
         let mut seen = std::collections::HashSet::new();
         let separator = separator_of(header);
+        let mut time_at: Option<usize> = None;
+        let mut time = |name: &str, names: &[String]| match time_at {
+            Some(first) => Err(HeaderError::TwoTimes(names[first].clone(), name.to_owned())),
+            None => {
+                time_at = Some(names.len() - 1);
+                Ok(Slot::T)
+            }
+        };
         for name in header.split(separator).map(str::trim) {
             if !seen.insert(name.to_owned()) {
                 return Err(HeaderError::Duplicate(name.to_owned()));
@@ -213,12 +258,16 @@ impl<R: BufRead> CsvReader<R> {
                 let find = |list: &[String]| list.iter().position(|c| c == name);
                 let slot = match name {
                     "k" => Slot::K,
-                    "t" => Slot::T,
-                    _ => find(&columns.u)
+                    "t" => time(name, &names)?,
+                    _ => match find(&columns.u)
                         .map(Slot::U)
                         .or_else(|| find(&columns.y).map(Slot::Y))
                         .or_else(|| find(&columns.p).map(Slot::P))
-                        .unwrap_or(Slot::Skip),
+                    {
+                        Some(slot) => slot,
+                        None if is_time_column(name) => time(name, &names)?,
+                        None => Slot::Skip,
+                    },
                 };
                 slots.push(slot);
                 continue;
@@ -238,7 +287,7 @@ impl<R: BufRead> CsvReader<R> {
             };
             let slot = match name {
                 "k" => Slot::K,
-                "t" => Slot::T,
+                n if is_time_column(n) => time(n, &names)?,
                 n if n.starts_with('u') => Slot::U(index("u", dims.inputs, "inputs")?),
                 n if n.starts_with('y') => Slot::Y(index("y", dims.outputs, "outputs")?),
                 n if n.starts_with('p') => Slot::P(index("p", dims.signals, "signals")?),
@@ -259,7 +308,15 @@ impl<R: BufRead> CsvReader<R> {
             line: String::new(),
             row: 1,
             dims,
+            naive_times: false,
         })
+    }
+
+    /// Whether a time without a UTC offset (`2026-11-27 08:00:20`) was read so far:
+    /// such times are taken as UTC, which a caller may want to say once.
+    #[must_use]
+    pub fn naive_times(&self) -> bool {
+        self.naive_times
     }
 
     /// The next row into `sample`: `None` at the end of the file, `Some(Err)` for a bad
@@ -337,7 +394,32 @@ impl<R: BufRead> CsvReader<R> {
         for ((text, slot), name) in line.split(separator).zip(&self.slots).zip(&self.names) {
             let target: &mut f64 = match *slot {
                 Slot::K | Slot::Skip => continue,
-                Slot::T => sample.t.insert(0.0),
+                Slot::T => {
+                    // Seconds, else an ISO 8601 time.
+                    let text = text.trim();
+                    match parse_value(text, separator) {
+                        Ok(v) if v.is_finite() => sample.t = Some(v),
+                        Ok(_) => {
+                            let msg = format!("column {name}: \"{text}\" is not finite");
+                            return Some(Err(self.err(k, ErrorCode::NonFinite, msg)));
+                        }
+                        Err(_) => match parse_time(text) {
+                            Ok(time) => {
+                                self.naive_times |= time.naive;
+                                sample.t = Some(time.seconds);
+                            }
+                            Err(why) => {
+                                let msg = format!(
+                                    "column {name}: \"{text}\" is neither seconds nor an ISO \
+                                     8601 time (2026-11-27T08:00:20Z, 2026-11-27 \
+                                     08:00:20.5+01:00): {why}"
+                                );
+                                return Some(Err(self.err(k, ErrorCode::WrongType, msg)));
+                            }
+                        },
+                    }
+                    continue;
+                }
                 Slot::U(i) => &mut sample.u[i],
                 Slot::Y(i) => &mut sample.y[i],
                 Slot::P(i) => &mut sample.p[i],
@@ -372,6 +454,52 @@ impl<R: BufRead> CsvReader<R> {
             message: format!("row {}: {message}", self.row),
         }
     }
+}
+
+/// Whether a column of this name gives the sample time: `t`, or `time`, `timestamp` or
+/// `datetime` in any case (`Time`, `TIMESTAMP`), as exports name it.
+#[must_use]
+pub(crate) fn is_time_column(name: &str) -> bool {
+    name == "t"
+        || ["time", "timestamp", "datetime"]
+            .iter()
+            .any(|n| name.eq_ignore_ascii_case(n))
+}
+
+/// A time read from an ISO 8601 text.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Time {
+    /// Seconds since 1970-01-01T00:00:00Z.
+    pub(crate) seconds: f64,
+    /// The text had no UTC offset (taken as UTC).
+    pub(crate) naive: bool,
+}
+
+/// An ISO 8601 date and time (the module's table: `2026-11-27T08:00:20Z`,
+/// `2026-11-27 08:00:20`, `2026-11-27T08:00:20.5+01:00`, a date alone) as seconds since
+/// the Unix epoch; a time without an offset is UTC. Allocates nothing but for an error.
+///
+/// # Errors
+/// Why the text is not such a time (jiff's reason, or a time zone name given instead of
+/// an offset).
+pub(crate) fn parse_time(text: &str) -> Result<Time, String> {
+    use jiff::fmt::temporal::Pieces;
+    let pieces = Pieces::parse(text).map_err(|e| e.to_string())?;
+    if pieces.time_zone_annotation().is_some() {
+        return Err("a time zone name is not read: give the UTC offset (+01:00)".into());
+    }
+    let date_time = pieces
+        .date()
+        .to_datetime(pieces.time().unwrap_or(jiff::civil::Time::midnight()));
+    let offset = pieces.to_numeric_offset();
+    let instant = offset
+        .unwrap_or(jiff::tz::Offset::UTC)
+        .to_timestamp(date_time)
+        .map_err(|e| e.to_string())?;
+    Ok(Time {
+        seconds: instant.as_second() as f64 + f64::from(instant.subsec_nanosecond()) * 1e-9,
+        naive: offset.is_none(),
+    })
 }
 
 /// The field separator of a CSV file, from its header: `,` unless the header has
@@ -527,6 +655,152 @@ mod tests {
         // A decimal comma in a comma-separated file is a column too many, as before.
         let bad = read_all("k,t,u0,y0,y1,p0\n0,0,5,1,2,3,4\n".as_bytes()).unwrap();
         assert_eq!(bad[0].as_ref().unwrap_err().code, ErrorCode::WrongDimension);
+    }
+
+    /// Reads `text` with the numbered columns of [`DIMS`]: (t, message of a bad row).
+    fn times(text: &str) -> Vec<Result<Option<f64>, String>> {
+        read_all(text.as_bytes())
+            .unwrap()
+            .into_iter()
+            .map(|r| r.map(|s| s.t).map_err(|e| e.message))
+            .collect()
+    }
+
+    /// An export's ISO 8601 time column gives `t` in seconds since the Unix epoch, with
+    /// the offset applied and a time without one taken as UTC; a numeric time column
+    /// keeps giving seconds.
+    #[test]
+    fn iso_times_become_seconds_since_the_epoch() {
+        let t0 = 1_795_766_420.0; // 2026-11-27T08:00:20Z
+        let cases = [
+            ("2026-11-27T08:00:20Z", t0),
+            ("2026-11-27T08:00:20z", t0),
+            ("2026-11-27 08:00:20", t0),
+            ("2026-11-27t08:00:20", t0),
+            ("2026-11-27T08:00:20.5+01:00", t0 - 3600.0 + 0.5),
+            ("2026-11-27T08:00:20.25-0230", t0 + 9000.0 + 0.25),
+            ("2026-11-27T08:00:20+00", t0),
+            ("2026-11-27T08:00", t0 - 20.0),
+            ("2026-11-27", t0 - 8.0 * 3600.0 - 20.0),
+            ("1970-01-01T00:00:00Z", 0.0),
+            ("1969-12-31T23:59:59.5Z", -0.5),
+        ];
+        for name in ["t", "time", "Time", "timestamp", "TIMESTAMP", "datetime"] {
+            for (text, want) in cases {
+                let file = format!("{name},u0,y0,y1,p0\n{text},1,2,3,4\n");
+                assert_eq!(times(&file), [Ok(Some(want))], "{name}: {text}");
+            }
+        }
+        assert_eq!(times("time,u0,y0,y1,p0\n12.5,1,2,3,4\n"), [Ok(Some(12.5))]);
+        // A ';' export: a decimal comma in the seconds and in the time.
+        assert_eq!(
+            times("Time;u0;y0;y1;p0\n2026-11-27 08:00:20,5;1;2;3;4\n12,5;1;2;3;4\n"),
+            [Ok(Some(t0 + 0.5)), Ok(Some(12.5))]
+        );
+        let mut reader = CsvReader::new(
+            "timestamp,u0,y0,y1,p0\n2026-11-27T08:00:20Z,1,2,3,4\n2026-11-27 08:00:21,1,2,3,4\n"
+                .as_bytes(),
+            DIMS,
+        )
+        .unwrap();
+        let mut sample = Sample::default();
+        reader.next_into(&mut sample).unwrap().unwrap();
+        assert!(!reader.naive_times(), "an offset was given");
+        reader.next_into(&mut sample).unwrap().unwrap();
+        assert!(reader.naive_times(), "no offset: taken as UTC");
+    }
+
+    /// A malformed time is a bad row naming the row, the column and why, and reading
+    /// goes on.
+    #[test]
+    fn a_malformed_time_is_a_bad_row() {
+        let file = "k,timestamp,u0,y0,y1,p0\n\
+                    0,2026-11-27T08:00:20Z,1,2,3,4\n\
+                    1,2026-13-27T08:00:20Z,1,2,3,4\n\
+                    2,27.11.2026 08:00,1,2,3,4\n\
+                    3,2026-11-27T08:00:20[Europe/Paris],1,2,3,4\n\
+                    4,2026-11-27T08:00:20Z junk,1,2,3,4\n\
+                    5,,1,2,3,4\n\
+                    6,inf,1,2,3,4\n\
+                    7,2026-11-27T08:00:27Z,1,2,3,4\n";
+        let rows = read_all(file.as_bytes()).unwrap();
+        let errs: Vec<_> = rows
+            .iter()
+            .filter_map(|r| r.as_ref().err())
+            .map(|e| (e.k, e.code, e.message.as_str()))
+            .collect();
+        assert_eq!(errs.len(), 6, "{errs:#?}");
+        assert_eq!(errs[0].0, Some(1));
+        assert_eq!(errs[0].1, ErrorCode::WrongType);
+        assert!(
+            errs[0].2.starts_with(
+                "row 3: column timestamp: \"2026-13-27T08:00:20Z\" is neither seconds nor an \
+                 ISO 8601 time (2026-11-27T08:00:20Z, 2026-11-27 08:00:20.5+01:00): "
+            ) && errs[0].2.contains("month"),
+            "{}",
+            errs[0].2
+        );
+        assert!(
+            errs[1]
+                .2
+                .starts_with("row 4: column timestamp: \"27.11.2026 08:00\"")
+        );
+        assert!(
+            errs[2]
+                .2
+                .ends_with("a time zone name is not read: give the UTC offset (+01:00)")
+        );
+        assert!(errs[3].2.contains("junk"), "{}", errs[3].2);
+        assert!(
+            errs[4]
+                .2
+                .starts_with("row 7: column timestamp: \"\" is neither")
+        );
+        assert_eq!(
+            (errs[5].1, errs[5].2),
+            (
+                ErrorCode::NonFinite,
+                "row 8: column timestamp: \"inf\" is not finite"
+            )
+        );
+        let good: Vec<_> = rows.iter().filter_map(|r| r.as_ref().ok()?.t).collect();
+        assert_eq!(good, [1_795_766_420.0, 1_795_766_427.0]);
+    }
+
+    /// Two time columns are refused; with named columns, a configured signal called
+    /// `Time` is a signal, and other time columns are the time.
+    #[test]
+    fn time_columns_in_the_header() {
+        let err = read_all(b"t,u0,y0,y1,p0,Timestamp\n").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "columns \"t\" and \"Timestamp\" both give the sample time (t, time, timestamp, \
+             datetime): keep one"
+        );
+        let dims = Dims {
+            states: 1,
+            inputs: 1,
+            outputs: 1,
+            signals: 0,
+        };
+        let columns = Columns {
+            u: vec!["Time".into()],
+            y: vec!["LI201".into()],
+            p: vec![],
+            named: true,
+            ..Columns::numbered(dims)
+        };
+        let file = "datetime,LI201,spare,Time\n2026-11-27 08:00:20,62.3,x,5\n";
+        let mut rows = CsvReader::with_columns(file.as_bytes(), dims, &columns).unwrap();
+        let mut sample = Sample::default();
+        rows.next_into(&mut sample).unwrap().unwrap();
+        assert_eq!(
+            (sample.t, sample.u[0], sample.y[0]),
+            (Some(1_795_766_420.0), 5.0, 62.3)
+        );
+        let err =
+            CsvReader::with_columns("time,LI201,Time,t\n".as_bytes(), dims, &columns).unwrap_err();
+        assert!(matches!(err, HeaderError::TwoTimes(ref a, ref b) if a == "time" && b == "t"));
     }
 
     /// What `write_header`/`write_row` write reads back to the same bits.

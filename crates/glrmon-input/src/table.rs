@@ -12,12 +12,13 @@ use crate::{InputError, InputErrorKind, InputFormat, McapInput};
 /// One run of consecutive samples: column names and their values, in file order.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Table {
-    /// The column names (`t` and `k` are not columns: `k` cuts runs, `t` gives
-    /// [`Table::period`]).
+    /// The column names (`k` and the time column are not columns: `k` cuts runs, the
+    /// time gives [`Table::period`]).
     pub names: Vec<String>,
     /// The values, one vector per column, all of the same length.
     pub columns: Vec<Vec<f64>>,
-    /// The median time step of the `t` column, when there is one.
+    /// The median time step of the time column (`t`, `time`, `timestamp` or `datetime`,
+    /// in seconds or ISO 8601), when there is one.
     pub period: Option<f64>,
     /// Where the run starts: `row <n>` of a CSV file or `k = <k>` of a recording.
     pub start: String,
@@ -38,8 +39,10 @@ impl Table {
     }
 }
 
-/// Reads `path` as runs of consecutive samples: a CSV file (a header, numbers only; a
-/// new run starts where the `k` column jumps), or channel `channel`'s inputs in an MCAP
+/// Reads `path` as runs of consecutive samples: a CSV file (a header, numbers only but
+/// for the time column, `t`, `time`, `timestamp` or `datetime`, whose values may be
+/// seconds or ISO 8601 times as in the sample reader, see [`crate::CsvReader`]; a new
+/// run starts where the `k` column jumps), or channel `channel`'s inputs in an MCAP
 /// recording (columns `u0…`, `y0…`, `p0…`; a new run starts after a refused, dropped or
 /// missing sample). `channel` may be omitted when the recording has one channel.
 ///
@@ -90,11 +93,23 @@ fn read_csv(path: &Path) -> Result<Vec<Table>, String> {
         }
     }
     let k_at = header.iter().position(|n| n == "k");
-    let t_at = header.iter().position(|n| n == "t");
+    let mut times = header
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| crate::csv::is_time_column(n));
+    let t_at = times.next().map(|(i, _)| i);
+    if let (Some(first), Some((_, second))) = (t_at, times.next()) {
+        return Err(format!(
+            "columns \"{}\" and \"{second}\" both give the sample time (t, time, timestamp, \
+             datetime): keep one",
+            header[first]
+        ));
+    }
     let names: Vec<String> = header
         .iter()
-        .filter(|n| *n != "k" && *n != "t")
-        .cloned()
+        .enumerate()
+        .filter(|(i, _)| Some(*i) != k_at && Some(*i) != t_at)
+        .map(|(_, n)| n.clone())
         .collect();
     let mut runs = Vec::new();
     let mut current = Run::new(&names, "row 2".into());
@@ -121,6 +136,19 @@ fn read_csv(path: &Path) -> Result<Vec<Table>, String> {
                 k = Some(text.parse::<u64>().map_err(|_| {
                     format!("row {row}: column k: \"{text}\" is not a non-negative integer")
                 })?);
+                continue;
+            }
+            if Some(i) == t_at && crate::parse_value(text, separator).is_err() {
+                // Not seconds: an ISO 8601 time (the sample reader's rule).
+                values[i] = crate::csv::parse_time(text)
+                    .map_err(|why| {
+                        format!(
+                            "row {row}: column {}: \"{text}\" is neither seconds nor an ISO \
+                             8601 time (2026-11-27T08:00:20Z, 2026-11-27 08:00:20.5+01:00): {why}",
+                            header[i]
+                        )
+                    })?
+                    .seconds;
                 continue;
             }
             values[i] = match crate::parse_value(text, separator) {
@@ -337,6 +365,43 @@ mod tests {
             assert_eq!(semicolon[0].column(name), comma[0].column(name), "{name}");
         }
         assert_eq!(comma[0].column("LI201"), Some(&[20.25, 20.5][..]));
+    }
+
+    /// An export's ISO 8601 time column is the time, whatever its case: it gives the
+    /// period and is not a column; a malformed time names its row and column.
+    #[test]
+    fn iso_time_columns_give_the_period() {
+        let runs = read_table(
+            &write(
+                "Timestamp,FIC101,LI201\n2026-11-27T08:00:00Z,1.5,20\n\
+                 2026-11-27T08:00:20Z,1.6,21\n2026-11-27 08:00:40,1.7,22\n",
+            ),
+            None,
+        )
+        .unwrap();
+        assert_eq!(runs.len(), 1);
+        assert_eq!(runs[0].names, ["FIC101", "LI201"]);
+        assert_eq!(runs[0].period, Some(20.0));
+        let e = read_table(
+            &write("k,time,FIC101\n0,2026-11-27T08:00:00Z,1\n1,2026-11-27T8:00:20Z,1\n"),
+            None,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains(
+                "row 3: column time: \"2026-11-27T8:00:20Z\" is neither seconds nor an ISO \
+                 8601 time"
+            ),
+            "{e}"
+        );
+        let e = read_table(&write("t,a,datetime\n0,1,2\n"), None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("columns \"t\" and \"datetime\" both give the sample time"),
+            "{e}"
+        );
     }
 
     #[test]
