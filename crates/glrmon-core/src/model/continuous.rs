@@ -396,9 +396,10 @@ impl Discretisation {
 }
 
 /// One line: the period, the method, the eigenvalues of F, stability and the time
-/// constants −T/ln|μ| of the stable modes, e.g. `sampled every T = 20 s: F = e^{AT},
-/// G = ∫₀ᵀe^{As}ds·B (zero-order hold), Q from Qc (Van Loan 1978); eigenvalues of F
-/// 0.9811, 0.9702 (stable, spectral radius 0.9811; time constants 1050 s, 661 s)`.
+/// constants −T/ln|μ| of the stable modes (four significant digits), e.g. `sampled every
+/// T = 20 s: F = e^{AT}, G = ∫₀ᵀe^{As}ds·B (zero-order hold), Q = ∫₀ᵀe^{As}·Qc·e^{Aᵀs}ds
+/// (Van Loan 1978); eigenvalues of F 0.9817, 0.9794 (stable, spectral radius 0.9817;
+/// time constants 1080 s, 960 s)`.
 impl fmt::Display for Discretisation {
     fn fmt(&self, out: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
@@ -441,8 +442,7 @@ impl fmt::Display for Discretisation {
         let constants: Vec<String> = eig
             .iter()
             .filter(|z| z.im >= 0.0 && z.norm() > 0.0 && z.norm() < 1.0)
-            .map(|z| format!("{:.3} s", -self.period / z.norm().ln()))
-            .map(|s| trim_zeros(&s))
+            .map(|z| format!("{} s", significant(-self.period / z.norm().ln())))
             .collect();
         if !constants.is_empty() {
             write!(out, "; time constants {}", constants.join(", "))?;
@@ -451,15 +451,16 @@ impl fmt::Display for Discretisation {
     }
 }
 
-/// `"1050.000 s"` → `"1050 s"`, `"12.500 s"` → `"12.5 s"`.
-fn trim_zeros(text: &str) -> String {
-    let (number, unit) = text.split_once(' ').unwrap_or((text, ""));
-    let number = if number.contains('.') {
-        number.trim_end_matches('0').trim_end_matches('.')
+/// A positive number to four significant digits, without trailing zeros: a time
+/// constant from a rounded A (1079.995 s) reads 1080, 12.5 reads 12.5.
+fn significant(x: f64) -> String {
+    let decimals = (3 - x.log10().floor() as i32).max(0) as usize;
+    let text = format!("{x:.decimals$}");
+    if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_owned()
     } else {
-        number
-    };
-    format!("{number} {unit}")
+        text
+    }
 }
 
 fn check_period(period: f64) -> Result<(), ContinuousError> {
@@ -587,6 +588,9 @@ mod tests {
         assert!(text.contains("Van Loan 1978"), "{text}");
         assert!(text.contains("stable, spectral radius 0.9672"), "{text}");
         assert!(text.contains("time constants 600 s, 300 s"), "{text}");
+        assert_eq!(significant(1079.995), "1080");
+        assert_eq!(significant(12.5), "12.5");
+        assert_eq!(significant(0.012345), "0.01235");
         let radius = d.spectral_radius().unwrap();
         assert!((radius - (-20.0f64 / 600.0).exp()).abs() < 1e-14);
         // An integrator (a = 0) and an oscillator (a complex pair).
