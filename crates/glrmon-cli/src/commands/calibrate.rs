@@ -262,8 +262,11 @@ fn skipped_line(r: &RunRate) -> String {
 fn rate_text(r: &RunRate, target: Target) -> String {
     match target {
         Target::Mtbfa(_) => format!(
-            "{} episodes: one per {:.0} samples (95 % interval {:.0}–{:.0})",
-            r.events, r.rate, r.interval.0, r.interval.1
+            "{}: one per {:.0} samples (95 % interval {:.0}–{:.0})",
+            episodes(r.events),
+            r.rate,
+            r.interval.0,
+            r.interval.1
         ),
         Target::SampleFar(_) => format!(
             "{:.3} % above the threshold (95 % interval {:.3}–{:.3} %), {} samples in {} \
@@ -620,8 +623,9 @@ fn text(
                 samples_and_time(m, period)
             ),
             format!(
-                "{} episodes at the threshold (the target expects {:.1})",
-                c.episodes, c.expected
+                "{} at the threshold (the target expects {:.1})",
+                episodes(c.episodes),
+                c.expected
             ),
             format!(
                 "mean time between false alarms {}–{}",
@@ -652,7 +656,7 @@ fn text(
         "channel \"{channel}\": threshold {:.4} for {head}\n  \
          data: {} fault-free samples ({source}), {found}\n  95 % interval: threshold \
          {:.4}–{:.4}, {rate} (about ±{:.0} % on the rate; {} samples would give ±30 %)\n  \
-         current threshold {current:.4}: {current_episodes} episodes on this data\n\n\
+         current threshold {current:.4}: {} on this data\n\n\
          [channels.glr.calibrated]\nthreshold = {:?}\n{target_line}samples = {}\n\
          episodes = {}\n{exceedances}interval = [{:?}, {:?}]\n",
         c.threshold,
@@ -661,12 +665,18 @@ fn text(
         c.threshold_interval.1,
         precision * 100.0,
         (43.0 * per_event).ceil(),
+        episodes(current_episodes),
         c.threshold,
         c.samples,
         c.episodes,
         c.threshold_interval.0,
         c.threshold_interval.1,
     )
+}
+
+/// `1 episode`, `2 episodes`.
+fn episodes(n: u64) -> String {
+    format!("{n} episode{}", if n == 1 { "" } else { "s" })
 }
 
 /// A library error with its exit code: [`InvalidInput`] (1) when the user's data or
