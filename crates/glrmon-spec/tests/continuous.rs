@@ -243,3 +243,13 @@ fn errors_are_located_at_the_key() {
     // Line 1 is the empty line of the opening quote, F is on line 7: A on line 8.
     assert_eq!((located.line, located.column), (8, 1), "{err}");
 }
+
+/// A Qc of the wrong shape, or not PSD, is reported once and not discretised.
+#[test]
+fn a_refused_qc_is_reported_once() {
+    for qc in ["Qc = [[1e-4, 0.0], [0.0, 1e-4]]", "Qc = -1e-4"] {
+        let errs = errors(&with("Qc = 1e-4", qc));
+        assert_eq!(errs.len(), 1, "{errs:#?}");
+        assert!(errs[0].contains("model.Qc is"), "{errs:#?}");
+    }
+}

@@ -66,6 +66,7 @@ impl Validator {
         model: &ModelSpec,
         period: Option<f64>,
     ) -> Option<Matrices> {
+        let before = self.errors.len();
         if let Some(t) = period
             && !(t.is_finite() && t > 0.0)
         {
@@ -82,6 +83,9 @@ impl Validator {
         let (q, r) = self.noise(prefix, model, form, n, p)?;
         let (f, g, q, discretised) = match form {
             Form::Discrete => (f, g, q, None),
+            // A, B, Qc with an error already reported (a shape, a Qc that is not PSD)
+            // are not discretised: the error would come twice, or the result be wrong.
+            Form::Continuous if self.errors.len() > before => return None,
             Form::Continuous => {
                 let (f, g, q, d) =
                     self.discretise(prefix, period, (&f, &g, &q), model.qc.is_some())?;
@@ -530,15 +534,21 @@ impl Validator {
         }
         let a = a.base();
         let qc = noise_is_intensity.then(|| noise.base());
+        // Shapes, finiteness and symmetry were checked above: what is left is an
+        // overflow of e^{AT}, named at A with the period.
         let fail = |v: &mut Self, e: ContinuousError| {
-            let field = match &e {
-                ContinuousError::Period { .. } => "period".to_owned(),
-                ContinuousError::Dimension { what, .. }
-                | ContinuousError::NonFinite { what }
-                | ContinuousError::NotSymmetric { what, .. } => format!("model.{what}"),
-                _ => "model.A".to_owned(),
+            let (field, message) = match &e {
+                ContinuousError::Period { .. } => ("period".to_owned(), e.to_string()),
+                ContinuousError::Dimension { what, detail } => {
+                    (format!("model.{what}"), detail.clone())
+                }
+                ContinuousError::NonFinite { what }
+                | ContinuousError::NotSymmetric { what, .. } => {
+                    (format!("model.{what}"), e.to_string())
+                }
+                _ => ("model.A".to_owned(), e.to_string()),
             };
-            v.error(join(prefix, &field), format!("{e} (T = {t} s)"));
+            v.error(join(prefix, &field), format!("{message} (T = {t} s)"));
         };
         let d = match Discretisation::zero_order_hold(a, b.base(), qc, t) {
             Ok(d) => d,
