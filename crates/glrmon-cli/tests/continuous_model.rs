@@ -90,8 +90,7 @@ fn a_sensor_bias_is_detected_at_its_onset_and_isolated() {
     };
     let last = lines
         .iter()
-        .filter(|r| r["type"] == "alarm" || r["type"] == "isolation")
-        .next_back()
+        .rfind(|r| r["type"] == "alarm" || r["type"] == "isolation")
         .unwrap();
     assert_eq!(isolated(last), ["LI202_bias"], "{last:#}");
     // Its magnitude is the injected 1.5 cm, give or take the noise.
