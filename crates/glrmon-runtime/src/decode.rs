@@ -1,13 +1,17 @@
 //! Payload decoders: a channel's raw payloads → samples, inside its pipeline.
 //!
 //! Each channel's [`ChannelPipeline`](crate::ChannelPipeline) owns the decoder its
-//! configuration names (`[[channels]] payload`), built by [`decoder`]; the daemon's
-//! workers hand it the payloads as received. A new format is a type implementing
-//! [`PayloadDecoder`] in a module of its own here, one arm of [`decoder`] and one
-//! variant of `glrmon_spec::PayloadFormat`.
+//! configuration names (`[[channels]] payload`), built by [`decoder`] (or, for a
+//! configured channel, `decoder_for`, which gives a JSON channel whose signals have
+//! names the decoder that also reads them by name); the daemon's workers hand it the
+//! payloads as received. A new format is a type implementing [`PayloadDecoder`] in a
+//! module of its own here, one arm of [`decoder`] and one variant of
+//! `glrmon_spec::PayloadFormat`.
 
-use glrmon_spec::PayloadFormat;
-use glrmon_wire::{DecodeError, DecodeLimits, Sample, decode_samples};
+use glrmon_spec::{Channel, PayloadFormat};
+use glrmon_wire::{
+    DecodeError, DecodeLimits, Sample, SignalNames, decode_samples, decode_samples_named,
+};
 
 /// Turns one payload into the samples it carries.
 pub trait PayloadDecoder: Send + std::fmt::Debug {
@@ -49,10 +53,147 @@ impl PayloadDecoder for JsonDecoder {
     }
 }
 
+/// The JSON sample format of a channel whose signals have names (`[channels.columns]`):
+/// positional arrays as [`JsonDecoder`] reads them, or values by name, flat
+/// (`{"t": 1.5, "FIC101": 2.1, "LI201": 62.3, …}`) or grouped (`{"u": {"FIC101": 2.1},
+/// "y": {…}}`), put in the order of the names ([`decode_samples_named`]). The names are
+/// indexed once, when the decoder is built, so that decoding allocates no more than the
+/// positional path.
+#[derive(Debug, Clone)]
+pub(crate) struct NamedJsonDecoder {
+    names: SignalNames,
+}
+
+impl NamedJsonDecoder {
+    /// The decoder of a channel with these signal names.
+    pub(crate) fn new(names: SignalNames) -> Self {
+        Self { names }
+    }
+}
+
+impl PayloadDecoder for NamedJsonDecoder {
+    fn format(&self) -> &'static str {
+        PayloadFormat::Json.name()
+    }
+
+    fn decode(
+        &mut self,
+        channel: &str,
+        payload: &[u8],
+        limits: &DecodeLimits,
+        out: &mut Vec<Sample>,
+    ) -> Result<(), DecodeError> {
+        decode_samples_named(channel, payload, limits, &self.names, out)
+    }
+}
+
 /// The decoder of a payload format: the one factory the runtime builds decoders with.
 #[must_use]
 pub fn decoder(format: PayloadFormat) -> Box<dyn PayloadDecoder> {
     match format {
         PayloadFormat::Json => Box::new(JsonDecoder),
+    }
+}
+
+/// The decoder of a configured channel: [`decoder`] of its `payload` format, reading
+/// values by name too when the channel names its signals (`columns.named`).
+#[must_use]
+pub(crate) fn decoder_for(channel: &Channel) -> Box<dyn PayloadDecoder> {
+    match channel.payload {
+        PayloadFormat::Json if channel.columns.named => {
+            let c = &channel.columns;
+            Box::new(NamedJsonDecoder::new(SignalNames::new(&c.u, &c.y, &c.p)))
+        }
+        format => decoder(format),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glrmon_wire::ErrorCode;
+
+    /// A channel of two inputs and two outputs, its columns named or numbered.
+    fn channel(named: bool) -> Channel {
+        let columns = if named {
+            "\n[channels.columns]\nu = [\"FIC101\", \"FIC102\"]\ny = [\"LI201\", \"LI202\"]\n"
+        } else {
+            ""
+        };
+        let text = format!(
+            r#"
+[[channels]]
+name = "tanks"
+model = {{ F = [[0.9, 0.0], [0.0, 0.9]], G = [[1.0, 0.0], [0.0, 1.0]], H = [[1.0, 0.0], [0.0, 1.0]], Q = 0.01, R = 0.04 }}
+faults = [{{ name = "level_bias", kind = "sensor_bias", output = 0 }}]
+{columns}"#
+        );
+        let mut cfg = glrmon_spec::parse(&text).unwrap();
+        cfg.channels.remove(0)
+    }
+
+    fn decode(decoder: &mut dyn PayloadDecoder, payload: &str) -> Result<Vec<Sample>, DecodeError> {
+        let mut out = Vec::new();
+        decoder
+            .decode(
+                "tanks",
+                payload.as_bytes(),
+                &DecodeLimits::default(),
+                &mut out,
+            )
+            .map(|()| out)
+    }
+
+    /// A channel that names its signals reads both named shapes and positional arrays;
+    /// a numbered one reads positional arrays only, as before.
+    #[test]
+    fn a_named_channels_decoder_reads_values_by_name() {
+        let mut named = decoder_for(&channel(true));
+        assert_eq!(named.format(), "json");
+        let want = Sample {
+            k: None,
+            t: Some(1.5),
+            u: vec![2.1, 1.0],
+            y: vec![62.3, 48.1],
+            p: vec![],
+        };
+        for payload in [
+            r#"{"t":1.5,"FIC101":2.1,"FIC102":1.0,"LI201":62.3,"LI202":48.1}"#,
+            r#"{"t":1.5,"u":{"FIC102":1.0,"FIC101":2.1},"y":{"LI201":62.3,"LI202":48.1}}"#,
+            r#"{"t":1.5,"u":[2.1,1.0],"y":[62.3,48.1]}"#,
+        ] {
+            assert_eq!(
+                decode(named.as_mut(), payload).unwrap(),
+                std::slice::from_ref(&want),
+                "{payload}"
+            );
+        }
+        let e = decode(
+            named.as_mut(),
+            r#"{"FIC101":2.1,"FIC102":1.0,"LI201":62.3}"#,
+        )
+        .unwrap_err();
+        assert_eq!(
+            (e.code(), e.field.as_deref()),
+            (ErrorCode::MissingField, Some("LI202"))
+        );
+        assert_eq!(e.to_string(), r#"channel "tanks": field LI202 is missing"#);
+        let e = decode(named.as_mut(), r#"{"FIC101":2.1,"FIC103":1.0}"#).unwrap_err();
+        assert_eq!(
+            (e.code(), e.field.as_deref()),
+            (ErrorCode::UnknownField, Some("FIC103"))
+        );
+
+        let mut numbered = decoder_for(&channel(false));
+        assert_eq!(
+            decode(
+                numbered.as_mut(),
+                r#"{"t":1.5,"u":[2.1,1.0],"y":[62.3,48.1]}"#
+            )
+            .unwrap(),
+            [want]
+        );
+        let e = decode(numbered.as_mut(), r#"{"u0":2.1,"y":[1,2]}"#).unwrap_err();
+        assert_eq!(e.code(), ErrorCode::UnknownField);
     }
 }

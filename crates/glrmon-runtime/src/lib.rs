@@ -404,14 +404,15 @@ pub struct ChannelSetup {
 
 impl ChannelSetup {
     /// A validated channel of the configuration: its monitor
-    /// ([`Monitor::from_channel`]) and the decoder of its `payload` format.
+    /// ([`Monitor::from_channel`]) and the decoder of its `payload` format, which reads
+    /// values by name when the channel names its signals.
     ///
     /// # Errors
     /// As [`Monitor::from_channel`].
     pub fn from_channel(channel: &glrmon_spec::Channel) -> Result<Self, glrmon_core::ModelError> {
         Ok(Self {
             monitor: Monitor::from_channel(channel)?,
-            decoder: decoder(channel.payload),
+            decoder: decode::decoder_for(channel),
         })
     }
 }

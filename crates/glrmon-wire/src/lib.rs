@@ -23,7 +23,10 @@ pub use record::{
     Alarm, AlarmEnd, Consistency, Diagnosis, EpisodeEstimate, ErrorRecord, IsolationResult,
     IsolationUpdate, RECORD_KINDS, Record, Stat, decode_record, encode_json,
 };
-pub use sample::{DecodeLimits, Sample, decode_samples, encode_sample, encode_samples};
+pub use sample::{
+    DecodeLimits, Sample, SignalNames, decode_samples, decode_samples_named, encode_sample,
+    encode_samples,
+};
 pub use status::{ChannelStatus, InstanceStatus, StatusError, ZenohSessions};
 
 #[cfg(test)]

@@ -6,6 +6,14 @@
 //! to the offending field, so a publisher's mistake is reported, counted and never
 //! guessed around.
 //!
+//! A channel whose signals have names (`[channels.columns]`) may also receive them by
+//! name, with [`decode_samples_named`] and the channel's [`SignalNames`]: flat,
+//! `{"t": 1.5, "FIC101": 2.1, "FIC102": 1.0, "LI201": 62.3, "LI202": 48.1, "FI301": 1.9}`,
+//! or grouped, `{"u": {"FIC101": 2.1, "FIC102": 1.0}, "y": {"LI201": 62.3, …}}`. A
+//! payload that names any signal must name every signal of each group it does not give
+//! as an array; a name that is not the channel's (or not of that group), or given twice,
+//! is an error at that name.
+//!
 //! The decoder is a set of serde visitors driven directly by serde_json's parser: no
 //! intermediate `serde_json::Value`, the caller's sample buffers are reused, and the
 //! visitors keep track of where the parser is, so that even a syntax error or an
@@ -189,6 +197,124 @@ pub fn decode_samples(
     limits: &DecodeLimits,
     out: &mut Vec<Sample>,
 ) -> Result<(), DecodeError> {
+    decode(channel, payload, limits, None, out)
+}
+
+/// The names of a channel's signals (its `[channels.columns]` `u`, `y` and `p`), by
+/// which [`decode_samples_named`] reads payloads that give values by name. Built once
+/// per channel: it indexes the names, so that decoding looks each one up without
+/// allocating.
+///
+/// # Examples
+///
+/// ```
+/// use glrmon_wire::SignalNames;
+///
+/// let names = SignalNames::new(&["FIC101".into()], &["LI201".into(), "LI202".into()], &[]);
+/// assert_eq!(names.outputs(), ["LI201", "LI202"]);
+/// ```
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct SignalNames {
+    groups: [Vec<String>; 3],
+    /// Each name → (its group: 0 u, 1 y, 2 p; its index in the group). A name given
+    /// twice keeps its first place.
+    index: std::collections::HashMap<String, (usize, usize)>,
+}
+
+impl SignalNames {
+    /// The names of the inputs `u`, outputs `y` and scheduling signals `p`, in the
+    /// order of the sample's vectors.
+    #[must_use]
+    pub fn new(u: &[String], y: &[String], p: &[String]) -> Self {
+        let groups = [u.to_vec(), y.to_vec(), p.to_vec()];
+        let mut index = std::collections::HashMap::new();
+        for (g, names) in groups.iter().enumerate() {
+            for (i, name) in names.iter().enumerate() {
+                index.entry(name.clone()).or_insert((g, i));
+            }
+        }
+        Self { groups, index }
+    }
+
+    /// The names of the inputs `u`.
+    #[must_use]
+    pub fn inputs(&self) -> &[String] {
+        &self.groups[0]
+    }
+
+    /// The names of the outputs `y`.
+    #[must_use]
+    pub fn outputs(&self) -> &[String] {
+        &self.groups[1]
+    }
+
+    /// The names of the scheduling signals `p`.
+    #[must_use]
+    pub fn signals(&self) -> &[String] {
+        &self.groups[2]
+    }
+
+    /// Where `name` goes: its group (0 u, 1 y, 2 p) and index, and the name as kept
+    /// here (borrowed for error paths).
+    fn find(&self, name: &str) -> Option<(usize, usize, &str)> {
+        let &(g, i) = self.index.get(name)?;
+        Some((g, i, self.groups[g][i].as_str()))
+    }
+}
+
+/// [`decode_samples`] for a channel whose signals have names: each sample object may
+/// give `u`, `y` and `p` as arrays (as [`decode_samples`] reads them), as objects by
+/// name (`"u": {"FIC101": 2.1, …}`), or by name at the top level (`"FIC101": 2.1`),
+/// and a batch may mix them. Values given by name are put in the order of `names`.
+///
+/// A payload that gives any value by name must give every signal of each group it does
+/// not give as an array. As with [`decode_samples`], a steady stream of same-shaped
+/// payloads decodes without allocating.
+///
+/// # Errors
+///
+/// As [`decode_samples`], with the field path at the name: `UnknownField` for a name
+/// that is not the channel's (`FIC109`) or not of the group it is given in (`u.LI201`),
+/// `MissingField` for a signal not given (`FIC102`), `DuplicateField` for a name given
+/// twice or a group given both as an array and by name, `WrongType` for a value that is
+/// not a number (a named value cannot be `null`).
+///
+/// # Examples
+///
+/// ```
+/// use glrmon_wire::{DecodeLimits, SignalNames, decode_samples_named};
+///
+/// let names = SignalNames::new(&["FIC101".into()], &["LI201".into(), "LI202".into()], &[]);
+/// let limits = DecodeLimits::default();
+/// let mut out = Vec::new();
+/// decode_samples_named("tanks", br#"{"t": 1.5, "LI202": 48.1, "FIC101": 2.1, "LI201": 62.3}"#,
+///                      &limits, &names, &mut out)?;
+/// assert_eq!((out[0].t, &out[0].u[..], &out[0].y[..]), (Some(1.5), &[2.1][..], &[62.3, 48.1][..]));
+/// decode_samples_named("tanks", br#"{"u": {"FIC101": 2.1}, "y": {"LI201": 62.3, "LI202": 48.1}}"#,
+///                      &limits, &names, &mut out)?;
+/// assert_eq!(out[0].y, [62.3, 48.1]);
+/// let err = decode_samples_named("tanks", br#"{"FIC101": 2.1, "LI201": 62.3}"#,
+///                                &limits, &names, &mut out).unwrap_err();
+/// assert_eq!(err.to_string(), r#"channel "tanks": field LI202 is missing"#);
+/// # Ok::<(), glrmon_wire::DecodeError>(())
+/// ```
+pub fn decode_samples_named(
+    channel: &str,
+    payload: &[u8],
+    limits: &DecodeLimits,
+    names: &SignalNames,
+    out: &mut Vec<Sample>,
+) -> Result<(), DecodeError> {
+    decode(channel, payload, limits, Some(names), out)
+}
+
+fn decode(
+    channel: &str,
+    payload: &[u8],
+    limits: &DecodeLimits,
+    names: Option<&SignalNames>,
+    out: &mut Vec<Sample>,
+) -> Result<(), DecodeError> {
     if payload.len() > limits.max_payload_bytes {
         out.clear();
         return Err(DecodeError::new(
@@ -201,7 +327,7 @@ pub fn decode_samples(
             },
         ));
     }
-    let mut ctx = Ctx::new(limits);
+    let mut ctx = Ctx::new(limits, names);
     let mut filled = 0;
     let mut de = serde_json::Deserializer::from_slice(payload);
     let result = de::Deserializer::deserialize_any(
@@ -356,10 +482,16 @@ impl<'a> From<&'a Sample> for SampleJson<'a> {
 /// error, even one raised inside the parser, name the field it happened in.
 struct Ctx<'l> {
     limits: &'l DecodeLimits,
+    /// The channel's signal names, when payloads may give values by name.
+    names: Option<&'l SignalNames>,
     /// Index in the batch array, when inside one.
     batch: Option<usize>,
-    /// Current field name; owned only for an unknown field (the error path).
-    field: Option<Cow<'static, str>>,
+    /// Current field name (a signal's borrowed from `names`); owned only for an unknown
+    /// field (the error path).
+    field: Option<Cow<'l, str>>,
+    /// The name inside the current field's object (`u.FIC101`); owned only for an
+    /// unknown name.
+    sub: Option<Cow<'l, str>>,
     /// Index inside the current vector field.
     index: Option<usize>,
     /// What the format expects at the current position, for `WrongType`.
@@ -375,14 +507,19 @@ const EXPECT_K: &str = "a non-negative integer or null";
 const EXPECT_T: &str = "a number or null";
 const EXPECT_VEC: &str = "an array of numbers";
 const EXPECT_OPT_VEC: &str = "an array of numbers or null";
+const EXPECT_NAMED_VEC: &str = "an array of numbers or an object of numbers by signal name";
+const EXPECT_NAMED_OPT_VEC: &str =
+    "an array of numbers, an object of numbers by signal name, or null";
 const EXPECT_NUMBER: &str = "a number";
 
 impl<'l> Ctx<'l> {
-    fn new(limits: &'l DecodeLimits) -> Self {
+    fn new(limits: &'l DecodeLimits, names: Option<&'l SignalNames>) -> Self {
         Ctx {
             limits,
+            names,
             batch: None,
             field: None,
+            sub: None,
             index: None,
             expected: EXPECT_PAYLOAD,
             failure: None,
@@ -405,6 +542,10 @@ impl<'l> Ctx<'l> {
                 path.push('.');
             }
             path.push_str(field);
+            if let Some(sub) = &self.sub {
+                path.push('.');
+                path.push_str(sub);
+            }
             if let Some(i) = self.index {
                 path.push_str(&format!("[{i}]"));
             }
@@ -413,7 +554,12 @@ impl<'l> Ctx<'l> {
     }
 
     fn in_float_field(&self) -> bool {
-        matches!(self.field.as_deref(), Some("t" | "u" | "y" | "p"))
+        match self.field.as_deref() {
+            Some("t" | "u" | "y" | "p") => true,
+            // A value given by name.
+            Some(name) => self.names.is_some_and(|n| n.find(name).is_some()),
+            None => false,
+        }
     }
 
     fn into_error(mut self, channel: &str, err: &serde_json::Error) -> DecodeError {
@@ -553,6 +699,15 @@ impl Field {
     const fn bit(self) -> u8 {
         1 << (self as u8)
     }
+
+    /// The group number of u, y, p (as [`SignalNames`] numbers them).
+    const fn group(self) -> usize {
+        match self {
+            Field::U => 0,
+            Field::Y => 1,
+            _ => 2,
+        }
+    }
 }
 
 struct SampleVisitor<'c, 'l> {
@@ -575,7 +730,23 @@ impl<'de> Visitor<'de> for SampleVisitor<'_, '_> {
         sample.y.clear();
         sample.p.clear();
         let mut seen = 0_u8;
-        while let Some(field) = map.next_key_seed(KeySeed { ctx: &mut *ctx })? {
+        // Which of u, y, p were given by name (an object, or names at the top level).
+        let mut by_name = [false; 3];
+        while let Some(key) = map.next_key_seed(KeySeed { ctx: &mut *ctx })? {
+            let field = match key {
+                Key::Field(field) => field,
+                Key::Signal { group, index, name } => {
+                    ctx.field = Some(Cow::Borrowed(name));
+                    if seen & GROUPS[group].bit() != 0 && !by_name[group] {
+                        // The group was given as an array already.
+                        return Err(ctx.fail(DecodeErrorKind::DuplicateField));
+                    }
+                    let values = group_values(sample, group);
+                    named_value(ctx, &mut map, values, &mut by_name[group], group, index)?;
+                    ctx.field = None;
+                    continue;
+                }
+            };
             ctx.field = Some(Cow::Borrowed(field.name()));
             if seen & field.bit() != 0 {
                 return Err(ctx.fail(DecodeErrorKind::DuplicateField));
@@ -591,23 +762,45 @@ impl<'de> Visitor<'de> for SampleVisitor<'_, '_> {
                     sample.t = map.next_value_seed(TSeed { ctx: &mut *ctx })?;
                 }
                 Field::U | Field::Y | Field::P => {
+                    let group = field.group();
+                    if by_name[group] {
+                        // Some of its values were given by name already.
+                        return Err(ctx.fail(DecodeErrorKind::DuplicateField));
+                    }
                     let optional = field != Field::Y;
-                    ctx.expected = if optional { EXPECT_OPT_VEC } else { EXPECT_VEC };
-                    let values = match field {
-                        Field::U => &mut sample.u,
-                        Field::Y => &mut sample.y,
-                        _ => &mut sample.p,
+                    ctx.expected = match (ctx.names.is_some(), optional) {
+                        (true, true) => EXPECT_NAMED_OPT_VEC,
+                        (true, false) => EXPECT_NAMED_VEC,
+                        (false, true) => EXPECT_OPT_VEC,
+                        (false, false) => EXPECT_VEC,
                     };
                     map.next_value_seed(VecSeed {
                         ctx: &mut *ctx,
-                        values,
+                        values: group_values(sample, group),
                         optional,
+                        group,
+                        by_name: &mut by_name[group],
                     })?;
                 }
             }
             ctx.field = None;
         }
-        if seen & Field::Y.bit() == 0 {
+        if let (Some(names), true) = (ctx.names, by_name.contains(&true)) {
+            // Every signal of a group not given as an array must have been named.
+            for (group, field) in GROUPS.into_iter().enumerate() {
+                if seen & field.bit() != 0 && !by_name[group] {
+                    continue;
+                }
+                let values = group_values(sample, group);
+                if !by_name[group] {
+                    unnamed(values, names.groups[group].len());
+                }
+                if let Some(i) = values.iter().position(|v| v.is_nan()) {
+                    ctx.field = Some(Cow::Borrowed(names.groups[group][i].as_str()));
+                    return Err(ctx.fail(DecodeErrorKind::MissingField));
+                }
+            }
+        } else if seen & Field::Y.bit() == 0 {
             ctx.field = Some(Cow::Borrowed("y"));
             return Err(ctx.fail(DecodeErrorKind::MissingField));
         }
@@ -615,34 +808,125 @@ impl<'de> Visitor<'de> for SampleVisitor<'_, '_> {
     }
 }
 
+/// The fields of u, y, p by group number (as [`SignalNames`] numbers them).
+const GROUPS: [Field; 3] = [Field::U, Field::Y, Field::P];
+
+fn group_values(sample: &mut Sample, group: usize) -> &mut Vec<f64> {
+    match group {
+        0 => &mut sample.u,
+        1 => &mut sample.y,
+        _ => &mut sample.p,
+    }
+}
+
+/// A group's values before any is given by name: one slot per signal, NaN until given
+/// (a decoded value is never NaN). Allocates only when the vector is smaller.
+fn unnamed(values: &mut Vec<f64>, signals: usize) {
+    values.clear();
+    values.resize(signals, f64::NAN);
+}
+
+/// The value of the signal `index` of `group`, given by name: a number, which goes in
+/// its slot unless one was given for it already (a duplicate).
+fn named_value<'de, 'l, A: MapAccess<'de>>(
+    ctx: &mut Ctx<'l>,
+    map: &mut A,
+    values: &mut Vec<f64>,
+    by_name: &mut bool,
+    group: usize,
+    index: usize,
+) -> Result<(), A::Error> {
+    if !*by_name {
+        let signals = ctx.names.map_or(0, |n| n.groups[group].len());
+        unnamed(values, signals);
+        *by_name = true;
+    }
+    ctx.expected = EXPECT_NUMBER;
+    let v = map.next_value_seed(NumberSeed { ctx: &mut *ctx })?;
+    match values.get_mut(index) {
+        Some(slot) if slot.is_nan() => {
+            *slot = v;
+            Ok(())
+        }
+        _ => Err(ctx.fail(DecodeErrorKind::DuplicateField)),
+    }
+}
+
+/// A key of a sample object: a field of the format, or a signal's name.
+enum Key<'l> {
+    Field(Field),
+    Signal {
+        /// 0 u, 1 y, 2 p.
+        group: usize,
+        index: usize,
+        /// The name, borrowed from the channel's [`SignalNames`].
+        name: &'l str,
+    },
+}
+
 struct KeySeed<'c, 'l> {
     ctx: &'c mut Ctx<'l>,
 }
 
-impl<'de> DeserializeSeed<'de> for KeySeed<'_, '_> {
-    type Value = Field;
+impl<'de, 'l> DeserializeSeed<'de> for KeySeed<'_, 'l> {
+    type Value = Key<'l>;
 
-    fn deserialize<D: de::Deserializer<'de>>(self, de: D) -> Result<Field, D::Error> {
+    fn deserialize<D: de::Deserializer<'de>>(self, de: D) -> Result<Key<'l>, D::Error> {
         de.deserialize_str(self)
     }
 }
 
-impl<'de> Visitor<'de> for KeySeed<'_, '_> {
-    type Value = Field;
+impl<'de, 'l> Visitor<'de> for KeySeed<'_, 'l> {
+    type Value = Key<'l>;
 
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str("a field name")
     }
 
-    fn visit_str<E: de::Error>(self, name: &str) -> Result<Field, E> {
+    fn visit_str<E: de::Error>(self, name: &str) -> Result<Key<'l>, E> {
         match name {
-            "k" => Ok(Field::K),
-            "t" => Ok(Field::T),
-            "u" => Ok(Field::U),
-            "y" => Ok(Field::Y),
-            "p" => Ok(Field::P),
-            other => {
-                self.ctx.field = Some(Cow::Owned(other.to_owned()));
+            "k" => Ok(Key::Field(Field::K)),
+            "t" => Ok(Key::Field(Field::T)),
+            "u" => Ok(Key::Field(Field::U)),
+            "y" => Ok(Key::Field(Field::Y)),
+            "p" => Ok(Key::Field(Field::P)),
+            other => match self.ctx.names.and_then(|n| n.find(other)) {
+                Some((group, index, name)) => Ok(Key::Signal { group, index, name }),
+                None => {
+                    self.ctx.field = Some(Cow::Owned(other.to_owned()));
+                    Err(self.ctx.fail(DecodeErrorKind::UnknownField))
+                }
+            },
+        }
+    }
+}
+
+/// A name inside a group's object (`"u": {"FIC101": …}`): one of that group's signals.
+struct GroupKeySeed<'c, 'l> {
+    ctx: &'c mut Ctx<'l>,
+    group: usize,
+}
+
+impl<'de, 'l> DeserializeSeed<'de> for GroupKeySeed<'_, 'l> {
+    type Value = (usize, &'l str);
+
+    fn deserialize<D: de::Deserializer<'de>>(self, de: D) -> Result<Self::Value, D::Error> {
+        de.deserialize_str(self)
+    }
+}
+
+impl<'de, 'l> Visitor<'de> for GroupKeySeed<'_, 'l> {
+    type Value = (usize, &'l str);
+
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("a signal's name")
+    }
+
+    fn visit_str<E: de::Error>(self, name: &str) -> Result<Self::Value, E> {
+        match self.ctx.names.and_then(|n| n.find(name)) {
+            Some((group, index, name)) if group == self.group => Ok((index, name)),
+            _ => {
+                self.ctx.sub = Some(Cow::Owned(name.to_owned()));
                 Err(self.ctx.fail(DecodeErrorKind::UnknownField))
             }
         }
@@ -729,6 +1013,10 @@ struct VecSeed<'c, 'l> {
     ctx: &'c mut Ctx<'l>,
     values: &'c mut Vec<f64>,
     optional: bool,
+    /// The group (0 u, 1 y, 2 p), for values given by name.
+    group: usize,
+    /// Set when the values were given by name.
+    by_name: &'c mut bool,
 }
 
 impl<'de> DeserializeSeed<'de> for VecSeed<'_, '_> {
@@ -756,6 +1044,37 @@ impl<'de> Visitor<'de> for VecSeed<'_, '_> {
         } else {
             Err(E::invalid_type(de::Unexpected::Unit, &self))
         }
+    }
+
+    /// `"u": {"FIC101": 2.1, …}`: values by name, on a channel that names its signals.
+    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
+        if self.ctx.names.is_none() {
+            return Err(de::Error::invalid_type(de::Unexpected::Map, &self));
+        }
+        let Self {
+            ctx,
+            values,
+            group,
+            by_name,
+            ..
+        } = self;
+        let signals = ctx.names.map_or(0, |n| n.groups[group].len());
+        unnamed(values, signals);
+        *by_name = true;
+        while let Some((index, name)) = map.next_key_seed(GroupKeySeed {
+            ctx: &mut *ctx,
+            group,
+        })? {
+            ctx.sub = Some(Cow::Borrowed(name));
+            ctx.expected = EXPECT_NUMBER;
+            let v = map.next_value_seed(NumberSeed { ctx: &mut *ctx })?;
+            match values.get_mut(index) {
+                Some(slot) if slot.is_nan() => *slot = v,
+                _ => return Err(ctx.fail(DecodeErrorKind::DuplicateField)),
+            }
+            ctx.sub = None;
+        }
+        Ok(())
     }
 
     fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
@@ -1182,6 +1501,213 @@ mod tests {
         assert_eq!(decode_with("[]", &none).unwrap().len(), 0);
     }
 
+    /// The two-tank plant's signals: two inputs, three outputs, one scheduling signal.
+    fn tank_names() -> SignalNames {
+        let s = |v: &[&str]| v.iter().map(|n| (*n).to_owned()).collect::<Vec<_>>();
+        SignalNames::new(
+            &s(&["FIC101", "FIC102"]),
+            &s(&["LI201", "LI202", "FI301"]),
+            &s(&["TI401"]),
+        )
+    }
+
+    fn decode_named(payload: &str) -> Result<Vec<Sample>, DecodeError> {
+        let mut out = Vec::new();
+        decode_samples_named(
+            "tanks",
+            payload.as_bytes(),
+            &DecodeLimits::default(),
+            &tank_names(),
+            &mut out,
+        )
+        .map(|()| out)
+    }
+
+    fn tank_sample() -> Sample {
+        Sample {
+            k: Some(7),
+            t: Some(1.5),
+            u: vec![2.1, 1.0],
+            y: vec![62.3, 48.1, 1.9],
+            p: vec![20.5],
+        }
+    }
+
+    /// Flat, grouped, mixed and positional payloads of a named channel give the same
+    /// sample, its values in the order of the names whatever the payload's order.
+    #[test]
+    fn named_payloads_decode_in_the_order_of_the_names() {
+        let want = [tank_sample()];
+        for payload in [
+            r#"{"k":7,"t":1.5,"FIC101":2.1,"FIC102":1.0,"LI201":62.3,"LI202":48.1,"FI301":1.9,"TI401":20.5}"#,
+            r#"{"TI401":20.5,"FI301":1.9,"LI202":48.1,"LI201":62.3,"FIC102":1,"FIC101":2.1,"t":1.5,"k":7}"#,
+            r#"{"k":7,"t":1.5,"u":{"FIC101":2.1,"FIC102":1.0},"y":{"LI201":62.3,"LI202":48.1,"FI301":1.9},"p":{"TI401":20.5}}"#,
+            r#"{"k":7,"t":1.5,"u":{"FIC102":1.0},"FIC101":2.1,"y":[62.3,48.1,1.9],"TI401":20.5}"#,
+            r#"{"k":7,"t":1.5,"u":[2.1,1.0],"y":[62.3,48.1,1.9],"p":[20.5]}"#,
+        ] {
+            assert_eq!(decode_named(payload).unwrap(), want, "{payload}");
+        }
+        // A batch mixes them; positional vectors keep their own lengths (the monitor
+        // checks them against the model).
+        let batch = decode_named(
+            r#"[{"FIC101":1,"FIC102":2,"LI201":3,"LI202":4,"FI301":5,"TI401":6},{"y":[9]}]"#,
+        )
+        .unwrap();
+        assert_eq!(
+            (&batch[0].u[..], &batch[0].y[..], &batch[0].p[..]),
+            (&[1.0, 2.0][..], &[3.0, 4.0, 5.0][..], &[6.0][..])
+        );
+        assert_eq!(
+            (&batch[1].u[..], &batch[1].y[..], &batch[1].p[..]),
+            (&[][..], &[9.0][..], &[][..])
+        );
+    }
+
+    /// A missing, unknown, misplaced or repeated name, or a bad value, is an error at
+    /// that name, naming the channel.
+    #[test]
+    fn named_payload_errors_name_the_channel_and_the_field() {
+        let all = r#""FIC101":2.1,"FIC102":1.0,"LI201":62.3,"LI202":48.1,"FI301":1.9,"TI401":20.5"#;
+        let cases = [
+            (
+                r#"{"t":1.5,"FIC101":2.1,"FIC102":1.0,"LI201":62.3,"FI301":1.9,"TI401":20.5}"#
+                    .to_owned(),
+                ErrorCode::MissingField,
+                "LI202",
+                "field LI202 is missing",
+            ),
+            (
+                r#"{"u":{"FIC101":2.1,"FIC102":1.0},"y":{"LI201":1,"LI202":2,"FI301":3}}"#
+                    .to_owned(),
+                ErrorCode::MissingField,
+                "TI401",
+                "field TI401 is missing",
+            ),
+            (
+                format!(r#"{{{all},"FIC109":3}}"#),
+                ErrorCode::UnknownField,
+                "FIC109",
+                "field FIC109 is not a field of a sample",
+            ),
+            (
+                r#"{"u":{"FIC101":2.1,"LI201":1.0}}"#.to_owned(),
+                ErrorCode::UnknownField,
+                "u.LI201",
+                "field u.LI201 is not a field of a sample",
+            ),
+            (
+                format!(r#"{{{all},"LI201":3}}"#),
+                ErrorCode::Duplicate,
+                "LI201",
+                "field LI201 appears more than once",
+            ),
+            (
+                r#"{"u":{"FIC101":2.1,"FIC101":1.0}}"#.to_owned(),
+                ErrorCode::Duplicate,
+                "u.FIC101",
+                "field u.FIC101 appears more than once",
+            ),
+            (
+                format!(r#"{{{all},"u":[1,2]}}"#),
+                ErrorCode::Duplicate,
+                "u",
+                "field u appears more than once",
+            ),
+            (
+                format!(r#"{{"y":[1,2,3],{all}}}"#),
+                ErrorCode::Duplicate,
+                "LI201",
+                "field LI201 appears more than once",
+            ),
+            (
+                r#"{"FIC101":"2.1"}"#.to_owned(),
+                ErrorCode::WrongType,
+                "FIC101",
+                "field FIC101 has the wrong type: expected a number",
+            ),
+            (
+                r#"{"FIC101":null}"#.to_owned(),
+                ErrorCode::WrongType,
+                "FIC101",
+                "expected a number",
+            ),
+            (
+                r#"{"y":{"LI201":1e999}}"#.to_owned(),
+                ErrorCode::NonFinite,
+                "y.LI201",
+                "field y.LI201 is not a finite number",
+            ),
+            (
+                r#"{"FI301":1e999}"#.to_owned(),
+                ErrorCode::NonFinite,
+                "FI301",
+                "field FI301 is not a finite number",
+            ),
+            (
+                r#"{"y":true}"#.to_owned(),
+                ErrorCode::WrongType,
+                "y",
+                "expected an array of numbers or an object of numbers by signal name",
+            ),
+            (
+                format!(r#"[{{{all}}},{{"FIC101":1}}]"#),
+                ErrorCode::MissingField,
+                "[1].FIC102",
+                "field [1].FIC102 is missing",
+            ),
+        ];
+        for (payload, code, field, message) in cases {
+            let err = decode_named(&payload).unwrap_err();
+            assert_eq!(
+                (err.code(), err.field.as_deref()),
+                (code, Some(field)),
+                "{payload}: {err}"
+            );
+            let text = err.to_string();
+            assert!(text.starts_with(r#"channel "tanks": "#), "{text}");
+            assert!(text.contains(message), "{payload}: {text}");
+        }
+        // Without names, as before: a name is an unknown field, an object a wrong type.
+        let e = assert_rejects(
+            r#"{"y":[1],"LI201":2}"#,
+            ErrorCode::UnknownField,
+            Some("LI201"),
+        );
+        assert!(e.to_string().contains("LI201"));
+        assert_rejects(r#"{"y":{"LI201":2}}"#, ErrorCode::WrongType, Some("y"));
+    }
+
+    /// Named payloads decode without allocating once the buffers have their shape, as
+    /// positional ones do (names are looked up, not copied).
+    #[test]
+    fn steady_named_stream_decodes_without_allocating() {
+        let limits = DecodeLimits::default();
+        let names = tank_names();
+        let payloads: Vec<Vec<u8>> = (0..50_u32)
+            .flat_map(|i| {
+                let x = f64::from(i) * 0.1;
+                [
+                    format!(
+                        r#"{{"k":{i},"t":{x},"FIC101":{x},"FIC102":1,"LI201":{x},"LI202":2,"FI301":3,"TI401":4}}"#
+                    ),
+                    format!(
+                        r#"[{{"u":{{"FIC102":{x},"FIC101":1}},"y":{{"FI301":{x},"LI202":2,"LI201":3}},"p":{{"TI401":4}}}}]"#
+                    ),
+                ]
+            })
+            .map(String::into_bytes)
+            .collect();
+        let count = || ALLOCATIONS.with(std::cell::Cell::get);
+        let mut out = Vec::new();
+        decode_samples_named("c", &payloads[0], &limits, &names, &mut out).unwrap();
+        let before = count();
+        for payload in &payloads {
+            decode_samples_named("c", payload, &limits, &names, &mut out).unwrap();
+        }
+        assert_eq!(count() - before, 0, "allocations while decoding");
+        assert_eq!(out[0].y, [3.0, 2.0, 4.9]);
+    }
+
     #[test]
     fn check_dimensions_names_the_first_mismatch() {
         let s = Sample {
@@ -1307,6 +1833,28 @@ mod tests {
     }
 
     proptest! {
+        /// A sample written by name (flat, in any order) decodes to the same bits as
+        /// written positionally.
+        #[test]
+        fn named_and_positional_payloads_agree(
+            values in proptest::collection::vec(finite_f64(), 6),
+            t in proptest::option::of(finite_f64()),
+            order in Just((0..6_usize).collect::<Vec<_>>()).prop_shuffle(),
+        ) {
+            let names = tank_names();
+            let all: Vec<&String> = names.inputs().iter().chain(names.outputs()).chain(names.signals()).collect();
+            // Rust's `{:?}` of a finite f64 is a JSON number that reads back exactly.
+            let mut fields: Vec<String> = order.iter().map(|&i| format!("\"{}\":{:?}", all[i], values[i])).collect();
+            if let Some(t) = t {
+                fields.push(format!("\"t\":{t:?}"));
+            }
+            let named = format!("{{{}}}", fields.join(",")).into_bytes();
+            let mut got = Vec::new();
+            decode_samples_named("c", &named, &DecodeLimits::default(), &names, &mut got).unwrap();
+            let want = Sample { k: None, t, u: values[..2].to_vec(), y: values[2..5].to_vec(), p: values[5..].to_vec() };
+            prop_assert_eq!(bits(&got[0]), bits(&want));
+        }
+
         /// encode_sample → decode_samples is the identity, bit for bit.
         #[test]
         fn sample_round_trip_is_bit_identical(batch in proptest::collection::vec(sample(), 1..5)) {
