@@ -95,7 +95,7 @@ fn the_readme_recipe_runs_verbatim_and_keeps_its_false_alarm_promise() {
     assert!(
         stderr
             .lines()
-            .any(|l| (l.contains("k=12") && l.contains("isolated=[LI202_bias]"))),
+            .any(|l| l.contains("k=12") && l.contains("isolated=[LI202_bias]")),
         "LI202 isolated:\n{stderr}"
     );
 

@@ -277,6 +277,9 @@ fn settings(channel: &Channel) -> String {
     }
     let threshold = threshold_text(channel);
     let _ = writeln!(s, "  model: {model}; {window}; threshold {threshold}");
+    if let Some(d) = &channel.discretised {
+        let _ = writeln!(s, "  continuous-time model {d}");
+    }
     if let Some(advice) = threshold_advice(channel) {
         let _ = writeln!(s, "  threshold: {advice}");
     }
@@ -714,6 +717,21 @@ y_units = ["cm"]
 [[channels.faults]]
 kind = "all_sensors"
 "#;
+
+    #[test]
+    fn a_continuous_model_says_how_it_was_sampled() {
+        let cfg =
+            glrmon_spec::parse(include_str!("../../../config/examples/two-tanks.toml")).unwrap();
+        let text = settings(&cfg.channels[0]);
+        assert!(
+            text.contains("continuous-time model sampled every T = 20 s")
+                && text.contains("zero-order hold")
+                && text.contains("Van Loan"),
+            "{text}"
+        );
+        let text = settings(&glrmon_spec::parse(SCALED).unwrap().channels[0]);
+        assert!(!text.contains("continuous-time"), "{text}");
+    }
 
     #[test]
     fn units_are_named_and_a_scale_is_not_a_spread() {

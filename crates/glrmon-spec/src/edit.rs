@@ -243,6 +243,9 @@ pub fn set_noise(
             .get_mut("model")
             .and_then(toml_edit::Item::as_table_like_mut)
             .ok_or(EditError::ModelNotTable)?;
+        // A continuous-time model's Qc gives way to the per-sample Q estimated from
+        // the samples (a model with `A` takes either).
+        model.remove("Qc");
         put(model, "Q", &symmetric(q));
         put(model, "R", &symmetric(r));
         match s {
@@ -539,6 +542,28 @@ output = 0
             m(2, &[0.04, 0.0, 0.0, 0.09]),
             m(2, &[0.001, 0.0, 0.0, 0.002]),
         )
+    }
+
+    #[test]
+    fn a_continuous_models_qc_gives_way_to_the_estimated_per_sample_q() {
+        let text = include_str!("../../../config/examples/two-tanks.toml");
+        let q = m(2, &[0.003, 0.0, 0.0, 0.003]);
+        let r = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![0.04, 0.04, 4e-4]));
+        let edited = set_noise(text, "two_tanks", &q, &r, None, "mon.csv (ALS)").unwrap();
+        assert!(!edited.contains("\nQc ="), "{edited}");
+        assert!(
+            edited.contains("\nA = ") && edited.contains("\nQ = "),
+            "{edited}"
+        );
+        let channel = &crate::parse(&edited).unwrap().channels[0];
+        let d = channel
+            .discretised
+            .as_ref()
+            .expect("still continuous in A, B");
+        assert_eq!(d.period(), 20.0);
+        assert!(d.qc().is_none(), "no Qc left");
+        let q_written = channel.model.matrices()[4].base();
+        assert!((q_written[(0, 0)] - 0.003).abs() < 1e-15, "{q_written}");
     }
 
     #[test]

@@ -3,7 +3,7 @@
 //! simulated from it is detected at its onset and isolated by `replay`; and a model
 //! with both `F` and `A` is refused with a message naming both.
 
-#[path = "../../../tests/support.rs"]
+#[path = "support.rs"]
 mod support;
 
 use std::path::{Path, PathBuf};
