@@ -5,7 +5,7 @@
 //! as it reads positional arrays, and publishes the same alarm; a payload missing a name
 //! is an `error` record naming the channel and the signal.
 
-#[path = "../../../tests/support.rs"]
+#[path = "support.rs"]
 mod support;
 
 use std::io::{BufRead as _, BufReader};

@@ -4,7 +4,7 @@
 //! change, exit code 3, and none of Zenoh's own WARN lines (source paths under
 //! `.cargo/registry`, Rust's `Single(tcp/…)`) unless the log filter asks for them.
 
-#[path = "../../../tests/support.rs"]
+#[path = "support.rs"]
 mod support;
 
 use std::io::{BufRead as _, BufReader, Read as _};

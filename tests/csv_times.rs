@@ -4,7 +4,7 @@
 //! numeric times, and a malformed time is a bad row naming its row and column, counted
 //! like a bad number.
 
-#[path = "../../../tests/support.rs"]
+#[path = "support.rs"]
 mod support;
 
 use std::path::{Path, PathBuf};
