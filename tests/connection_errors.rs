@@ -110,6 +110,19 @@ fn play_names_a_dead_endpoint_once_with_the_flag() {
 }
 
 #[test]
+fn simulate_publish_names_a_dead_endpoint_once_with_the_flag() {
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let out = output(
+        glrmon()
+            .args(["simulate", "--config"])
+            .arg(demo_config())
+            .args(["--channel", "dc_motor", "--samples", "20", "--publish"])
+            .args(["--connect", &endpoint]),
+    );
+    assert_one_clear_line(&out, &[&endpoint, "connection refused", "--connect"]);
+}
+
+#[test]
 fn run_names_a_busy_listen_port_once_with_the_flag_or_the_key() {
     let busy = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let endpoint = format!("tcp/{}", busy.local_addr().unwrap());

@@ -30,10 +30,11 @@ pub(crate) struct ZenohArgs {
 }
 
 impl ZenohArgs {
-    /// Settings for a tool that talks to a daemon: client mode (a peer's `open` can
-    /// wait for the 500 ms scouting delay, a client's does not; the daemon, a peer,
-    /// routes for its clients) connecting to the local default endpoint, unless told
-    /// otherwise.
+    /// Settings for a tool that talks to a daemon (`watch`, `status`, `play`,
+    /// `simulate --publish`): client mode (a peer's `open` can wait for the 500 ms
+    /// scouting delay, a client's does not; the daemon, a peer, routes for its clients)
+    /// connecting to the local default endpoint, unless told otherwise; the flags that
+    /// set its endpoints are named for the message of a failure to connect or listen.
     pub(crate) fn client_settings(&self) -> glrmon_zenoh::SessionSettings {
         let mut s = self.settings(None);
         if s.config_file.is_none() {
@@ -44,6 +45,24 @@ impl ZenohArgs {
                 s.connect = vec![crate::common::DEFAULT_ENDPOINT.to_owned()];
             }
         }
+        let from_file = |key: &str| {
+            self.zenoh_config.as_ref().map_or_else(String::new, |f| {
+                format!(
+                    " (or {key} in {})",
+                    glrmon_wire::text::Escaped(&f.to_string_lossy())
+                )
+            })
+        };
+        s.connect_hint = Some(if self.connect.is_empty() {
+            format!("--connect{}", from_file("connect/endpoints"))
+        } else {
+            "--connect".into()
+        });
+        s.listen_hint = Some(if self.listen.is_empty() {
+            format!("--listen{}", from_file("listen/endpoints"))
+        } else {
+            "--listen".into()
+        });
         s
     }
 

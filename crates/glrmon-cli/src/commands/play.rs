@@ -54,7 +54,7 @@ pub(crate) fn run(args: &PlayArgs) -> anyhow::Result<()> {
 
 async fn play(mut playback: glrmon_input::Playback, args: &PlayArgs) -> anyhow::Result<()> {
     let channels = playback.channels();
-    let session = glrmon_zenoh::open(&super::watch::client_settings(&args.zenoh)).await?;
+    let session = glrmon_zenoh::open(&args.zenoh.client_settings()).await?;
     let mut publishers = HashMap::new();
     for (_, key) in &channels {
         let publisher = session

@@ -41,7 +41,7 @@ async fn status(args: &StatusArgs) -> anyhow::Result<()> {
     if !(args.timeout.is_finite() && args.timeout > 0.0) {
         return Err(InvalidInput(format!("--timeout {} must be positive", args.timeout)).into());
     }
-    let session = glrmon_zenoh::open(&super::watch::client_settings(&args.zenoh)).await?;
+    let session = glrmon_zenoh::open(&args.zenoh.client_settings()).await?;
     let replies = glrmon_zenoh::query_status(
         &session,
         &args.instances,

@@ -38,31 +38,8 @@ pub(crate) fn run(args: &WatchArgs) -> anyhow::Result<()> {
     rt.block_on(watch(args))
 }
 
-/// The session settings of a tool that talks to a daemon (`watch`, `status`, `play`):
-/// [`ZenohArgs::client_settings`], with the flags that set its endpoints named for the
-/// message of a failure to connect or listen.
-pub(crate) fn client_settings(zenoh: &ZenohArgs) -> glrmon_zenoh::SessionSettings {
-    let mut s = zenoh.client_settings();
-    let from_file = |key: &str| {
-        zenoh.zenoh_config.as_ref().map_or_else(String::new, |f| {
-            format!(" (or {key} in {})", Escaped(&f.to_string_lossy()))
-        })
-    };
-    if zenoh.connect.is_empty() {
-        s.connect_hint = Some(format!("--connect{}", from_file("connect/endpoints")));
-    } else {
-        s.connect_hint = Some("--connect".into());
-    }
-    if zenoh.listen.is_empty() {
-        s.listen_hint = Some(format!("--listen{}", from_file("listen/endpoints")));
-    } else {
-        s.listen_hint = Some("--listen".into());
-    }
-    s
-}
-
 async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
-    let session = glrmon_zenoh::open(&client_settings(&args.zenoh)).await?;
+    let session = glrmon_zenoh::open(&args.zenoh.client_settings()).await?;
     let sub = session
         .declare_subscriber(args.key.as_str())
         .await
