@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 use glrmon_wire::{Alarm, AlarmEnd, Consistency, Diagnosis, ErrorRecord, IsolationUpdate, Stat};
 
 use crate::decimate::{ColumnId, Grid};
+use crate::labels::ChannelLabels;
 
 /// Alarms kept in full (markers, isolation, table), and as many isolation updates;
 /// later ones are only counted.
@@ -37,9 +38,13 @@ pub(crate) struct ChannelState {
     pub(crate) threshold: ColumnId,
     pub(crate) innovation: Vec<ColumnId>,
     pub(crate) magnitude: Vec<ColumnId>,
+    /// The episode's θ̂ (`stat.episode.magnitude`), a gap outside episodes.
+    pub(crate) episode_magnitude: Vec<ColumnId>,
     /// Largest ε_k / θ̂ length seen, including components beyond [`MAX_COMPONENTS`].
     pub(crate) innovation_len: usize,
     pub(crate) magnitude_len: usize,
+    /// The names and units of the signals and faults, when the caller gave them.
+    pub(crate) labels: Option<ChannelLabels>,
     pub(crate) alarms: Vec<Alarm>,
     pub(crate) alarms_total: u64,
     /// Isolation updates (`isolation` records), matched to their alarm by `alarm_k`.
@@ -73,8 +78,10 @@ impl ChannelState {
             threshold,
             innovation: Vec::new(),
             magnitude: Vec::new(),
+            episode_magnitude: Vec::new(),
             innovation_len: 0,
             magnitude_len: 0,
+            labels: None,
             alarms: Vec::new(),
             alarms_total: 0,
             updates: Vec::new(),
@@ -116,6 +123,22 @@ impl ChannelState {
             &s.innovation,
         );
         push_vector(&mut self.grid, &mut self.magnitude, slot, s.k, &s.magnitude);
+        let episode = s.episode.as_ref().map_or(&[][..], |e| &e.magnitude[..]);
+        if !episode.is_empty() || !self.episode_magnitude.is_empty() {
+            push_vector(
+                &mut self.grid,
+                &mut self.episode_magnitude,
+                slot,
+                s.k,
+                episode,
+            );
+        }
+    }
+
+    /// Whether the channel had an alarm episode (an alarm, or the end of one whose
+    /// alarm came before the replay began).
+    pub(crate) fn alarmed(&self) -> bool {
+        self.alarms_total > 0 || self.alarm_ends > 0
     }
 
     pub(crate) fn add_alarm(&mut self, a: &Alarm) {
@@ -191,21 +214,25 @@ impl ChannelState {
             .fold(0, |a, b| a.saturating_add(*b))
     }
 
-    /// Names of the θ̂ components: the fault dictionary of an alarm or a diagnosis of
-    /// this channel when its length matches, `θ̂[i]` otherwise.
+    /// Names of the θ̂ components: the labels' faults, else the fault dictionary of an
+    /// alarm or a diagnosis of this channel, when its length matches; `θ̂[i]`
+    /// otherwise.
     pub(crate) fn fault_names(&self) -> Vec<String> {
         let n = self.magnitude_len;
-        let known = self
-            .alarms
-            .iter()
-            .map(|a| &a.faults)
-            .chain(self.updates.iter().map(|u| &u.faults))
-            .chain(self.diagnoses.iter().map(|d| &d.faults))
-            .find(|f| f.len() == n);
-        match known {
-            Some(names) => names.clone(),
-            None => (0..n).map(|i| format!("θ̂[{i}]")).collect(),
-        }
+        let labelled = self
+            .labels
+            .as_ref()
+            .map(|l| l.faults.iter().map(|f| f.name.clone()).collect::<Vec<_>>());
+        let known = labelled.into_iter().find(|f| f.len() == n).or_else(|| {
+            self.alarms
+                .iter()
+                .map(|a| &a.faults)
+                .chain(self.updates.iter().map(|u| &u.faults))
+                .chain(self.diagnoses.iter().map(|d| &d.faults))
+                .find(|f| f.len() == n)
+                .cloned()
+        });
+        known.unwrap_or_else(|| (0..n).map(|i| format!("θ̂[{i}]")).collect())
     }
 }
 

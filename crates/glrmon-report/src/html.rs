@@ -6,12 +6,13 @@ use std::io::{self, Write};
 
 use glrmon_wire::{Alarm, Diagnosis, IsolationResult};
 
-use crate::Report;
 use crate::channel::{ChannelState, MAX_ALARMS, MAX_COMPONENTS, MAX_DIAGNOSES, MAX_ERRORS};
 use crate::clock::{Zone, date, format_time};
 use crate::decimate::ColumnId;
 use crate::escape::escape;
+use crate::labels::{ChannelLabels, MagnitudeUnit};
 use crate::svg::{Axis, Category, Figure, ONSET, PALETTE, RED, Swatch, TimeAxis, fmt_num};
+use crate::{Provenance, Report};
 
 /// Lines drawn per figure of vector components (ε_k, θ̂); the rest are named in the caption.
 const MAX_LINES: usize = 10;
@@ -25,6 +26,9 @@ const MAX_PATH_LEGEND: usize = 12;
 const MAX_LABELS: usize = 6;
 /// Items listed per cell of the summary table.
 const MAX_SUMMARY_ITEMS: usize = 8;
+/// Figures of ε_k or θ̂ per channel, one per unit; the components of further units are
+/// named in a note.
+const MAX_UNIT_FIGURES: usize = 6;
 
 pub(crate) const CSS: &str = "body{font-family:Helvetica,Arial,sans-serif;margin:0 auto;max-width:1080px;padding:16px 20px;color:#222;line-height:1.35}\
 h1{font-size:24px;margin-bottom:4px}h2{font-size:20px;border-bottom:2px solid #ddd;padding-bottom:4px;margin-top:36px}h3{font-size:16px;margin-top:24px}\
@@ -32,7 +36,8 @@ table{border-collapse:collapse;margin:8px 0 16px;font-size:13px}th,td{border:1px
 th{background:#f2f2f2}td.num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}\
 figure{margin:14px 0 22px}figcaption{font-size:13px;color:#555;margin-top:2px}svg.fig{max-width:100%;height:auto;display:block}\
 .isolated{color:#b11;font-weight:bold}.note{color:#666;font-size:13px}code{background:#f4f4f4;padding:0 3px}\
-nav a{margin-right:12px}details{margin:6px 0 12px}summary{cursor:pointer}";
+nav a{margin-right:12px}details{margin:6px 0 12px}summary{cursor:pointer}\
+.provenance{color:#444;font-size:13px;margin-top:0}";
 
 pub(crate) fn write_page<W: Write>(report: &Report, mut out: W) -> io::Result<()> {
     let title = escape(&report.options.title);
@@ -40,6 +45,9 @@ pub(crate) fn write_page<W: Write>(report: &Report, mut out: W) -> io::Result<()
         out,
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{title}</title><style>{CSS}</style></head><body>\n<h1>{title}</h1>\n"
     )?;
+    if let Some(p) = &report.options.provenance {
+        out.write_all(provenance_line(p).as_bytes())?;
+    }
     let mut meta = format!(
         "{} records over {} channel{}. Letters of Zhang &amp; Basseville (2014): ε<sub>k</sub> innovation, l<sub>k</sub> GLR statistic, h threshold, r̂ onset, θ̂ magnitude; λ the Lasso penalty of Zhang (2021).",
         report.records,
@@ -68,15 +76,16 @@ pub(crate) fn write_page<W: Write>(report: &Report, mut out: W) -> io::Result<()
         return Ok(());
     }
 
+    let channels = report.ordered_channels();
     out.write_all(b"<nav>")?;
-    for (i, name) in report.channels.keys().enumerate() {
+    for (i, (name, _)) in channels.iter().enumerate() {
         write!(out, "<a href=\"#ch-{i}\">{}</a>", escape(name))?;
     }
     out.write_all(b"</nav>\n")?;
-    out.write_all(summary_table(report).as_bytes())?;
+    out.write_all(summary_table(&channels).as_bytes())?;
 
     let mut fig_id = 0;
-    for (i, (name, ch)) in report.channels.iter().enumerate() {
+    for (i, (name, ch)) in channels.into_iter().enumerate() {
         let section = channel_section(
             i,
             name,
@@ -91,11 +100,31 @@ pub(crate) fn write_page<W: Write>(report: &Report, mut out: W) -> io::Result<()
     out.flush()
 }
 
-fn summary_table(report: &Report) -> String {
+/// `glrmon 0.1.0 (git …), configuration …, data …, made … (UTC)`: what made the report,
+/// from what and when.
+fn provenance_line(p: &Provenance) -> String {
+    let data = if p.data.is_empty() {
+        "–".to_owned()
+    } else {
+        p.data
+            .iter()
+            .map(|d| format!("<code>{}</code>", escape(d)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    format!(
+        "<p class=\"provenance\">Made by glrmon {} from configuration <code>{}</code> and data {data}, at {} (UTC).</p>\n",
+        escape(&p.version),
+        escape(&p.config),
+        p.made.strftime("%Y-%m-%dT%H:%M:%SZ")
+    )
+}
+
+fn summary_table(channels: &[(&String, &ChannelState)]) -> String {
     let mut s = String::from(
         "<h2>Summary</h2>\n<table class=\"summary\"><tr><th>Channel</th><th>Samples</th><th>k range</th><th>Alarms</th><th>Episodes ended</th><th>Onsets r̂</th><th>Isolated faults</th><th>Diagnoses</th><th>Model consistency</th><th>Errors by code</th></tr>\n",
     );
-    for (i, (name, ch)) in report.channels.iter().enumerate() {
+    for (i, (name, ch)) in channels.iter().enumerate() {
         let k_range = ch
             .k_range
             .map_or("–".to_owned(), |(lo, hi)| format!("{lo} … {hi}"));
@@ -295,16 +324,16 @@ fn channel_section(
     let _ = writeln!(s, "<p class=\"note\">{facts}</p>");
 
     if ch.stats > 0 {
-        s.push_str(&innovation_figure(ch, &t_axis, fig_id));
+        s.push_str(&innovation_figures(ch, &t_axis, fig_id));
         s.push_str(&glr_figure(ch, &t_axis, fig_id));
         s.push_str(&onset_figure(ch, &t_axis, fig_id));
-        s.push_str(&magnitude_figure(ch, &t_axis, fig_id));
+        s.push_str(&magnitude_figures(ch, &t_axis, fig_id));
     } else {
         s.push_str(
             "<p class=\"note\">No stat records for this channel: no time-series figures.</p>\n",
         );
     }
-    if ch.alarms_total > 0 || ch.alarm_ends > 0 {
+    if ch.alarmed() {
         s.push_str(&alarm_section(ch, zone, fig_id));
     }
     if ch.diagnoses_total > 0 {
@@ -388,33 +417,169 @@ fn decorate_alarms(fig: &mut Figure, ch: &ChannelState) {
     }
 }
 
-fn innovation_figure(ch: &ChannelState, t_axis: &TimeAxis, fig_id: &mut usize) -> String {
-    let (lo, hi) = columns_range(ch, &ch.innovation).unwrap_or((-1.0, 1.0));
-    let mut fig = Figure::new(
-        "Kalman innovation ε_k",
-        k_axis(ch),
-        Axis::linear_padded(lo, hi, 0.05, "ε_k"),
-        200.0,
-    );
-    fig.set_class("innovation");
-    fig.set_secondary_x(t_axis);
-    decorate_alarms(&mut fig, ch);
-    fig.hline(0.0, "#999", None, "zero");
-    let picked = pick_components(ch, &ch.innovation);
-    for (n, i) in picked.iter().enumerate() {
-        let Some(col) = ch.innovation.get(*i) else {
-            continue;
+/// Components of a per-sample vector (ε_k or θ̂) drawn on one figure: those of one
+/// unit, with the unit's axis label and the factor that turns the stored values into
+/// that unit.
+struct UnitGroup {
+    /// The unit as the axis shows it (`cm`, `model units`), empty when not known.
+    unit: String,
+    /// Whether `unit` is a unit symbol, written in brackets (`θ̂ [cm]`), rather than
+    /// words, written in parentheses (`θ̂ (model units)`).
+    symbol: bool,
+    /// Component indices, in order.
+    members: Vec<usize>,
+}
+
+impl UnitGroup {
+    /// `what [unit]`, `what (words)` or `what`.
+    fn label(&self, what: &str) -> String {
+        match (self.unit.as_str(), self.symbol) {
+            ("", _) => what.to_owned(),
+            (unit, true) => format!("{what} [{unit}]"),
+            (words, false) => format!("{what} ({words})"),
+        }
+    }
+}
+
+/// Components `0..n` grouped by their unit (`unit_of`: the unit and whether it is a
+/// symbol), groups in order of their first member.
+fn group_by_unit(n: usize, unit_of: impl Fn(usize) -> (String, bool)) -> Vec<UnitGroup> {
+    let mut groups: Vec<UnitGroup> = Vec::new();
+    for i in 0..n {
+        let (unit, symbol) = unit_of(i);
+        match groups.iter_mut().find(|g| g.unit == unit) {
+            Some(g) => g.members.push(i),
+            None => groups.push(UnitGroup {
+                unit,
+                symbol,
+                members: vec![i],
+            }),
+        }
+    }
+    groups
+}
+
+/// The groups beyond [`MAX_UNIT_FIGURES`], as a note naming their components.
+fn extra_groups_note(groups: &[UnitGroup], name: impl Fn(usize) -> String) -> String {
+    let rest: Vec<String> = groups
+        .iter()
+        .skip(MAX_UNIT_FIGURES)
+        .map(|g| {
+            let names: Vec<String> = g.members.iter().map(|i| escape(&name(*i))).collect();
+            format!("{} ({})", names.join(", "), escape(&g.unit))
+        })
+        .collect();
+    if rest.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "<p class=\"note\">Not drawn (more than {MAX_UNIT_FIGURES} units): {}.</p>\n",
+            rest.join("; ")
+        )
+    }
+}
+
+/// The output's name: the labels', else `y{i}` as a configuration without
+/// `[channels.columns]` names it.
+fn output_name(labels: Option<&ChannelLabels>, i: usize) -> String {
+    labels
+        .and_then(|l| l.output(i))
+        .map_or_else(|| format!("y{i}"), |o| o.name.clone())
+}
+
+/// Values of `col` times `factor`, as drawn segments.
+fn scaled_segments(ch: &ChannelState, col: ColumnId, factor: f64) -> Vec<Vec<(f64, f64)>> {
+    ch.grid
+        .segments(col)
+        .into_iter()
+        .map(|seg| {
+            seg.into_iter()
+                .map(|(k, v)| (k as f64, v * factor))
+                .collect()
+        })
+        .collect()
+}
+
+/// ε_k: one figure per output unit when the channel is labelled, in raw units (the
+/// stored model-unit values times each output's scale), else one figure in model units.
+fn innovation_figures(ch: &ChannelState, t_axis: &TimeAxis, fig_id: &mut usize) -> String {
+    let labels = ch.labels.as_ref();
+    let n = ch.innovation.len();
+    let groups = match labels {
+        Some(l) => group_by_unit(n, |i| match l.output(i).and_then(|o| o.unit.clone()) {
+            Some(unit) => (unit, true),
+            None => ("raw units, none given".to_owned(), false),
+        }),
+        None => vec![UnitGroup {
+            unit: "model units".to_owned(),
+            symbol: false,
+            members: (0..n).collect(),
+        }],
+    };
+    let scale = |i: usize| labels.and_then(|l| l.output(i)).map_or(1.0, |o| o.scale);
+    let mut s = String::new();
+    let several = groups.len() > 1;
+    for group in groups.iter().take(MAX_UNIT_FIGURES) {
+        let cols: Vec<(usize, ColumnId)> = group
+            .members
+            .iter()
+            .filter_map(|i| ch.innovation.get(*i).map(|c| (*i, *c)))
+            .collect();
+        let (lo, hi) = cols
+            .iter()
+            .filter_map(|(i, c)| {
+                ch.grid
+                    .range(*c)
+                    .map(|(a, b)| (a * scale(*i), b * scale(*i)))
+            })
+            .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)))
+            .unwrap_or((-1.0, 1.0));
+        let axis = group.label("ε_k");
+        let title = format!("Kalman innovation {axis}");
+        let title = if several {
+            let names: Vec<String> = group
+                .members
+                .iter()
+                .map(|i| output_name(labels, *i))
+                .collect();
+            format!("{title}: {}", names.join(", "))
+        } else {
+            title
         };
-        let color = PALETTE.get(n % PALETTE.len()).copied().unwrap_or("#000");
-        fig.polyline(segments_f64(ch, *col), color, 1.0, None);
-        fig.legend_math(&format!("ε_k[{i}]"), color, Swatch::Line);
+        let mut fig = Figure::new(
+            &title,
+            k_axis(ch),
+            Axis::linear_padded(lo, hi, 0.05, &axis),
+            200.0,
+        );
+        fig.set_class("innovation");
+        fig.set_secondary_x(t_axis);
+        decorate_alarms(&mut fig, ch);
+        fig.hline(0.0, "#999", None, "zero");
+        let own: Vec<ColumnId> = cols.iter().map(|(_, c)| *c).collect();
+        let picked = pick_components(ch, &own);
+        for (n, p) in picked.iter().enumerate() {
+            let Some((i, col)) = cols.get(*p) else {
+                continue;
+            };
+            let color = PALETTE.get(n % PALETTE.len()).copied().unwrap_or("#000");
+            fig.polyline(scaled_segments(ch, *col, scale(*i)), color, 1.0, None);
+            fig.legend(&output_name(labels, *i), color, Swatch::Line);
+        }
+        let mut caption = "Innovation of the Kalman filter of the fault-free model, one line per output (Zhang &amp; Basseville 2014, Fig. 3 top)".to_owned();
+        caption.push_str(match labels {
+            None => ", in the model's units: with <code>[channels.scaling]</code>, (raw − offset)/scale.",
+            Some(l) if l.scaled => ", in the outputs' raw units: the model works in (raw − offset)/scale (<code>[channels.scaling]</code>), and each output's innovation is drawn times its scale.",
+            Some(_) => ", in the outputs' raw units (the model's, without <code>[channels.scaling]</code>).",
+        });
+        caption.push_str(&omitted_note(picked.len(), cols.len(), "outputs"));
+        if ch.innovation.is_empty() {
+            caption.push_str(" No innovation values were recorded.");
+        }
+        s.push_str(&figure(&fig, fig_id, &caption));
     }
-    let mut caption = "Innovation of the Kalman filter of the fault-free model, one line per output (Zhang &amp; Basseville 2014, Fig. 3 top).".to_owned();
-    caption.push_str(&omitted_note(picked.len(), ch.innovation_len, "outputs"));
-    if ch.innovation.is_empty() {
-        caption.push_str(" No innovation values were recorded.");
-    }
-    figure(&fig, fig_id, &caption)
+    s.push_str(&extra_groups_note(&groups, |i| output_name(labels, i)));
+    s
 }
 
 fn omitted_note(shown: usize, total: usize, what: &str) -> String {
@@ -562,31 +727,114 @@ fn onset_figure(ch: &ChannelState, t_axis: &TimeAxis, fig_id: &mut usize) -> Str
     )
 }
 
-fn magnitude_figure(ch: &ChannelState, t_axis: &TimeAxis, fig_id: &mut usize) -> String {
-    let (lo, hi) = columns_range(ch, &ch.magnitude).unwrap_or((-1.0, 1.0));
+/// θ̂ of an alarmed channel: one figure per unit of the faults' magnitudes, each with
+/// the window's θ̂ at its r̂ (thin, faint) and, during episodes, the episode's θ̂ at its
+/// own onset (thick). A channel without alarms gets a one-line note instead: its θ̂
+/// fits noise.
+fn magnitude_figures(ch: &ChannelState, t_axis: &TimeAxis, fig_id: &mut usize) -> String {
+    if !ch.alarmed() {
+        return if ch.magnitude.is_empty() {
+            String::new()
+        } else {
+            "<p class=\"note\">No alarm on this channel: its magnitude estimates, which then fit noise, are not drawn.</p>\n".to_owned()
+        };
+    }
+    let labels = ch.labels.as_ref();
+    let names = ch.fault_names();
+    let name = |i: usize| names.get(i).cloned().unwrap_or_else(|| format!("θ̂[{i}]"));
+    let groups = match labels {
+        Some(l) => group_by_unit(ch.magnitude.len(), |i| {
+            let unit = l.fault_unit(i);
+            let symbol = matches!(unit, MagnitudeUnit::Signal { unit: Some(_), .. });
+            (unit.label(), symbol)
+        }),
+        None => vec![UnitGroup {
+            unit: String::new(),
+            symbol: false,
+            members: (0..ch.magnitude.len()).collect(),
+        }],
+    };
+    let mut s = String::new();
+    let several = groups.len() > 1;
+    for group in groups.iter().take(MAX_UNIT_FIGURES) {
+        s.push_str(&magnitude_figure(ch, group, several, &name, t_axis, fig_id));
+    }
+    s.push_str(&extra_groups_note(&groups, name));
+    s
+}
+
+fn magnitude_figure(
+    ch: &ChannelState,
+    group: &UnitGroup,
+    several: bool,
+    name: &dyn Fn(usize) -> String,
+    t_axis: &TimeAxis,
+    fig_id: &mut usize,
+) -> String {
+    let window: Vec<(usize, ColumnId)> = group
+        .members
+        .iter()
+        .filter_map(|i| ch.magnitude.get(*i).map(|c| (*i, *c)))
+        .collect();
+    let episode_col = |i: usize| ch.episode_magnitude.get(i).copied();
+    let all: Vec<ColumnId> = window
+        .iter()
+        .flat_map(|(i, c)| std::iter::once(*c).chain(episode_col(*i)))
+        .collect();
+    let (lo, hi) = columns_range(ch, &all).unwrap_or((-1.0, 1.0));
+    let axis = group.label("θ̂");
+    let title = format!("Magnitude estimate {axis}");
+    let title = if several {
+        let names: Vec<String> = window.iter().map(|(i, _)| name(*i)).collect();
+        format!("{title}: {}", names.join(", "))
+    } else {
+        title
+    };
     let mut fig = Figure::new(
-        "Magnitude estimate θ̂ at r̂",
+        &title,
         k_axis(ch),
-        Axis::linear_padded(lo.min(0.0), hi.max(0.0), 0.05, "θ̂"),
+        Axis::linear_padded(lo.min(0.0), hi.max(0.0), 0.05, &axis),
         220.0,
     );
     fig.set_class("magnitude");
     fig.set_secondary_x(t_axis);
     decorate_alarms(&mut fig, ch);
     fig.hline(0.0, "#999", None, "zero");
-    let names = ch.fault_names();
-    let picked = pick_components(ch, &ch.magnitude);
-    for (n, i) in picked.iter().enumerate() {
-        let Some(col) = ch.magnitude.get(*i) else {
+    let own: Vec<ColumnId> = window.iter().map(|(_, c)| *c).collect();
+    let picked = pick_components(ch, &own);
+    let mut episodes = false;
+    for (n, p) in picked.iter().enumerate() {
+        let Some((i, col)) = window.get(*p) else {
             continue;
         };
         let color = PALETTE.get(n % PALETTE.len()).copied().unwrap_or("#000");
-        fig.polyline(segments_f64(ch, *col), color, 1.1, None);
-        let name = names.get(*i).cloned().unwrap_or_else(|| format!("θ̂[{i}]"));
-        fig.legend(&name, color, Swatch::Line);
+        fig.raw("<g class=\"window-magnitude\" opacity=\"0.45\">");
+        fig.polyline(segments_f64(ch, *col), color, 1.0, None);
+        fig.raw("</g>");
+        if let Some(ep) = episode_col(*i).filter(|c| ch.grid.range(*c).is_some()) {
+            episodes = true;
+            fig.raw("<g class=\"episode-magnitude\">");
+            fig.polyline(segments_f64(ch, ep), color, 2.4, None);
+            fig.raw("</g>");
+        }
+        fig.legend(&name(*i), color, Swatch::Line);
     }
-    let mut caption = "Magnitude θ̂ at the maximising onset, one line per fault of the dictionary (Zhang &amp; Basseville 2014, eq. (34)).".to_owned();
-    caption.push_str(&omitted_note(picked.len(), ch.magnitude_len, "faults"));
+    if episodes {
+        fig.legend("thick: the episode's θ̂ at its onset", "#444", Swatch::Line);
+        fig.legend("faint: the window's θ̂ at r̂", "#bbb", Swatch::Line);
+    }
+    let mut caption = "Magnitude θ̂ of each fault of the dictionary (Zhang &amp; Basseville 2014, eq. (34)): thin and faint, at the onset r̂ that maximises l<sub>k</sub> in the window".to_owned();
+    if episodes {
+        caption.push_str("; thick, during each alarm episode, the episode's θ̂ at its own onset over every sample since (the <code>stat</code> records' <code>episode</code>). Once a persisting fault's onset has left the window, the window's θ̂ fits its settled response with the transient of a fault starting inside the window and shrinks while the fault does not: the thick line is the fault's magnitude.");
+    } else {
+        caption.push_str(" (the records carry no episode estimate: a glrmon before it, or a detector that follows no onset).");
+    }
+    caption.push_str(match (group.unit.as_str(), several) {
+        ("", _) => " Units: those of each fault's column.",
+        (_, true) => " Faults whose magnitudes are in other units are on the other θ̂ figures.",
+        (_, false) => "",
+    });
+    caption.push_str(&omitted_note(picked.len(), window.len(), "faults"));
     if ch.magnitude.is_empty() {
         caption.push_str(" No θ̂ values were recorded.");
     }
@@ -616,7 +864,7 @@ fn alarm_section(ch: &ChannelState, zone: Zone, fig_id: &mut usize) -> String {
         let end = episode
             .and_then(|e| e.end)
             .map_or("open".to_owned(), |e| e.to_string());
-        let theta = largest_magnitudes(a);
+        let theta = largest_magnitudes(a, ch.labels.as_ref());
         let (update_k, update_onset, update_isolated) = match (ch.update_of(a), a.update_k) {
             (Some(u), _) => (
                 u.k.to_string(),
@@ -660,9 +908,10 @@ fn alarm_section(ch: &ChannelState, zone: Zone, fig_id: &mut usize) -> String {
     s
 }
 
-/// `name=θ̂` for the [`MAX_LINES`] faults with the largest |θ̂| (dictionary order), and
-/// how many are left out.
-fn largest_magnitudes(a: &Alarm) -> String {
+/// `name=θ̂` (with its unit when the labels name one: `LI201_bias=1.32 cm`) for the
+/// [`MAX_LINES`] faults with the largest |θ̂| (dictionary order), and how many are left
+/// out.
+fn largest_magnitudes(a: &Alarm, labels: Option<&ChannelLabels>) -> String {
     let mut pairs: Vec<(usize, &String, f64)> = a
         .faults
         .iter()
@@ -678,7 +927,13 @@ fn largest_magnitudes(a: &Alarm) -> String {
     }
     let mut s = pairs
         .iter()
-        .map(|(_, f, v)| format!("{}={}", escape(f), fmt_num(*v)))
+        .map(|(i, f, v)| {
+            let unit = labels
+                .filter(|l| l.faults.get(*i).is_some_and(|l| &l.name == *f))
+                .and_then(|l| l.fault_unit(*i).suffix())
+                .map_or_else(String::new, |u| format!(" {}", escape(&u)));
+            format!("{}={}{unit}", escape(f), fmt_num(*v))
+        })
         .collect::<Vec<_>>()
         .join(", ");
     if total > pairs.len() {

@@ -7,11 +7,13 @@ mod escape;
 mod evaluation;
 mod histogram;
 mod html;
+mod labels;
 mod sink;
 mod svg;
 
 pub use evaluation::{DecisionError, Evaluation, FaultEvaluation, MinmaxEvaluation};
 pub use histogram::Histogram;
+pub use labels::{ChannelLabels, FaultLabel, MagnitudeUnit, SignalLabel};
 pub use sink::ReportSink;
 
 use std::collections::BTreeMap;
@@ -34,6 +36,8 @@ pub struct ReportOptions {
     pub width_points: usize,
     /// The zone wall-clock sample times are shown in ([`clock`]).
     pub zone: clock::Zone,
+    /// Where the report comes from, shown under its title; none when `None`.
+    pub provenance: Option<Provenance>,
 }
 
 impl Default for ReportOptions {
@@ -42,8 +46,24 @@ impl Default for ReportOptions {
             title: "glrmon replay report".to_owned(),
             width_points: 2000,
             zone: clock::Zone::Utc,
+            provenance: None,
         }
     }
+}
+
+/// Where a report comes from: which glrmon made it, from which configuration and data,
+/// and when. A report read weeks later, or passed on, says what it shows. The caller
+/// knows all of it (`glrmon replay` passes its own).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Provenance {
+    /// The glrmon that made it, e.g. `0.1.0 (git 1a2b3c4)`.
+    pub version: String,
+    /// The configuration: its path, or where it came from (`recorded in run.mcap`).
+    pub config: String,
+    /// The data files replayed.
+    pub data: Vec<String>,
+    /// When the report was made; shown in UTC, ISO 8601.
+    pub made: jiff::Timestamp,
 }
 
 /// A report under construction: feed it every record of a replay with [`Report::add`],
@@ -97,20 +117,39 @@ impl Report {
         }
     }
 
-    /// Takes one record into account. Call it once per record, in the order of the
-    /// replay; a `stat` costs O(1) amortised time and no lasting memory.
-    pub fn add(&mut self, record: &Record) {
-        self.records = self.records.saturating_add(1);
-        let name = record.channel();
+    /// Names the signals and faults of channel `name` and gives their units
+    /// ([`ChannelLabels`]): the figures then show `LI201 [cm]` where they would show
+    /// `ε_k[0]` in model units, innovations in raw units, and each fault's θ̂ on an axis
+    /// of its unit. Call it before or while adding records; a channel beyond
+    /// [`MAX_CHANNELS`] is not reported.
+    pub fn label_channel(&mut self, name: &str, labels: ChannelLabels) {
+        if let Some(ch) = self.channel_mut(name) {
+            ch.labels = Some(labels);
+        }
+    }
+
+    /// The state of channel `name`, created if there is room for it.
+    fn channel_mut(&mut self, name: &str) -> Option<&mut ChannelState> {
         if !self.channels.contains_key(name) {
             if self.channels.len() >= MAX_CHANNELS {
-                self.dropped_records = self.dropped_records.saturating_add(1);
-                return;
+                return None;
             }
             self.channels.insert(
                 name.to_owned(),
                 ChannelState::new(self.options.width_points),
             );
+        }
+        self.channels.get_mut(name)
+    }
+
+    /// Takes one record into account. Call it once per record, in the order of the
+    /// replay; a `stat` costs O(1) amortised time and no lasting memory.
+    pub fn add(&mut self, record: &Record) {
+        self.records = self.records.saturating_add(1);
+        let name = record.channel();
+        if self.channel_mut(name).is_none() {
+            self.dropped_records = self.dropped_records.saturating_add(1);
+            return;
         }
         let Some(ch) = self.channels.get_mut(name) else {
             return;
@@ -128,13 +167,22 @@ impl Report {
     }
 
     /// Writes the report as one self-contained HTML page: inline CSS and SVG, no
-    /// JavaScript, no external resources.
+    /// JavaScript, no external resources. Channels with alarms come first, then the
+    /// others, each by name.
     ///
     /// # Errors
     ///
     /// Any error of `out`.
     pub fn write_html<W: std::io::Write>(&self, out: W) -> std::io::Result<()> {
         html::write_page(self, out)
+    }
+
+    /// The channels in the order the page shows them: those with alarms (or an ended
+    /// episode) first, then the others, each group by name.
+    pub(crate) fn ordered_channels(&self) -> Vec<(&String, &ChannelState)> {
+        let mut channels: Vec<(&String, &ChannelState)> = self.channels.iter().collect();
+        channels.sort_by_key(|(name, ch)| (!ch.alarmed(), *name));
+        channels
     }
 }
 

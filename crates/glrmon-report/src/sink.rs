@@ -21,13 +21,23 @@ impl ReportSink {
     /// wall-clock times in `zone`.
     #[must_use]
     pub fn new(path: &Path, input: &Path, zone: Zone) -> Self {
-        Self {
-            path: path.to_owned(),
-            report: Some(Report::new(ReportOptions {
+        Self::with_report(
+            path,
+            Report::new(ReportOptions {
                 title: format!("glrmon replay of {}", input.display()),
                 zone,
                 ..ReportOptions::default()
-            })),
+            }),
+        )
+    }
+
+    /// `report` (its options, provenance and channel labels set by the caller), to be
+    /// written to `path`.
+    #[must_use]
+    pub fn with_report(path: &Path, report: Report) -> Self {
+        Self {
+            path: path.to_owned(),
+            report: Some(report),
         }
     }
 }

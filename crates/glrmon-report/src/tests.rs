@@ -495,6 +495,7 @@ fn odd_records_do_not_panic() {
         title: String::new(),
         width_points: 0,
         zone: crate::clock::Zone::Utc,
+        provenance: None,
     });
     // An alarm_end without its alarm, out-of-order and extreme k, a diagnosis without a
     // path, rows of the wrong length, non-finite values.
@@ -551,4 +552,54 @@ fn wall_clock_times_are_shown_as_times_of_day() {
         "a tick labelled with a time of day"
     );
     assert!(!html.contains("e9 s<"), "no epoch seconds on an axis");
+}
+
+/// Channels with alarms come first (then by name), and only they get θ̂ figures; the
+/// episode's θ̂ of `stat` records is drawn over the window's, thick.
+#[test]
+fn alarmed_channels_first_and_theta_only_after_an_alarm() {
+    let mut report = scenario();
+    for k in 0..100 {
+        report.add(&stat("aaa quiet", k, glr_at(k)));
+    }
+    let html = render(&report);
+    let order: Vec<usize> = [CHANNEL, "&lt;script&gt;", "aaa quiet"]
+        .iter()
+        .map(|name| {
+            let name = if *name == CHANNEL {
+                escape(CHANNEL)
+            } else {
+                (*name).to_owned()
+            };
+            html.find(&format!("<h2>Channel <code>{name}</code></h2>"))
+                .unwrap_or_else(|| panic!("{name}"))
+        })
+        .collect();
+    assert!(order[0] < order[1] && order[0] < order[2], "{order:?}");
+    assert!(order[1] < order[2], "then by name: '<' sorts before 'a'");
+    let quiet = html
+        .split("<h2>Channel <code>aaa quiet</code></h2>")
+        .nth(1)
+        .unwrap();
+    let quiet = quiet.split("</section>").next().unwrap();
+    assert!(figures_of_class(quiet, "magnitude").is_empty());
+    assert!(!quiet.contains("θ̂["), "{quiet}");
+    assert!(quiet.contains("No alarm on this channel"));
+    assert!(figures_of_class(&html, "magnitude")[0].contains(">x0_jump<"));
+
+    let mut report = scenario();
+    for k in 215..320 {
+        let Record::Stat(mut s) = stat(CHANNEL, k, glr_at(k)) else {
+            unreachable!()
+        };
+        s.episode = Some(glrmon_wire::EpisodeEstimate {
+            onset: 200,
+            magnitude: vec![4.0, 0.0],
+        });
+        report.add(&Record::from(s));
+    }
+    let html = render(&report);
+    let magnitude = figures_of_class(&html, "magnitude");
+    assert!(magnitude[0].contains("class=\"episode-magnitude\""));
+    assert!(magnitude[0].contains("thick: the episode"));
 }
