@@ -15,8 +15,8 @@ use glrmon_input::{
 };
 use glrmon_monitor::Monitor;
 use glrmon_record::{FileHeader, McapFileSink};
-use glrmon_report::ReportSink;
 use glrmon_report::clock::Zone;
+use glrmon_report::{ChannelLabels, Provenance, Report, ReportOptions, ReportSink};
 use glrmon_runtime::{ChannelPipeline, Fanout, FnSink, Interest, JsonLinesSink, Output, Sink};
 use glrmon_wire::text::Escaped;
 use glrmon_wire::{DecodeLimits, Record};
@@ -57,11 +57,47 @@ pub(crate) struct ReplayArgs {
 /// The alarm, end and diagnosis lines of a replay, printed after its summary.
 type AlarmLines = Arc<Mutex<Vec<String>>>;
 
-/// The output sinks of `args`, and a sink keeping the alarm lines for the summary.
+/// The HTML report of `args.input`: titled after it, wall-clock times in `zone`, with
+/// the provenance line (this glrmon, the configuration, the data file, now) and each
+/// replayed channel's signal names and units from `cfg`.
+fn report(
+    args: &ReplayArgs,
+    zone: Zone,
+    cfg: &glrmon_spec::Config,
+    channels: &[&glrmon_spec::Channel],
+) -> Report {
+    let config = match &args.config {
+        Some(path) => path.display().to_string(),
+        None => format!("recorded in {}", args.input.display()),
+    };
+    let mut report = Report::new(ReportOptions {
+        title: format!("glrmon replay of {}", args.input.display()),
+        zone,
+        provenance: Some(Provenance {
+            version: crate::version::long().to_owned(),
+            config,
+            data: vec![args.input.display().to_string()],
+            made: jiff::Timestamp::now(),
+        }),
+        ..ReportOptions::default()
+    });
+    for channel in channels {
+        report.label_channel(
+            &channel.name,
+            ChannelLabels::from_channel(channel, &cfg.source),
+        );
+    }
+    report
+}
+
+/// The output sinks of `args` (the report's of the `channels` of `cfg`), and a sink
+/// keeping the alarm lines for the summary.
 fn output_sinks(
     args: &ReplayArgs,
     zone: Zone,
     header: &FileHeader,
+    cfg: &glrmon_spec::Config,
+    channels: &[&glrmon_spec::Channel],
 ) -> anyhow::Result<(Vec<Box<dyn Sink>>, AlarmLines)> {
     let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
     match &args.output {
@@ -91,7 +127,10 @@ fn output_sinks(
         ))),
     }
     if let Some(p) = &args.report {
-        sinks.push(Box::new(ReportSink::new(p, &args.input, zone)));
+        sinks.push(Box::new(ReportSink::with_report(
+            p,
+            report(args, zone, cfg, channels),
+        )));
     }
     let lines = AlarmLines::default();
     let kept = lines.clone();
@@ -166,7 +205,7 @@ fn replay_csv(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
             args.input.display().to_string(),
         )]),
     };
-    let (sinks, lines) = output_sinks(args, zone, &header)?;
+    let (sinks, lines) = output_sinks(args, zone, &header, &cfg, &[channel])?;
     let mut fanout = Fanout::new(sinks, 1);
     let mut pipeline = ChannelPipeline::new(0, monitor, fanout.plan());
     let CsvReplayed { rows, .. } =
@@ -212,10 +251,12 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
     });
     let mut order: Vec<Arc<str>> = Vec::new();
     let mut monitors: Vec<Monitor> = Vec::new();
+    let mut replayed: Vec<&glrmon_spec::Channel> = Vec::new();
     for c in &cfg.channels {
         if args.channel.as_ref().is_none_or(|n| *n == c.name) {
             order.push(Arc::from(c.name.as_str()));
             monitors.push(Monitor::from_channel(c)?);
+            replayed.push(c);
         }
     }
     let header = FileHeader {
@@ -226,7 +267,7 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
             args.input.display().to_string(),
         )]),
     };
-    let (sinks, lines) = output_sinks(args, zone, &header)?;
+    let (sinks, lines) = output_sinks(args, zone, &header, &cfg, &replayed)?;
     let mut fanout = Fanout::new(sinks, 1);
     let mut channels: Vec<ChannelPipeline> = monitors
         .into_iter()
