@@ -857,3 +857,66 @@ y = ["LI201"]
     assert_eq!(alarms.len(), 1, "{alarms:?}");
     assert!((150..=160).contains(&alarms[0].onset), "{alarms:?}");
 }
+
+/// Several CSV files in one replay: each a run of its own from a fresh monitor (the
+/// same alarms as replaying it alone, at indices moved up after the previous file's),
+/// one summary line per file, records in one increasing order of k; an MCAP file among
+/// them is refused.
+#[test]
+fn replay_takes_several_csv_files_each_a_run_of_its_own() {
+    let dir = TempDir::new("replay-files");
+    let cfg = config("examples/paper2014-unstable.toml");
+    let (a, b) = (dir.file("a.csv"), dir.file("b.csv"));
+    for (file, seed) in [(&a, "1"), (&b, "2")] {
+        ok(&glrmon(&[
+            "simulate",
+            "--config",
+            &cfg,
+            "--samples",
+            "400",
+            "--seed",
+            seed,
+            "--fault",
+            "x0_jump:4",
+            "--onset",
+            "201",
+            "--output",
+            file,
+        ]));
+    }
+    let (both, alone) = (dir.file("both.jsonl"), dir.file("b.jsonl"));
+    let out = glrmon(&["replay", "--config", &cfg, &a, &b, "--output", &both]);
+    ok(&out);
+    let summary = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        summary.contains("a.csv: 400 rows, 400 samples, 1 alarm, 0 errors")
+            && summary.contains("b.csv: 400 rows, 400 samples, 1 alarm, 0 errors"),
+        "{summary}"
+    );
+    let both = records(&both);
+    let ks: Vec<u64> = both.iter().filter_map(Record::k).collect();
+    assert!(ks.windows(2).all(|w| w[0] <= w[1]), "k in one order");
+    assert_eq!(ks.last(), Some(&799));
+    ok(&glrmon(&[
+        "replay", "--config", &cfg, &b, "--output", &alone,
+    ]));
+    let alone = records(&alone);
+    let second: Vec<&Alarm> = alarms(&both).into_iter().filter(|a| a.k >= 400).collect();
+    let own = alarms(&alone);
+    assert_eq!(second.len(), own.len());
+    for (x, y) in second.iter().zip(&own) {
+        assert_eq!((x.k - 400, x.onset - 400), (y.k, y.onset));
+        assert_eq!(
+            x.glr.to_bits(),
+            y.glr.to_bits(),
+            "a fresh monitor: the same numbers"
+        );
+    }
+    let mixed = glrmon(&["replay", "--config", &cfg, &a, &dir.file("x.mcap")]);
+    assert_eq!(mixed.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&mixed.stderr).contains("an MCAP recording is replayed alone"),
+        "{}",
+        String::from_utf8_lossy(&mixed.stderr)
+    );
+}

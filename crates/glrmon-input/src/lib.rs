@@ -19,6 +19,8 @@ pub use format::{InputFormat, OutputFormat, embedded_config};
 pub use mcap::{McapInput, RecordedInput};
 pub use play::{Playback, PlayedSample, due};
 pub use readahead::{ReadAhead, ReadAheadError};
-pub use replay::{CsvReplayed, McapReplayed, ReplayError, replay_csv, replay_mcap};
+pub use replay::{
+    CsvReplayed, McapReplayed, ReplayError, replay_csv, replay_csv_from, replay_mcap,
+};
 pub use samples::{Samples, Skipped};
 pub use table::{Table, read_table};

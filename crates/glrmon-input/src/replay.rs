@@ -37,6 +37,9 @@ pub struct CsvReplayed {
     pub rows: u64,
     /// Rows refused (each became an `error` record).
     pub rejected: u64,
+    /// One past the largest sample index fed: where the next file of a multi-file
+    /// replay starts ([`replay_csv_from`]).
+    pub next_k: u64,
 }
 
 /// Feeds every row of `csv` to `pipeline`; a bad row becomes an `error` record and the
@@ -50,6 +53,24 @@ pub fn replay_csv<R: BufRead + Send + 'static>(
     pipeline: &mut ChannelPipeline,
     fanout: &mut Fanout,
 ) -> Result<CsvReplayed, ReplayError> {
+    replay_csv_from(csv, 0, pipeline, fanout)
+}
+
+/// [`replay_csv`] with the file's sample indices moved up by `first_k`: the next file
+/// of a replay of several gets indices after the previous one's ([`CsvReplayed::next_k`]),
+/// so that its records follow them. A row's `k` becomes `first_k + k`; a file without a
+/// `k` column numbers its samples `first_k`, `first_k + 1`, … in order of arrival, as
+/// the monitor numbers them from 0. With `first_k` = 0 the samples are fed untouched.
+///
+/// # Errors
+/// As [`replay_csv`].
+pub fn replay_csv_from<R: BufRead + Send + 'static>(
+    csv: CsvReader<R>,
+    first_k: u64,
+    pipeline: &mut ChannelPipeline,
+    fanout: &mut Fanout,
+) -> Result<CsvReplayed, ReplayError> {
+    let mut arrivals = 0u64;
     let mut rows_ahead = ReadAhead::spawn(csv, |csv, spare| {
         let mut sample = match spare {
             Some(Ok(sample)) => sample,
@@ -66,7 +87,13 @@ pub fn replay_csv<R: BufRead + Send + 'static>(
     while let Some(row) = rows_ahead.next().map_err(never)? {
         done.rows += 1;
         match row {
-            Ok(sample) => {
+            Ok(mut sample) => {
+                let k = sample.k.unwrap_or(arrivals);
+                arrivals += 1;
+                done.next_k = done.next_k.max(first_k.saturating_add(k).saturating_add(1));
+                if first_k > 0 {
+                    sample.k = Some(first_k.saturating_add(k));
+                }
                 let log_time = glrmon_record::sample_time_ns(sample.t, 0);
                 pipeline.sample(&sample, log_time, fanout)?;
                 rows_ahead.recycle(Ok(sample));
@@ -199,7 +226,8 @@ mod tests {
             done,
             CsvReplayed {
                 rows: 3,
-                rejected: 1
+                rejected: 1,
+                next_k: 3
             }
         );
         fanout.close(&mut |e| panic!("{e}"));
@@ -218,5 +246,47 @@ mod tests {
         assert_eq!(kinds.last(), Some(&("stat", Some(2))));
         let errors = pipeline.stats().errors.lock().unwrap().clone();
         assert_eq!(errors.get("non_finite"), Some(&1));
+    }
+
+    #[test]
+    fn a_second_file_follows_the_first_in_k_from_a_fresh_monitor() {
+        let cfg = glrmon_spec::parse(include_str!(
+            "../../../config/examples/paper2014-unstable.toml"
+        ))
+        .unwrap();
+        let channel = &cfg.channels[0];
+        let memory = MemorySink::default();
+        let records = memory.records();
+        let mut fanout = Fanout::new(vec![Box::new(memory) as Box<dyn Sink>], 1);
+        let mut first_k = 0;
+        for text in [
+            "u0,y0\n0.1,1.0\n0.1,1.1\n0.1,0.9\n",
+            "k,u0,y0\n0,0.1,1.0\n1,0.1,1.2\n",
+        ] {
+            let csv = CsvReader::new(std::io::Cursor::new(text.as_bytes().to_vec()), channel.dims)
+                .unwrap();
+            let monitor = glrmon_monitor::Monitor::from_channel(channel).unwrap();
+            let mut pipeline = ChannelPipeline::new(0, monitor, fanout.plan());
+            first_k = replay_csv_from(csv, first_k, &mut pipeline, &mut fanout)
+                .unwrap()
+                .next_k;
+            assert_eq!(
+                pipeline.error_total(),
+                0,
+                "no sequence reset: a fresh monitor"
+            );
+        }
+        assert_eq!(first_k, 5);
+        fanout.close(&mut |e| panic!("{e}"));
+        let ks: Vec<u64> = records
+            .lock()
+            .unwrap()
+            .iter()
+            .filter_map(|o| match &o.record {
+                Record::Stat(s) => Some(s.k),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(ks, [0, 1, 2, 3, 4]);
     }
 }

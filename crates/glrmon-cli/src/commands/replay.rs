@@ -5,7 +5,7 @@
 //! (inputs and results, self-describing), an HTML report.
 
 use std::io::IsTerminal as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use anyhow::Context as _;
@@ -34,8 +34,11 @@ pub(crate) struct ReplayArgs {
     /// every recorded channel).
     #[arg(long)]
     channel: Option<String>,
-    /// Recorded samples: CSV (one channel) or MCAP (a `glrmon run` or `demo` recording).
-    input: PathBuf,
+    /// Recorded samples: CSV exports of one channel (several: each a run of its own,
+    /// from a fresh start, in the order given, into the same outputs), or one MCAP
+    /// recording (a `glrmon run` or `demo` recording).
+    #[arg(required = true, num_args = 1..)]
+    input: Vec<PathBuf>,
     /// Output: JSON lines, or an MCAP file when the name ends in .mcap; `-` is
     /// standard output. Default: JSON lines on standard output, none when `--report`
     /// is given.
@@ -54,6 +57,22 @@ pub(crate) struct ReplayArgs {
     quiet: bool,
 }
 
+impl ReplayArgs {
+    /// The first input file (the only one for MCAP).
+    fn first(&self) -> &Path {
+        &self.input[0]
+    }
+
+    /// The input files as the user named them, comma-separated.
+    fn inputs_text(&self) -> String {
+        self.input
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
 /// The alarm, end and diagnosis lines of a replay, printed after its summary.
 type AlarmLines = Arc<Mutex<Vec<String>>>;
 
@@ -68,15 +87,15 @@ fn report(
 ) -> Report {
     let config = match &args.config {
         Some(path) => path.display().to_string(),
-        None => format!("recorded in {}", args.input.display()),
+        None => format!("recorded in {}", args.first().display()),
     };
     let mut report = Report::new(ReportOptions {
-        title: format!("glrmon replay of {}", args.input.display()),
+        title: format!("glrmon replay of {}", args.inputs_text()),
         zone,
         provenance: Some(Provenance {
             version: crate::version::long().to_owned(),
             config,
-            data: vec![args.input.display().to_string()],
+            data: args.input.iter().map(|p| p.display().to_string()).collect(),
             made: jiff::Timestamp::now(),
         }),
         ..ReportOptions::default()
@@ -178,9 +197,20 @@ fn take_lines(lines: &AlarmLines) -> Vec<String> {
 
 /// Replays `args.input`; wall-clock times in the report are shown in `zone`.
 pub(crate) fn run(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
-    match InputFormat::of(&args.input) {
-        InputFormat::Mcap => replay_mcap(args, zone),
-        InputFormat::Csv => replay_csv(args, zone),
+    let mcap = args
+        .input
+        .iter()
+        .filter(|p| InputFormat::of(p) == InputFormat::Mcap)
+        .count();
+    match (mcap, args.input.len()) {
+        (0, _) => replay_csv(args, zone),
+        (1, 1) => replay_mcap(args, zone),
+        _ => Err(InvalidInput(format!(
+            "{}: several inputs are CSV exports of one channel, each replayed as a run of \
+             its own; an MCAP recording is replayed alone",
+            args.inputs_text()
+        ))
+        .into()),
     }
 }
 
@@ -188,34 +218,57 @@ fn replay_csv(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
     let Some(config) = &args.config else {
         return Err(InvalidInput(format!(
             "{}: a CSV file needs --config (only MCAP recordings carry their configuration)",
-            args.input.display()
+            args.first().display()
         ))
         .into());
     };
     let cfg = load_config(config)?;
     let channel = pick(&cfg, args.channel.as_deref())?;
-    let csv = CsvReader::open_with_columns(&args.input, channel.dims, &channel.columns)
+    // Every header is read before any sample: a file that cannot be read costs nothing.
+    let files = args
+        .input
+        .iter()
+        .map(|p| CsvReader::open_with_columns(p, channel.dims, &channel.columns))
+        .collect::<Result<Vec<_>, _>>()
         .map_err(input_error)?;
-    let monitor = Monitor::from_channel(channel)?;
     let header = FileHeader {
         config: cfg.source.clone(),
         channels: vec![channel.name.clone()],
-        extra: std::collections::BTreeMap::from([(
-            "source".to_owned(),
-            args.input.display().to_string(),
-        )]),
+        extra: std::collections::BTreeMap::from([("source".to_owned(), args.inputs_text())]),
     };
     let (sinks, lines) = output_sinks(args, zone, &header, &cfg, &[channel])?;
     let mut fanout = Fanout::new(sinks, 1);
-    let mut pipeline = ChannelPipeline::new(0, monitor, fanout.plan());
-    let CsvReplayed { rows, .. } =
-        glrmon_input::replay_csv(csv, &mut pipeline, &mut fanout).map_err(replay_error)?;
+    // Each file is a run of its own, as identify and calibrate take them: its own
+    // monitor from a fresh start (never an episode or a filter state carried across).
+    // Its samples' indices follow the previous file's, so that the records of all
+    // files read in one order.
+    let mut summaries = Vec::with_capacity(files.len());
+    let mut first_k = 0;
+    for (path, csv) in args.input.iter().zip(files) {
+        let mut pipeline = ChannelPipeline::new(0, Monitor::from_channel(channel)?, fanout.plan());
+        let CsvReplayed { rows, next_k, .. } =
+            glrmon_input::replay_csv_from(csv, first_k, &mut pipeline, &mut fanout)
+                .map_err(replay_error)?;
+        first_k = next_k.max(first_k);
+        summaries.push(if args.input.len() > 1 {
+            format!(
+                "glrmon replay: channel \"{}\": {}: {rows} rows, {}",
+                channel.name,
+                path.display(),
+                counts(&pipeline)
+            )
+        } else {
+            format!(
+                "glrmon replay: channel \"{}\": {rows} rows, {}",
+                channel.name,
+                counts(&pipeline)
+            )
+        });
+    }
     close(fanout)?;
-    eprintln!(
-        "glrmon replay: channel \"{}\": {rows} rows, {}",
-        channel.name,
-        counts(&pipeline),
-    );
+    for line in &summaries {
+        eprintln!("{line}");
+    }
     if lines_on_stderr(args) {
         for line in &take_lines(&lines) {
             eprintln!("  {line}");
@@ -234,7 +287,7 @@ fn replay_error(e: ReplayError) -> anyhow::Error {
 }
 
 fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
-    let mut input = McapInput::open(&args.input).map_err(input_error)?;
+    let mut input = McapInput::open(args.first()).map_err(input_error)?;
     let cfg = match &args.config {
         Some(path) => load_config(path)?,
         None => input.recorded_config().map_err(input_error)?,
@@ -264,7 +317,7 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
         channels: order.iter().map(|c| c.to_string()).collect(),
         extra: std::collections::BTreeMap::from([(
             "source".to_owned(),
-            args.input.display().to_string(),
+            args.first().display().to_string(),
         )]),
     };
     let (sinks, lines) = output_sinks(args, zone, &header, &cfg, &replayed)?;
@@ -311,7 +364,7 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
     close(fanout)?;
     eprintln!(
         "glrmon replay: {}: {} messages, {inputs} inputs replayed in {elapsed:.2} s, {written} records written",
-        args.input.display(),
+        args.first().display(),
         input.messages(),
     );
     for (name, pipeline) in order.iter().zip(&channels) {
@@ -333,13 +386,13 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
     for line in &lines {
         eprintln!(
             "glrmon replay: {}: {line}",
-            Escaped(&args.input.to_string_lossy())
+            Escaped(&args.first().to_string_lossy())
         );
     }
     if damaged {
         return Err(InvalidInput(format!(
             "{}: the file is damaged; the readable part was replayed",
-            args.input.display()
+            args.first().display()
         ))
         .into());
     }
