@@ -502,13 +502,15 @@ fn scaled_segments(ch: &ChannelState, col: ColumnId, factor: f64) -> Vec<Vec<(f6
 
 /// ε_k: one figure per output unit when the channel is labelled, in raw units (the
 /// stored model-unit values times each output's scale), else one figure in model units.
+/// An output whose unit is not given has a figure of its own: two unknown units are
+/// not assumed to be one.
 fn innovation_figures(ch: &ChannelState, t_axis: &TimeAxis, fig_id: &mut usize) -> String {
     let labels = ch.labels.as_ref();
     let n = ch.innovation.len();
     let groups = match labels {
         Some(l) => group_by_unit(n, |i| match l.output(i).and_then(|o| o.unit.clone()) {
             Some(unit) => (unit, true),
-            None => ("raw units, none given".to_owned(), false),
+            None => (format!("raw units of {}", output_name(labels, i)), false),
         }),
         None => vec![UnitGroup {
             unit: "model units".to_owned(),

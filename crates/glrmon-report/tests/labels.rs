@@ -83,7 +83,12 @@ fn samples(channel: &glrmon_spec::Channel, n: usize, fault: Option<(&str, f64)>)
 
 /// The page of the two channels' replay, each labelled from the configuration.
 fn page() -> String {
-    let config = glrmon_spec::parse(PLANT).unwrap();
+    page_of(PLANT)
+}
+
+/// The page of the two channels' replay under configuration `text`.
+fn page_of(text: &str) -> String {
+    let config = glrmon_spec::parse(text).unwrap();
     let mut report = Report::new(ReportOptions {
         title: "replay".into(),
         provenance: Some(Provenance {
@@ -98,7 +103,7 @@ fn page() -> String {
         (&config.channels[0], Some(("LI201_bias", 1.32))),
         (&config.channels[1], None),
     ] {
-        report.label_channel(&channel.name, ChannelLabels::from_channel(channel, PLANT));
+        report.label_channel(&channel.name, ChannelLabels::from_channel(channel, text));
         let mut monitor = glrmon_monitor::Monitor::from_channel(channel).unwrap();
         let mut records = Vec::new();
         for s in samples(channel, 1300, fault) {
@@ -194,4 +199,30 @@ fn the_page_names_signals_in_their_units_alarmed_channel_first() {
     assert!(!boiler.contains("TI101_bias"), "no θ̂ legend");
     assert!(!boiler.contains("θ̂["));
     assert!(boiler.contains("No alarm on this channel"));
+}
+
+/// Without `y_units` (what `glrmon identify` writes) a level and a flow are not drawn
+/// on one axis: each output whose unit is not given has an innovation figure of its own.
+#[test]
+fn outputs_of_unknown_units_are_not_put_on_one_axis() {
+    let text = PLANT.replace("y_units = [\"cm\", \"m³/h\"]\n", "");
+    assert_ne!(text, PLANT);
+    let html = page_of(&text);
+    let tanks = section(&html, "tanks");
+    let innovations = figures(tanks, "innovation");
+    assert_eq!(
+        innovations.len(),
+        2,
+        "one figure per output of unknown unit"
+    );
+    assert!(
+        innovations[0].contains("raw units of LI201"),
+        "{}",
+        innovations[0]
+    );
+    assert!(
+        innovations[1].contains("raw units of FI301"),
+        "{}",
+        innovations[1]
+    );
 }
