@@ -115,12 +115,21 @@ pub fn identified_channel(channel: &IdentifiedChannel) -> String {
     if !numbered {
         out.push_str(
             "\n# The CSV columns read into u0…, y0… (other columns are skipped); live\n\
-             # payloads carry these signals in this order.\n[channels.columns]\n",
+             # payloads carry these signals in this order, or by name.\n[channels.columns]\n",
         );
         if !channel.inputs.is_empty() {
             let _ = writeln!(out, "u = {}", names(&channel.inputs));
         }
         let _ = writeln!(out, "y = {}", names(&channel.outputs));
+        let blank = |n: usize| names(&vec![String::new(); n]);
+        out.push_str(
+            "# Their units as the plant gives them (reports draw each unit on its own axis and\n\
+             # give magnitudes in it): uncomment and fill in, e.g. \"cm\", \"m³/h\".\n",
+        );
+        if !channel.inputs.is_empty() {
+            let _ = writeln!(out, "# u_units = {}", blank(channel.inputs.len()));
+        }
+        let _ = writeln!(out, "# y_units = {}", blank(channel.outputs.len()));
     }
     let q = &channel.k * &channel.re * channel.k.transpose();
     let s = &channel.k * &channel.re;
@@ -262,5 +271,41 @@ mod tests {
         assert_eq!(c.fault_names, ["y0_bias"]);
         assert_eq!(c.model.matrices()[2].base()[(0, 1)], 1e-7);
         assert_eq!(c.cross_covariance.as_ref().unwrap()[(0, 0)], 0.6);
+    }
+
+    #[test]
+    fn named_columns_come_with_unit_lines_to_fill_in() {
+        let m = |r, c, v: &[f64]| DMatrix::from_row_slice(r, c, v);
+        let channel = IdentifiedChannel {
+            name: "tanks".into(),
+            period: Some(20.0),
+            a: m(1, 1, &[0.9]),
+            b: m(1, 1, &[0.1]),
+            c: m(1, 1, &[1.0]),
+            d: m(1, 1, &[0.0]),
+            k: m(1, 1, &[0.3]),
+            re: m(1, 1, &[2.0]),
+            p0: DMatrix::identity(1, 1),
+            inputs: vec!["FIC101".into()],
+            outputs: vec!["LI201".into()],
+            other_columns: true,
+            u_offset: vec![2.0],
+            u_scale: vec![0.2],
+            y_offset: vec![60.0],
+            y_scale: vec![1.5],
+            window: 20,
+            notes: vec![],
+        };
+        let text = identified_channel(&channel);
+        assert!(
+            text.contains("# u_units = [\"\"]\n# y_units = [\"\"]\n"),
+            "{text}"
+        );
+        let filled = text
+            .replace("# u_units = [\"\"]", "u_units = [\"m³/h\"]")
+            .replace("# y_units = [\"\"]", "y_units = [\"cm\"]");
+        let config = crate::parse(&filled).expect("the filled-in lines are valid");
+        assert_eq!(config.channels[0].columns.output_label(0), "LI201 [cm]");
+        assert_eq!(config.channels[0].columns.input_label(0), "FIC101 [m³/h]");
     }
 }
