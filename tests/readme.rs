@@ -78,6 +78,28 @@ fn the_readme_recipe_runs_verbatim_and_keeps_its_false_alarm_promise() {
         !stderr.contains("was identified from"),
         "the recipe calibrates on other days:\n{stderr}"
     );
+    // Each validation figure with its verdict.
+    assert!(
+        stdout.contains("→ share of each output's variance predicted one sample ahead: LI201")
+            && stdout.contains("→ LI202 innovations white"),
+        "{stdout}"
+    );
+    // Calibrating on an identification day is warned of.
+    let warned = run_ok(glrmon().current_dir(&dir.0).args([
+        "calibrate",
+        "--config",
+        "tanks.toml",
+        "mon.csv",
+        "thu.csv",
+        "--mtbfa",
+        "1d",
+    ]));
+    let warned = String::from_utf8_lossy(&warned.stderr);
+    assert!(
+        warned.contains("mon.csv is data the model of tanks.toml was identified from")
+            && !warned.contains("thu.csv is data"),
+        "{warned}"
+    );
     // The bias starts at sample 1200 of fault.csv, 06:40:00 UTC; LI202 is isolated by
     // the alarm or its update.
     let alarm = stderr
