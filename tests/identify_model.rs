@@ -155,9 +155,8 @@ fn recovers(name: &str, scaling: &str) -> String {
     );
     assert!(
         said.contains(&format!(
-            "glrmon calibrate --config {} --channel plant {} --sample-far 0.01 --write",
+            "glrmon calibrate --config {} --channel plant OTHER-DAYS.csv --mtbfa 10000 --write",
             s(&fixed),
-            s(&data)
         )),
         "{said}"
     );
