@@ -920,3 +920,67 @@ fn replay_takes_several_csv_files_each_a_run_of_its_own() {
         String::from_utf8_lossy(&mixed.stderr)
     );
 }
+
+/// `simulate --end`: a fault that ends. A speed-sensor drift from 100 to 200 on the DC
+/// motor changes y1 on exactly those samples (same seed, same noise), nothing else; an
+/// end before the onset is refused.
+#[test]
+fn simulate_end_cuts_the_fault_off() {
+    let dir = TempDir::new("simulate-end");
+    let cfg = config("examples/dc-motor.toml");
+    let (clean, ended) = (dir.file("clean.csv"), dir.file("ended.csv"));
+    ok(&glrmon(&[
+        "simulate",
+        "--config",
+        &cfg,
+        "--samples",
+        "300",
+        "--output",
+        &clean,
+    ]));
+    ok(&glrmon(&[
+        "simulate",
+        "--config",
+        &cfg,
+        "--samples",
+        "300",
+        "--fault",
+        "speed_sensor_drift:0.01",
+        "--onset",
+        "100",
+        "--end",
+        "200",
+        "--output",
+        &ended,
+    ]));
+    let rows = |path: &str| -> Vec<Vec<f64>> {
+        std::fs::read_to_string(path)
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+            .collect()
+    };
+    let (clean, ended) = (rows(&clean), rows(&ended));
+    let changed: Vec<usize> = (0..300).filter(|&k| clean[k] != ended[k]).collect();
+    assert_eq!(changed.first(), Some(&100));
+    assert_eq!(changed.last(), Some(&199));
+    assert_eq!(changed.len(), 100);
+    let refused = glrmon(&[
+        "simulate",
+        "--config",
+        &cfg,
+        "--samples",
+        "10",
+        "--fault",
+        "actuator_bias:1",
+        "--onset",
+        "5",
+        "--end",
+        "5",
+        "--output",
+        &dir.file("x.csv"),
+    ]);
+    assert_eq!(refused.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--end 5 must come after --onset 5"));
+}

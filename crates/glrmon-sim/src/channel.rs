@@ -258,6 +258,37 @@ input = 0
         assert!((shift - 6.0).abs() < 1e-9, "shift {shift}");
     }
 
+    /// An actuator bias from r = 5, released at 15 (`with_fault_end(15)`): X_{k+1} gets
+    /// θ for k = 5 … 13 (Ψ_k(r)θ on X_{k+1} for r ≤ k and k + 1 < 15), so the outputs
+    /// differ from the fault-free run's by θ·Σ 0.5^i over the steps taken, growing to
+    /// Y_14 and halving each sample after: exactly, with the same noise.
+    #[test]
+    fn an_ended_fault_acts_from_its_onset_to_its_end_only() {
+        let c = channel();
+        let theta = fault_magnitudes(&c, &["bias".to_owned()], &[3.0]).unwrap();
+        let faulty = inject(
+            from_channel(&c, 7).unwrap(),
+            &c,
+            Injection {
+                magnitude: theta,
+                onset: 5,
+            },
+        )
+        .unwrap()
+        .with_fault_end(15);
+        let (clean, faulty) = (run(from_channel(&c, 7).unwrap(), 30), run(faulty, 30));
+        let mut expected = 0.0;
+        for k in 0..30 {
+            let shift = faulty[k].y[0] - clean[k].y[0];
+            assert!(
+                (shift - expected).abs() < 1e-9,
+                "k = {k}: {shift} vs {expected}"
+            );
+            expected = 0.5 * expected + if (5..14).contains(&k) { 3.0 } else { 0.0 };
+        }
+        assert!((faulty[29].y[0] - clean[29].y[0]).abs() < 1e-3, "released");
+    }
+
     #[test]
     fn unknown_fault_names_the_dictionary() {
         let c = channel();

@@ -96,6 +96,8 @@ pub struct Simulator {
     model: Box<dyn StateSpace>,
     faults: Option<FaultDictionary>,
     injection: Option<Injection>,
+    /// The first sample the injected fault no longer acts on, if it ends.
+    fault_end: Option<u64>,
     controller: Option<PiController>,
     integral: f64,
     held_control: f64,
@@ -128,6 +130,7 @@ impl std::fmt::Debug for Simulator {
             .field("dims", &self.dims)
             .field("k", &self.k)
             .field("injection", &self.injection)
+            .field("fault_end", &self.fault_end)
             .field("controller", &self.controller)
             .finish_non_exhaustive()
     }
@@ -153,6 +156,7 @@ impl Simulator {
             model,
             faults: None,
             injection: None,
+            fault_end: None,
             controller: None,
             integral: 0.0,
             held_control: 0.0,
@@ -217,6 +221,17 @@ impl Simulator {
         }
         self.scaling = Some(scaling);
         Ok(self)
+    }
+
+    /// Ends the injected fault at sample `end`: its additive terms act on samples
+    /// r ≤ k < `end` only, Φ_k(r)θ on Y_k for k < `end` and Ψ_k(r)θ on X_{k+1} for
+    /// k + 1 < `end` (Zhang & Basseville 2014, eq. (44), with the profile cut off), as an
+    /// intermittent fault or an actuator stuck for a while and then released. What the
+    /// fault did to the state before `end` dies out with the plant's own dynamics.
+    #[must_use]
+    pub fn with_fault_end(mut self, end: u64) -> Self {
+        self.fault_end = Some(end);
+        self
     }
 
     /// Injects `injection` of the faults in `faults` (a dictionary built like the
@@ -358,7 +373,10 @@ impl Simulator {
         let v = &self.sqrt_r * &self.noise_v;
         let mut u = DVector::from_column_slice(&self.u_model);
         let mut y = &self.sys.h * &self.x + &self.sys.j * &u + &v;
-        if let (Some(f), Some(inj)) = (&self.faults, &self.injection) {
+        let ended = |at: u64| self.fault_end.is_some_and(|e| at >= e);
+        if let (Some(f), Some(inj)) = (&self.faults, &self.injection)
+            && !ended(k)
+        {
             for (j, fault) in f.faults().iter().enumerate() {
                 let factor = profile_factor(fault.onset, k, inj.onset, false);
                 if factor != 0.0 {
@@ -406,7 +424,9 @@ impl Simulator {
             e.evaluate_into(&out.p, at_k);
             x += &*at_k * &*buf;
         }
-        if let (Some(f), Some(inj)) = (&self.faults, &self.injection) {
+        if let (Some(f), Some(inj)) = (&self.faults, &self.injection)
+            && !self.fault_end.is_some_and(|e| k + 1 >= e)
+        {
             for (j, fault) in f.faults().iter().enumerate() {
                 let factor = profile_factor(fault.onset, k, inj.onset, true);
                 if factor != 0.0 {

@@ -38,6 +38,10 @@ pub(crate) struct SimulateArgs {
     /// Onset r of the injected fault(s).
     #[arg(long, default_value_t = 0)]
     onset: u64,
+    /// The sample at which the injected fault(s) end: they act on onset ≤ k < END
+    /// (an intermittent fault, an actuator stuck for a while). Default: never.
+    #[arg(long, value_name = "END", requires = "faults")]
+    end: Option<u64>,
     /// Replaced by `--fault NAME:MAGNITUDE`.
     #[arg(long, hide = true, allow_hyphen_values = true)]
     pub(crate) magnitude: Vec<String>,
@@ -70,6 +74,16 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let cfg = load_config(&args.config)?;
     let channel = pick(&cfg, args.channel.as_deref())?;
     let mut sim = simulator(channel, args.seed, &args.faults, args.onset)?;
+    if let Some(end) = args.end {
+        if end <= args.onset {
+            return Err(InvalidInput(format!(
+                "--end {end} must come after --onset {}: the fault acts on onset ≤ k < end",
+                args.onset
+            ))
+            .into());
+        }
+        sim = sim.with_fault_end(end);
+    }
     if let Some(path) = &args.signals {
         let rows = read_signals(path, channel.dims.signals, args.samples)?;
         sim = sim.with_signals(Box::new(move |k, out: &mut [f64]| {
