@@ -373,9 +373,8 @@ impl Simulator {
         let v = &self.sqrt_r * &self.noise_v;
         let mut u = DVector::from_column_slice(&self.u_model);
         let mut y = &self.sys.h * &self.x + &self.sys.j * &u + &v;
-        let ended = |at: u64| self.fault_end.is_some_and(|e| at >= e);
         if let (Some(f), Some(inj)) = (&self.faults, &self.injection)
-            && !ended(k)
+            && self.fault_end.is_none_or(|e| k < e)
         {
             for (j, fault) in f.faults().iter().enumerate() {
                 let factor = profile_factor(fault.onset, k, inj.onset, false);
@@ -425,7 +424,7 @@ impl Simulator {
             x += &*at_k * &*buf;
         }
         if let (Some(f), Some(inj)) = (&self.faults, &self.injection)
-            && !self.fault_end.is_some_and(|e| k + 1 >= e)
+            && self.fault_end.is_none_or(|e| k + 1 < e)
         {
             for (j, fault) in f.faults().iter().enumerate() {
                 let factor = profile_factor(fault.onset, k, inj.onset, true);
