@@ -242,8 +242,7 @@ impl Monitor {
         } else {
             settings.groups.clone()
         };
-        let dims = detector.dims();
-        let out = StepOutput::new(dims.outputs, detector.faults().len());
+        let out = StepOutput::for_detector(detector.as_ref());
         Self {
             channel: channel.to_owned(),
             alarm: {
@@ -416,13 +415,14 @@ impl Monitor {
             t,
             glr: self.out.glr,
             onset: self.out.onset,
-            magnitude: if self.out.glr.is_some() {
+            magnitude: if self.out.glr.is_some() && self.detector.estimates_magnitude() {
                 self.out.magnitude.iter().copied().collect()
             } else {
                 Vec::new()
             },
             rank: self.out.rank,
             innovation: self.out.innovation.iter().copied().collect(),
+            residual: self.out.residual.iter().copied().collect(),
             threshold: Some(self.settings.tuning.alarm.threshold),
             episode,
         }));

@@ -356,6 +356,7 @@ mod tests {
             magnitude: vec![0.5],
             rank: 1,
             innovation: vec![0.1, -0.2],
+            residual: Vec::new(),
             threshold: Some(20.0),
             episode: Some(glrmon_wire::EpisodeEstimate {
                 onset: 5,

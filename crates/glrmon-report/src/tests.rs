@@ -28,6 +28,7 @@ fn stat(channel: &str, k: u64, glr: Option<f64>) -> Record {
         },
         rank: 2,
         innovation: vec![(k as f64).sin(), (k as f64).cos()],
+        residual: Vec::new(),
         threshold: Some(THRESHOLD),
         episode: None,
     })
@@ -430,6 +431,7 @@ fn decimation_keeps_the_point_budget_and_the_spike() {
             magnitude: vec![0.0; 3],
             rank: 3,
             innovation: vec![0.0; 2],
+            residual: Vec::new(),
             threshold: Some(20.0),
             episode: None,
         }));

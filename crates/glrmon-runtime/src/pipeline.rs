@@ -536,6 +536,7 @@ mod tests {
             magnitude: vec![f64::NAN],
             rank: 1,
             innovation: vec![0.0],
+            residual: Vec::new(),
             threshold: None,
             episode: None,
         }));

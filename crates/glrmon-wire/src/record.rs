@@ -49,8 +49,14 @@ pub struct Stat {
     /// Numerical rank of C_k(r̂) (fewer than the number of faults when some are not
     /// separable over the window).
     pub rank: usize,
-    /// Innovation ε_k of the Kalman filter, one value per output.
+    /// Innovation ε_k of the Kalman filter, one value per output; empty for the
+    /// detector kinds that run no Kalman filter (`parity`, `fdf`, `uio`, `rls`).
     pub innovation: Vec<f64>,
+    /// The detector's own residual for the kinds that are not built on the Kalman
+    /// innovation: the parity residual (`parity`), the observer's weighted output
+    /// error (`fdf`, `uio`), θ̂ − θ_nom (`rls`). Absent for `glr`, `chi2` and `cusum`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub residual: Vec<f64>,
     /// Alarm threshold on l_k, if configured.
     pub threshold: Option<f64>,
     /// The alarm episode's estimate while an episode is on: from its alarm's sample
@@ -442,6 +448,7 @@ impl Record {
                 c.opt("glr", r.glr)?;
                 c.all("magnitude", &r.magnitude)?;
                 c.all("innovation", &r.innovation)?;
+                c.all("residual", &r.residual)?;
                 c.opt("threshold", r.threshold)?;
                 r.episode
                     .as_ref()
@@ -820,6 +827,7 @@ mod tests {
             magnitude: vec![1e-300, -0.0, 2.5],
             rank: 3,
             innovation: vec![0.1, -1.7976931348623157e308],
+            residual: Vec::new(),
             threshold: Some(13.8),
             episode: Some(EpisodeEstimate {
                 onset: 3,
@@ -943,6 +951,12 @@ mod tests {
         vec![
             stat().into(),
             stat_before_onset().into(),
+            Stat {
+                innovation: Vec::new(),
+                residual: vec![0.25, -1.5, 3.0],
+                ..stat()
+            }
+            .into(),
             alarm().into(),
             Alarm {
                 update_k: None,
@@ -1124,6 +1138,7 @@ mod tests {
             [
                 "stat",
                 "stat",
+                "stat",
                 "alarm",
                 "alarm",
                 "isolation",
@@ -1181,6 +1196,15 @@ mod tests {
                 }
                 .into(),
                 "innovation[1]",
+            ),
+            (
+                Stat {
+                    innovation: Vec::new(),
+                    residual: vec![0.5, 1.0, f64::INFINITY],
+                    ..stat()
+                }
+                .into(),
+                "residual[2]",
             ),
             (
                 Stat {
@@ -1469,9 +1493,10 @@ mod tests {
         );
     }
 
-    /// Each record's JSON Schema lists exactly the fields it serializes, requires those
-    /// that are not `Option`s (which may be absent or `null`), and locates a wrongly typed
-    /// or missing value in any of them.
+    /// Each record's JSON Schema lists exactly the fields it serializes (a record may
+    /// leave out only the fields the schema does not require: a stat's empty
+    /// `residual`), requires those that are not `Option`s (which may be absent or
+    /// `null`) or defaulted, and locates a wrongly typed or missing value in any of them.
     #[test]
     fn schema_matches_serialized_fields() {
         for record in all_records() {
@@ -1482,18 +1507,32 @@ mod tests {
             let schema = record_schema(kind).unwrap();
             assert_eq!(schema["properties"]["type"]["const"], kind);
             let properties = schema["properties"].as_object().unwrap();
-            let mut want: Vec<&String> = properties.keys().collect();
+            let is_required = |name: &str| {
+                schema["required"]
+                    .as_array()
+                    .unwrap()
+                    .contains(&Value::from(name))
+            };
+            let mut want: Vec<&String> = properties
+                .keys()
+                .filter(|name| obj.contains_key(*name) || is_required(name))
+                .collect();
             let mut got: Vec<&String> = obj.keys().collect();
             want.sort_unstable();
             got.sort_unstable();
             assert_eq!(got, want, "{kind}");
 
-            for (name, property) in properties.iter().filter(|(name, _)| *name != "type") {
-                let required = schema["required"]
-                    .as_array()
-                    .unwrap()
-                    .contains(&Value::from(name.as_str()));
-                assert_eq!(required, !allows(property, "null"), "{kind}.{name}");
+            for (name, property) in properties
+                .iter()
+                .filter(|(name, _)| *name != "type" && obj.contains_key(*name))
+            {
+                let required = is_required(name);
+                let defaulted = kind == "stat" && name == "residual";
+                assert_eq!(
+                    required,
+                    !allows(property, "null") && !defaulted,
+                    "{kind}.{name}"
+                );
 
                 let mut bad = obj.clone();
                 let wrong = if allows(property, "string") {

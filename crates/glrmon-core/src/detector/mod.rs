@@ -138,6 +138,28 @@ pub trait Detector: std::fmt::Debug + Send {
     fn followed_magnitude(&self) -> Option<&[f64]> {
         None
     }
+
+    /// The length of [`StepOutput::innovation`]: p for the kinds built on the Kalman
+    /// (or Kitanidis) filter, 0 for residual generators that run no such filter
+    /// (parity space, observers, parameter estimation), whose residual is
+    /// [`StepOutput::residual`] instead.
+    fn innovation_len(&self) -> usize {
+        self.dims().outputs
+    }
+
+    /// The length of [`StepOutput::residual`]: the kind's own residual besides the
+    /// innovation (the parity residual, an observer's output error, θ̂ − θ_nom); 0 for
+    /// the kinds whose residual is the innovation.
+    fn residual_len(&self) -> usize {
+        0
+    }
+
+    /// Whether [`StepOutput::magnitude`] carries a magnitude estimate θ̂ per fault.
+    /// Kinds that only detect leave it zero and say so here, so that no one reads
+    /// zeros as an estimate.
+    fn estimates_magnitude(&self) -> bool {
+        true
+    }
 }
 
 impl<D: Detector + ?Sized> Detector for Box<D> {
@@ -186,6 +208,15 @@ impl<D: Detector + ?Sized> Detector for Box<D> {
     fn followed_magnitude(&self) -> Option<&[f64]> {
         (**self).followed_magnitude()
     }
+    fn innovation_len(&self) -> usize {
+        (**self).innovation_len()
+    }
+    fn residual_len(&self) -> usize {
+        (**self).residual_len()
+    }
+    fn estimates_magnitude(&self) -> bool {
+        (**self).estimates_magnitude()
+    }
 }
 
 /// One sample of a channel: index k, known inputs U_k, outputs Y_k, signals p(k).
@@ -210,8 +241,13 @@ pub struct StepOutput {
     /// The residual: the innovation ε_k (Zhang & Basseville 2014, eq. (10)) for the
     /// kinds built on the Kalman filter.
     pub innovation: DVector<f64>,
-    /// εᵀΣ⁻¹ε: χ²(p) under no fault (χ²(p − q) decoupled from q unknown inputs).
+    /// εᵀΣ⁻¹ε: χ²(p) under no fault (χ²(p − q) decoupled from q unknown inputs); for
+    /// kinds without an innovation ([`Detector::innovation_len`] 0), their residual's
+    /// normalized square, which the filter-consistency test does not read.
     pub normalized_innovation: f64,
+    /// The kind's own residual ([`Detector::residual_len`] values; empty for the kinds
+    /// whose residual is the innovation).
+    pub residual: DVector<f64>,
     /// The decision statistic: l_k (eq. (35)) for the GLR; `None` while the kind has
     /// no value to report (no admissible onset yet, warm-up).
     pub glr: Option<f64>,
@@ -224,17 +260,27 @@ pub struct StepOutput {
 }
 
 impl StepOutput {
-    /// Buffers for a detector with `outputs` outputs and `faults` faults.
+    /// Buffers for a detector with `outputs` outputs and `faults` faults whose
+    /// residual is the innovation.
     #[must_use]
     pub fn new(outputs: usize, faults: usize) -> Self {
         Self {
             k: 0,
             innovation: DVector::zeros(outputs),
             normalized_innovation: 0.0,
+            residual: DVector::zeros(0),
             glr: None,
             onset: None,
             magnitude: DVector::zeros(faults),
             rank: 0,
         }
+    }
+
+    /// Buffers sized for `detector`: its innovation, residual and faults.
+    #[must_use]
+    pub fn for_detector(detector: &dyn Detector) -> Self {
+        let mut out = Self::new(detector.innovation_len(), detector.faults().len());
+        out.residual = DVector::zeros(detector.residual_len());
+        out
     }
 }
