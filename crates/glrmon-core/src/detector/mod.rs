@@ -16,9 +16,11 @@
 //! report, `calibrate`, `evaluate` and `validate` then run it unchanged.
 
 mod chi2;
+pub mod evaluation;
 mod glr;
 
 pub use chi2::Chi2Detector;
+pub use evaluation::{EnergyWindow, Evaluation};
 pub use glr::{DEFAULT_STEADY_TOLERANCE, GlrDetector, WindowSettings};
 
 use nalgebra::DVector;
