@@ -18,6 +18,7 @@
 mod chi2;
 pub mod evaluation;
 mod glr;
+pub mod parity;
 
 pub use chi2::Chi2Detector;
 pub use evaluation::{EnergyWindow, Evaluation};
@@ -162,6 +163,43 @@ pub trait Detector: std::fmt::Debug + Send {
     fn estimates_magnitude(&self) -> bool {
         true
     }
+}
+
+/// The checks every kind makes before touching its state: the index is the next one
+/// and below 2⁶⁴ − 1, and u, y, p have the model's lengths and finite values.
+pub(crate) fn check_sample(
+    dims: Dims,
+    next_k: Option<u64>,
+    s: &Sample<'_>,
+) -> Result<(), StepError> {
+    if s.k == u64::MAX {
+        return Err(StepError::IndexTooLarge { k: s.k });
+    }
+    if let Some(next) = next_k
+        && s.k != next
+    {
+        return Err(StepError::OutOfOrder {
+            expected: next,
+            got: s.k,
+        });
+    }
+    for (field, v, expected) in [
+        ("u", s.u, dims.inputs),
+        ("y", s.y, dims.outputs),
+        ("p", s.p, dims.signals),
+    ] {
+        if v.len() != expected {
+            return Err(StepError::WrongDimension {
+                field,
+                expected,
+                got: v.len(),
+            });
+        }
+        if let Some(index) = v.iter().position(|x| !x.is_finite()) {
+            return Err(StepError::NonFinite { field, index });
+        }
+    }
+    Ok(())
 }
 
 impl<D: Detector + ?Sized> Detector for Box<D> {
