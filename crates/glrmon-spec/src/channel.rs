@@ -280,6 +280,8 @@ pub struct Channel {
     pub isolation_thresholds: Vec<(String, f64)>,
     /// The detection method ([`Channel::detector`] builds it).
     pub detector_kind: DetectorKind,
+    /// The parity detector's settings (`[channels.parity]`), for `detector = "parity"`.
+    pub parity: Option<glrmon_core::detector::parity::ParitySettings>,
     /// Largest gap filled by predict-only steps.
     pub max_gap: u64,
     /// How many indices before the last processed one a sample is refused as late;

@@ -6,6 +6,7 @@
 //! one arm of [`Channel::detector`]; the schema's `detector` field lists the names
 //! from [`DetectorKind::NAMES`].
 
+use glrmon_core::detector::parity::{Disturbance, ParityDetector};
 use glrmon_core::{Chi2Detector, Detector, GlrDetector, ModelError};
 
 use crate::Channel;
@@ -19,14 +20,16 @@ pub enum DetectorKind {
     Glr,
     /// The classical χ² test of one sample's εᵀΣ⁻¹ε (the baseline to compare with).
     Chi2,
+    /// The parity-space residual of Ahmad & Mohd-Mokhtar 2021, eqs. (4)-(8).
+    Parity,
 }
 
 impl DetectorKind {
     /// Every kind, in declaration order (a kind's index is its discriminant).
-    pub const ALL: [Self; 2] = [Self::Glr, Self::Chi2];
+    pub const ALL: [Self; 3] = [Self::Glr, Self::Chi2, Self::Parity];
 
     /// The names the configuration accepts, as [`DetectorKind::ALL`].
-    pub const NAMES: [&'static str; 2] = ["glr", "chi2"];
+    pub const NAMES: [&'static str; 3] = ["glr", "chi2", "parity"];
 
     /// The configuration's name of the kind.
     #[must_use]
@@ -42,12 +45,25 @@ impl DetectorKind {
 
     /// The degrees of freedom of the statistic's χ² law under no fault, for one tested
     /// onset: m for the GLR (the number of faults: l_k(r) ~ χ²(rank C_k(r)) ≤ χ²(m),
-    /// Zhang & Basseville 2014 §5), the innovation's p − q for the χ² test.
+    /// Zhang & Basseville 2014 §5), the dimension of the residual it tests for the
+    /// others (`residual_dof`: the innovation's p − q for the χ² test, the parity
+    /// space's for `parity`).
     #[must_use]
-    pub fn statistic_dof(self, faults: usize, innovation_dof: usize) -> usize {
+    pub fn statistic_dof(self, faults: usize, residual_dof: usize) -> usize {
         match self {
             Self::Glr => faults.max(1),
-            Self::Chi2 => innovation_dof.max(1),
+            Self::Chi2 | Self::Parity => residual_dof.max(1),
+        }
+    }
+
+    /// Whether the kind runs the Kalman (or Kitanidis) filter, whose innovation the
+    /// consistency test and sparse diagnosis read, and estimates magnitudes for
+    /// isolation.
+    #[must_use]
+    pub fn runs_kalman_filter(self) -> bool {
+        match self {
+            Self::Glr | Self::Chi2 => true,
+            Self::Parity => false,
         }
     }
 
@@ -57,7 +73,7 @@ impl DetectorKind {
     pub fn maximises_over_onsets(self) -> bool {
         match self {
             Self::Glr => true,
-            Self::Chi2 => false,
+            Self::Chi2 | Self::Parity => false,
         }
     }
 }
@@ -72,6 +88,19 @@ impl Channel {
         Ok(match self.detector_kind {
             DetectorKind::Glr => Box::new(self.glr_detector()?),
             DetectorKind::Chi2 => Box::new(Chi2Detector::new(self.glr_detector()?)),
+            DetectorKind::Parity => Box::new(ParityDetector::new(
+                Box::new(self.model.clone()),
+                self.dictionary()?,
+                self.unknown_input.as_ref().map(|e| Disturbance {
+                    state: e.base().clone(),
+                    output: nalgebra::DMatrix::zeros(self.dims.outputs, e.shape().1),
+                }),
+                self.cross_covariance.clone(),
+                self.parity.ok_or(ModelError::Setting {
+                    what: "parity",
+                    detail: "the channel has no parity settings".into(),
+                })?,
+            )?),
         })
     }
 

@@ -36,7 +36,7 @@
 use glrmon_core::threshold::calibration::{Calibration, Target};
 use nalgebra::DMatrix;
 
-use crate::SpecErrors;
+use crate::{DetectorKind, SpecErrors};
 
 /// Why a configuration's text could not be edited. None of these is the machine's
 /// fault: the text, or the channel asked for, is.
@@ -154,6 +154,57 @@ pub fn set_calibrated(
         cal.insert("isolation", toml_edit::value(iso));
     }
     glr.insert("calibrated", toml_edit::Item::Table(cal));
+    let updated = doc.to_string();
+    crate::parse(&updated).map_err(EditError::Invalid)?;
+    Ok(updated)
+}
+
+/// Sets `glr.detector` of `channel` in the configuration `text` to `kind`, for
+/// comparing kinds on the same channel (`glrmon evaluate --detector`): every kind is
+/// then set to the same false-alarm probability per sample, the configured
+/// `false_alarm` (10⁻⁴ when none is given), since a threshold set for one kind's
+/// statistic (`threshold`, `[channels.glr.calibrated]`) means nothing for another's;
+/// `[channels.parity]` is removed for other kinds. Returns the edited text.
+///
+/// # Errors
+/// As [`set_calibrated`]: [`EditError::Toml`], [`EditError::NoChannels`],
+/// [`EditError::NoChannel`], [`EditError::GlrNotTable`], and [`EditError::Invalid`]
+/// when the channel cannot run `kind` (e.g. a parity space that is empty).
+pub fn set_detector(text: &str, channel: &str, kind: DetectorKind) -> Result<String, EditError> {
+    let mut doc: toml_edit::DocumentMut = text
+        .parse()
+        .map_err(|e: toml_edit::TomlError| EditError::Toml(e.to_string()))?;
+    let channels = doc
+        .get_mut("channels")
+        .and_then(toml_edit::Item::as_array_of_tables_mut)
+        .ok_or(EditError::NoChannels)?;
+    let table = channels
+        .iter_mut()
+        .find(|t| t.get("name").and_then(|v| v.as_str()) == Some(channel))
+        .ok_or_else(|| EditError::NoChannel(channel.to_owned()))?;
+    if kind != DetectorKind::Parity {
+        table.remove("parity");
+    }
+    if kind.runs_kalman_filter() {
+        // Sparse diagnosis needs the Kalman filter; other kinds refuse it.
+    } else if let Some(d) = table.get_mut("diagnosis").and_then(toml_edit::Item::as_table_like_mut) {
+        d.remove("enabled");
+    }
+    if table.get("glr").is_none() {
+        table.insert("glr", toml_edit::table());
+    }
+    let glr = table
+        .get_mut("glr")
+        .and_then(toml_edit::Item::as_table_like_mut)
+        .ok_or(EditError::GlrNotTable)?;
+    let explicit = glr.contains_key("threshold") || glr.contains_key("calibrated");
+    for key in ["threshold", "calibrated", "threshold_mode"] {
+        glr.remove(key);
+    }
+    if explicit && !glr.contains_key("false_alarm") {
+        glr.insert("false_alarm", toml_edit::value(1e-4));
+    }
+    glr.insert("detector", toml_edit::value(kind.name()));
     let updated = doc.to_string();
     crate::parse(&updated).map_err(EditError::Invalid)?;
     Ok(updated)

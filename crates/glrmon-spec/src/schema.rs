@@ -310,9 +310,36 @@ pub struct ChannelSpec {
     #[serde(default)]
     pub diagnosis: DiagnosisSpec,
     /// `[channels.consistency]`: the filter-consistency monitor. Default: on, blocks
-    /// of 500 samples.
+    /// of 500 samples (off for detectors that run no Kalman filter, `parity`).
     #[serde(default)]
     pub consistency: ConsistencySpec,
+    /// `[channels.parity]`: the parity-space detector (`glr.detector = "parity"`).
+    /// Default: the smallest order with a parity space, χ² evaluation.
+    pub parity: Option<ParitySpec>,
+}
+
+/// `[channels.parity]`: the parity-space residual of Ahmad & Mohd-Mokhtar 2021, eqs.
+/// (4)-(8), for `glr.detector = "parity"`: the outputs of a window of s + 1 samples
+/// minus their best fit by the model from an unknown initial state (and the unknown
+/// input `model.E`, decoupled where the parity space allows it, else the optimal
+/// parity vector of eq. (7)).
+#[derive(Debug, Clone, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ParitySpec {
+    /// Order s: the window holds s + 1 samples (at most 64). Default: the smallest order
+    /// whose parity space is not empty (decoupled from `model.E` if given).
+    pub order: Option<usize>,
+    /// How the residual becomes the statistic compared with the threshold: `chi2`
+    /// (default; rᵀΣ_r⁻¹r with the residual's covariance under Q, R, χ² with the
+    /// parity space's dimension, so `glr.false_alarm` sets the threshold) or `energy`
+    /// (the windowed energy (Σ rᵀr)^{1/2} over `energy_window` samples, survey eq.
+    /// (12): give `glr.threshold`, e.g. the bound J_th = δ_d of eq. (8), or calibrate).
+    #[schemars(extend("enum" = ["chi2", "energy"]))]
+    pub evaluation: Option<String>,
+    /// Samples of the windowed energy (`evaluation = "energy"`), 1 to 100000. Default 10.
+    pub energy_window: Option<usize>,
+    /// Relative rank cut-off of [H_o,s H_d,s], in (0, 1). Default 1e-9.
+    pub rank_tolerance: Option<f64>,
 }
 
 /// `[channels.model]`: the model matrices, letters of Zhang & Basseville 2014,
@@ -588,9 +615,11 @@ pub struct GlrSpec {
     /// none.
     pub calibrated: Option<CalibratedSpec>,
     /// The detection statistic: `glr` (default; the windowed GLR of Zhang & Basseville
-    /// 2014) or `chi2` (the plain χ²(p) test of εᵀΣ⁻¹ε on each sample: the classical
-    /// baseline, for comparing with the GLR on your data; alarms then carry r̂ = k).
-    #[schemars(extend("enum" = ["glr", "chi2"]))]
+    /// 2014), `chi2` (the plain χ²(p) test of εᵀΣ⁻¹ε on each sample: the classical
+    /// baseline, for comparing with the GLR on your data; alarms then carry r̂ = k) or
+    /// `parity` (the parity-space residual, `[channels.parity]`; detection only: no
+    /// magnitude or isolation; alarms carry the window's first sample as r̂).
+    #[schemars(extend("enum" = ["glr", "chi2", "parity"]))]
     pub detector: Option<String>,
     /// Hysteresis h in [0, 1): an alarm episode ends below λ(1 − h). Default 0.1.
     #[serde(default = "default_hysteresis")]

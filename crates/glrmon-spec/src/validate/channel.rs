@@ -9,7 +9,8 @@ use super::model::Matrices;
 use super::{Validator, join};
 use crate::names::validate_name;
 use crate::schema::{self, ChannelSpec, ConsistencySpec, GlrSpec};
-use crate::{Channel, PayloadFormat, limits, locate};
+use crate::{Channel, DetectorKind, PayloadFormat, ThresholdSource, limits, locate};
+use glrmon_core::detector::Evaluation;
 
 impl Validator {
     /// A channel, or `None` when it has an error. The model comes first: the shapes
@@ -61,9 +62,55 @@ impl Validator {
         self.observability(prefix, &lpv);
         let glr = &spec.glr;
         let innovation_dof = dims.outputs - e.as_ref().map_or(0, |e| e.shape().1).min(dims.outputs);
-        let detection = self.glr(prefix, glr, &faults, innovation_dof);
+        let kind = (glr.detector.as_deref())
+            .and_then(DetectorKind::from_name)
+            .unwrap_or_default();
+        let (parity, residual_dof) = if kind == DetectorKind::Parity {
+            match self.parity(prefix, spec.parity.as_ref(), &lpv, e.as_ref()) {
+                Some((settings, dof)) => (Some(settings), dof),
+                None => return None,
+            }
+        } else {
+            if spec.parity.is_some() {
+                self.error(
+                    join(prefix, "parity"),
+                    "applies to `glr.detector = \"parity\"`".into(),
+                );
+            }
+            (None, innovation_dof)
+        };
+        let detection = self.glr(prefix, glr, &faults, residual_dof);
+        if parity.is_some_and(|p| matches!(p.evaluation, Evaluation::Energy { .. }))
+            && !matches!(
+                detection.threshold_source,
+                ThresholdSource::Explicit | ThresholdSource::Calibrated { .. }
+            )
+        {
+            self.error(
+                join(prefix, "glr.threshold"),
+                "the parity residual's windowed energy (`parity.evaluation = \"energy\"`) \
+                 has no χ² law for `false_alarm` to set its threshold: give `threshold` \
+                 (e.g. the bound J_th = δ_d on the disturbance's energy, or any positive \
+                 value that `glrmon calibrate --write` then replaces)"
+                    .into(),
+            );
+        }
+        if !kind.runs_kalman_filter() && diagnosis.enabled {
+            self.error(
+                join(prefix, "diagnosis.enabled"),
+                format!(
+                    "sparse diagnosis runs on the Kalman filter, which the `{}` detector \
+                     does not run",
+                    kind.name()
+                ),
+            );
+        }
         let simulation = self.simulation(prefix, spec, dims, e.as_ref().map(LpvMatrix::base));
-        let consistency = self.consistency(prefix, spec.consistency, innovation_dof);
+        let consistency = if kind.runs_kalman_filter() {
+            self.consistency(prefix, spec.consistency, innovation_dof)
+        } else {
+            None
+        };
         let warm_up = self.warm_up(prefix, glr);
         let payload = self.payload(prefix, spec.payload.as_deref());
         if self.errors.len() > before {
@@ -107,6 +154,7 @@ impl Validator {
             isolation_alpha: glr.isolation_alpha,
             isolation_onsets: detection.isolation_onsets,
             detector_kind: detection.detector_kind,
+            parity,
             isolation_thresholds: glr
                 .calibrated
                 .as_ref()

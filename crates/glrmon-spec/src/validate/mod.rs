@@ -12,6 +12,7 @@ mod faults;
 mod glr;
 mod matrix;
 mod model;
+mod parity;
 mod signals;
 mod simulation;
 
