@@ -6,7 +6,10 @@
 //!   innovation, the Γ signature window bank and the moving-window GLR of Zhang &
 //!   Basseville 2014, §3-§5, with the sufficient statistics minmax isolation needs;
 //! - [`Chi2Detector`] (`chi2.rs`): the classical baseline, the χ² test of one
-//!   sample's normalized innovation εᵀΣ⁻¹ε, on the same filter.
+//!   sample's normalized innovation εᵀΣ⁻¹ε, on the same filter;
+//! - [`FdfDetector`] (`fdf.rs`): the observer-based fault-detection filter of Ahmad &
+//!   Mohd-Mokhtar 2021, eq. (9), with a given gain L and residual weight V or the
+//!   unified optimal ones of their eq. (18), evaluated by χ² or windowed energy.
 //!
 //! # Adding a kind
 //! A new kind is a new module here implementing [`Detector`], allocation-free in
@@ -17,11 +20,16 @@
 
 mod chi2;
 pub mod evaluation;
+mod fdf;
 mod glr;
 pub mod parity;
 
 pub use chi2::Chi2Detector;
 pub use evaluation::{EnergyWindow, Evaluation};
+pub use fdf::{
+    FdfDetector, FdfGains, disturbance_gain, energy_threshold, error_covariance,
+    residual_covariance, spectral_radius,
+};
 pub use glr::{DEFAULT_STEADY_TOLERANCE, GlrDetector, WindowSettings};
 
 use nalgebra::DVector;
