@@ -6,7 +6,10 @@
 //!   innovation, the Γ signature window bank and the moving-window GLR of Zhang &
 //!   Basseville 2014, §3-§5, with the sufficient statistics minmax isolation needs;
 //! - [`Chi2Detector`] (`chi2.rs`): the classical baseline, the χ² test of one
-//!   sample's normalized innovation εᵀΣ⁻¹ε, on the same filter.
+//!   sample's normalized innovation εᵀΣ⁻¹ε, on the same filter;
+//! - [`UioDetector`] (`uio.rs`): the unknown-input observer of Chen, Patton & Zhang
+//!   1996, a fixed-gain observer of an LTI model whose residual is decoupled from an
+//!   unknown input, with the χ² or windowed-energy evaluation.
 //!
 //! # Adding a kind
 //! A new kind is a new module here implementing [`Detector`], allocation-free in
@@ -18,10 +21,14 @@
 mod chi2;
 pub mod evaluation;
 mod glr;
+mod uio;
 
 pub use chi2::Chi2Detector;
 pub use evaluation::{EnergyWindow, Evaluation};
 pub use glr::{DEFAULT_STEADY_TOLERANCE, GlrDetector, WindowSettings};
+pub use uio::{
+    RESIDUAL_RANK_TOLERANCE, UioCondition, UioDesign, UioDetector, check_uio_conditions,
+};
 
 use nalgebra::DVector;
 
