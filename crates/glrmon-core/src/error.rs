@@ -27,6 +27,17 @@ pub enum ModelError {
         /// Why it is rejected.
         detail: String,
     },
+    /// A design condition of a residual generator fails for this model (e.g. the
+    /// unknown-input observer's matching condition rank(HE) = rank(E)): no such
+    /// generator exists, or it would not be stable.
+    #[error("{condition} fails: {detail}")]
+    Condition {
+        /// The condition, as the method's literature names it (e.g. `"the matching
+        /// condition rank(HE) = rank(E)"`).
+        condition: &'static str,
+        /// What was found, and what would satisfy it.
+        detail: String,
+    },
 }
 
 /// A sample that the detector refused. The detector's state is unchanged.

@@ -20,7 +20,7 @@ mod window;
 pub use alarm::{AlarmSettings, AlarmState, AlarmTransition, EpisodeEnd};
 pub use detector::{
     Chi2Detector, DEFAULT_STEADY_TOLERANCE, Detector, FdfDetector, FdfGains, GlrDetector, Sample,
-    StepOutput, WindowSettings,
+    StepOutput, UioDesign, UioDetector, WindowSettings,
 };
 pub use error::{ModelError, StepError};
 pub use filter::innovation::InnovationFilter;

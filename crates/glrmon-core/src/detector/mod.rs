@@ -7,9 +7,15 @@
 //!   Basseville 2014, §3-§5, with the sufficient statistics minmax isolation needs;
 //! - [`Chi2Detector`] (`chi2.rs`): the classical baseline, the χ² test of one
 //!   sample's normalized innovation εᵀΣ⁻¹ε, on the same filter;
+//! - [`parity::ParityDetector`] (`parity.rs`): the parity-space residual of Ahmad &
+//!   Mohd-Mokhtar 2021, eqs. (4)-(8), over a window of s + 1 samples, decoupled from a
+//!   disturbance or with the optimal parity vector of eq. (7);
 //! - [`FdfDetector`] (`fdf.rs`): the observer-based fault-detection filter of Ahmad &
 //!   Mohd-Mokhtar 2021, eq. (9), with a given gain L and residual weight V or the
-//!   unified optimal ones of their eq. (18), evaluated by χ² or windowed energy.
+//!   unified optimal ones of their eq. (18), evaluated by χ² or windowed energy;
+//! - [`UioDetector`] (`uio.rs`): the unknown-input observer of Chen, Patton & Zhang
+//!   1996, a fixed-gain observer of an LTI model whose residual is decoupled from an
+//!   unknown input, with the χ² or windowed-energy evaluation.
 //!
 //! # Adding a kind
 //! A new kind is a new module here implementing [`Detector`], allocation-free in
@@ -23,6 +29,7 @@ pub mod evaluation;
 mod fdf;
 mod glr;
 pub mod parity;
+mod uio;
 
 pub use chi2::Chi2Detector;
 pub use evaluation::{EnergyWindow, Evaluation};
@@ -31,6 +38,9 @@ pub use fdf::{
     residual_covariance, spectral_radius,
 };
 pub use glr::{DEFAULT_STEADY_TOLERANCE, GlrDetector, WindowSettings};
+pub use uio::{
+    RESIDUAL_RANK_TOLERANCE, UioCondition, UioDesign, UioDetector, check_uio_conditions,
+};
 
 use nalgebra::DVector;
 
