@@ -984,3 +984,62 @@ fn simulate_end_cuts_the_fault_off() {
     assert_eq!(refused.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&refused.stderr).contains("--end 5 must come after --onset 5"));
 }
+
+/// `evaluate --detector glr,chi2,parity` runs the same faults and noise through each
+/// kind at the same false-alarm probability and prints one table: every kind detects
+/// a speed-sensor drift, the GLR isolates it, and the parity kind (detection only)
+/// reports no isolation; the parity threshold is χ²(4)'s at 10⁻⁴ (dimension
+/// (s + 1)p − n = 4 at s = 2).
+#[test]
+fn evaluate_compares_detector_kinds_side_by_side() {
+    let cfg = config("examples/dc-motor-parity.toml");
+    let out = glrmon(&[
+        "evaluate",
+        "--config",
+        &cfg,
+        "--detector",
+        "glr,chi2,parity",
+        "--runs",
+        "20",
+        "--fault",
+        "speed_sensor_drift:0.002",
+    ]);
+    ok(&out);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains(
+            "parity space of order 2 (dimension 4), χ²(4) of rᵀΣ_r⁻¹r (threshold 23.5127)"
+        ),
+        "{text}"
+    );
+    let row = |kind: &str| {
+        text.lines()
+            .find(|l| l.starts_with(kind) && l.contains("speed_sensor_drift ("))
+            .unwrap_or_else(|| panic!("no {kind} row in\n{text}"))
+            .to_owned()
+    };
+    for kind in ["glr", "chi2", "parity"] {
+        assert!(row(kind).contains("100.0%"), "{}", row(kind));
+    }
+    assert!(row("glr").trim_end().ends_with("100.0%"), "{}", row("glr"));
+    assert!(row("parity").trim_end().ends_with('–'), "{}", row("parity"));
+    let bad = glrmon(&[
+        "evaluate",
+        "--config",
+        &cfg,
+        "--detector",
+        "glr,kalman",
+        "--runs",
+        "2",
+    ]);
+    assert_eq!(
+        bad.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&bad.stderr)
+    );
+    assert!(
+        String::from_utf8_lossy(&bad.stderr)
+            .contains("--detector kalman: not a detector kind (kinds: glr, chi2, parity)")
+    );
+}

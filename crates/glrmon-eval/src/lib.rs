@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 
 pub mod calibrate;
+pub mod compare;
 pub mod identify;
 pub mod noise;
 pub mod validation;

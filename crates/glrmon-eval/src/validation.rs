@@ -283,14 +283,25 @@ fn settings(channel: &Channel) -> String {
     if let Some(advice) = threshold_advice(channel) {
         let _ = writeln!(s, "  threshold: {advice}");
     }
-    if channel.detector_kind != DetectorKind::Glr {
-        let _ = writeln!(
-            s,
-            "  detector: the plain χ²({}) test of εᵀΣ⁻¹ε on each sample (baseline; no onset estimate, no isolation)",
-            channel
-                .detector_kind
-                .statistic_dof(channel.fault_names.len(), channel.innovation_dof())
-        );
+    match channel.detector_kind {
+        DetectorKind::Glr => {}
+        DetectorKind::Chi2 => {
+            let _ = writeln!(
+                s,
+                "  detector: the plain χ²({}) test of εᵀΣ⁻¹ε on each sample (baseline; no onset estimate, no isolation)",
+                channel.statistic_dof
+            );
+        }
+        kind => {
+            let described = channel
+                .detector()
+                .map_or_else(|e| format!("cannot be built: {e}"), |d| d.describe());
+            let _ = writeln!(
+                s,
+                "  detector: {} — {described} (detection only: no magnitude, no isolation)",
+                kind.name()
+            );
+        }
     }
     let faults: Vec<String> = channel
         .fault_names
@@ -485,10 +496,7 @@ fn threshold_text(channel: &Channel) -> String {
         ThresholdSource::Chi2 { false_alarm } if !channel.detector_kind.maximises_over_onsets() => {
             format!(
                 "{:.4} (χ²({}) upper quantile at {false_alarm:e} per sample)",
-                channel.alarm.threshold,
-                channel
-                    .detector_kind
-                    .statistic_dof(channel.fault_names.len(), channel.innovation_dof())
+                channel.alarm.threshold, channel.statistic_dof
             )
         }
         ThresholdSource::Chi2 { false_alarm } => format!(

@@ -280,6 +280,10 @@ pub struct Channel {
     pub isolation_thresholds: Vec<(String, f64)>,
     /// The detection method ([`Channel::detector`] builds it).
     pub detector_kind: DetectorKind,
+    /// The degrees of freedom of the decision statistic's χ² law under no fault, for
+    /// one tested onset ([`DetectorKind::statistic_dof`]; the parity space's dimension
+    /// for `parity`).
+    pub statistic_dof: usize,
     /// The parity detector's settings (`[channels.parity]`), for `detector = "parity"`.
     pub parity: Option<glrmon_core::detector::parity::ParitySettings>,
     /// Largest gap filled by predict-only steps.

@@ -139,9 +139,56 @@ mod tests {
         assert_eq!(DetectorKind::from_name("cusum"), None);
     }
 
+    /// The parity kind's order is checked against the model (naming the smallest order
+    /// with a parity space), its χ² law has the parity space's dimension, and its
+    /// windowed energy, which has no χ² law, needs a given threshold.
+    #[test]
+    fn parity_settings_are_validated_against_the_model() {
+        let text = |parity: &str, glr: &str| {
+            format!(
+                r#"
+[[channels]]
+name = "plant"
+model = {{ F = [[0.5, 1.0], [0.0, 1.2]], G = [[0.0], [1.0]], H = [[1.0, 0.0]], Q = 0.0025, R = 0.0025 }}
+faults = [{{ name = "bias", kind = "sensor_bias", output = 0 }}]
+glr = {{ detector = "parity"{glr} }}
+{parity}
+"#
+            )
+        };
+        let cfg = crate::parse(&text("", "")).unwrap();
+        let c = &cfg.channels[0];
+        assert_eq!(c.parity.unwrap().order, 2);
+        assert_eq!(c.statistic_dof, 1);
+        let cfg = crate::parse(&text("parity = { order = 4 }", "")).unwrap();
+        assert_eq!(cfg.channels[0].statistic_dof, 3);
+        let expected = glrmon_core::threshold::chi2_upper_quantile(3.0, 1e-4).unwrap();
+        assert!((cfg.channels[0].alarm.threshold - expected).abs() < 1e-12);
+        let err = crate::parse(&text("parity = { order = 1 }", ""))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("parity.order") && err.contains("smallest order that gives one is 2"),
+            "{err}"
+        );
+        let err = crate::parse(&text("parity = { evaluation = \"energy\" }", ""))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("glr.threshold") && err.contains("no χ² law"),
+            "{err}"
+        );
+        let cfg = crate::parse(&text(
+            "parity = { evaluation = \"energy\", energy_window = 20 }",
+            ", threshold = 0.5",
+        ))
+        .unwrap();
+        assert_eq!(cfg.channels[0].detector().unwrap().memory(), 22);
+    }
+
     #[test]
     fn the_factory_builds_the_configured_kind() {
-        for (kind, memory) in [("glr", 30), ("chi2", 1)] {
+        for (kind, memory) in [("glr", 30), ("chi2", 1), ("parity", 2)] {
             let cfg = crate::parse(&format!(
                 r#"
 [[channels]]

@@ -187,7 +187,10 @@ pub fn set_detector(text: &str, channel: &str, kind: DetectorKind) -> Result<Str
     }
     if kind.runs_kalman_filter() {
         // Sparse diagnosis needs the Kalman filter; other kinds refuse it.
-    } else if let Some(d) = table.get_mut("diagnosis").and_then(toml_edit::Item::as_table_like_mut) {
+    } else if let Some(d) = table
+        .get_mut("diagnosis")
+        .and_then(toml_edit::Item::as_table_like_mut)
+    {
         d.remove("enabled");
     }
     if table.get("glr").is_none() {

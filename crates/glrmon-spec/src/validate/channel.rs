@@ -154,6 +154,9 @@ impl Validator {
             isolation_alpha: glr.isolation_alpha,
             isolation_onsets: detection.isolation_onsets,
             detector_kind: detection.detector_kind,
+            statistic_dof: detection
+                .detector_kind
+                .statistic_dof(faults.len(), residual_dof),
             parity,
             isolation_thresholds: glr
                 .calibrated

@@ -33,7 +33,10 @@ impl Validator {
         let spec = spec.cloned().unwrap_or_default();
         let tolerance = spec.rank_tolerance.unwrap_or(DEFAULT_PARITY_RANK_TOLERANCE);
         if !(tolerance > 0.0 && tolerance < 1.0) {
-            self.error(path("rank_tolerance"), format!("{tolerance} is not in (0, 1)"));
+            self.error(
+                path("rank_tolerance"),
+                format!("{tolerance} is not in (0, 1)"),
+            );
         }
         if let Some(e) = e
             && !e.terms().is_empty()
@@ -56,7 +59,10 @@ impl Validator {
                 Evaluation::Energy { window }
             }
             Some(other) => {
-                self.error(path("evaluation"), locate::not_one_of(other, &["chi2", "energy"]));
+                self.error(
+                    path("evaluation"),
+                    locate::not_one_of(other, &["chi2", "energy"]),
+                );
                 Evaluation::Chi2
             }
         };
@@ -72,7 +78,9 @@ impl Validator {
         let dims = model.dims();
         let mut sys = SystemMatrices::zeros(dims);
         let (u, p) = (vec![0.0; dims.inputs], vec![0.0; dims.signals]);
-        model.clone().evaluate(0, &Signals { u: &u, p: &p }, &mut sys);
+        model
+            .clone()
+            .evaluate(0, &Signals { u: &u, p: &p }, &mut sys);
         let disturbance = e.map(|e| Disturbance {
             state: e.base().clone(),
             output: nalgebra::DMatrix::zeros(dims.outputs, e.shape().1),
@@ -81,7 +89,9 @@ impl Validator {
         let Some(free) = free else {
             self.error(
                 join(prefix, "model"),
-                format!("no parity order up to {MAX_ORDER} gives a parity space (is (H, F) observable?)"),
+                format!(
+                    "no parity order up to {MAX_ORDER} gives a parity space (is (H, F) observable?)"
+                ),
             );
             return None;
         };
