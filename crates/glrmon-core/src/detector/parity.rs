@@ -36,7 +36,7 @@
 //! v(Y_s − H_{u,s}U_s).
 //!
 //! Evaluation: rᵀΣ_r⁻¹r with Σ_r = M Σ_Y Mᵀ the residual's covariance under the noise
-//! model (Σ_Y = H_{w,s}Q_sH_{w,s}ᵀ + R_s + the cross terms of S = E[WVᵀ]), χ² with
+//! model (Σ_Y = H_{w,s}Q_sH_{w,s}ᵀ + R_s + the cross terms of S = E(WVᵀ)), χ² with
 //! dim M degrees of freedom under no fault; or the windowed energy of r (8), (12).
 //! Consecutive residuals share s samples: they are correlated, so exceedances cluster
 //! over s + 1 samples ([`Detector::memory`]).
