@@ -124,6 +124,15 @@ impl fmt::Display for ResidualKind {
     }
 }
 
+/// The observer detectors' settings of a channel (`[channels.observer]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObserverSettings {
+    /// The FDF's (L, V), or `None` for the optimal gains of the survey's eq. (18).
+    pub gains: Option<(DMatrix<f64>, DMatrix<f64>)>,
+    /// How the residual becomes the decision statistic.
+    pub evaluation: glrmon_core::detector::Evaluation,
+}
+
 /// Sparse diagnosis settings of a channel (`[channels.diagnosis]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DiagnosisSettings {
@@ -286,6 +295,9 @@ pub struct Channel {
     pub statistic_dof: usize,
     /// The parity detector's settings (`[channels.parity]`), for `detector = "parity"`.
     pub parity: Option<glrmon_core::detector::parity::ParitySettings>,
+    /// The observer detectors' settings (`[channels.observer]`), for `detector =
+    /// "fdf"` or `"uio"`.
+    pub observer: Option<ObserverSettings>,
     /// Largest gap filled by predict-only steps.
     pub max_gap: u64,
     /// How many indices before the last processed one a sample is refused as late;

@@ -7,6 +7,7 @@
 //! from [`DetectorKind::NAMES`].
 
 use glrmon_core::detector::parity::{Disturbance, ParityDetector};
+use glrmon_core::detector::{FdfDetector, FdfGains, UioDetector};
 use glrmon_core::{Chi2Detector, Detector, GlrDetector, ModelError};
 
 use crate::Channel;
@@ -22,14 +23,18 @@ pub enum DetectorKind {
     Chi2,
     /// The parity-space residual of Ahmad & Mohd-Mokhtar 2021, eqs. (4)-(8).
     Parity,
+    /// The observer fault-detection filter of the survey, eqs. (9)-(10), (18).
+    Fdf,
+    /// The unknown-input observer of Chen, Patton & Zhang 1996.
+    Uio,
 }
 
 impl DetectorKind {
     /// Every kind, in declaration order (a kind's index is its discriminant).
-    pub const ALL: [Self; 3] = [Self::Glr, Self::Chi2, Self::Parity];
+    pub const ALL: [Self; 5] = [Self::Glr, Self::Chi2, Self::Parity, Self::Fdf, Self::Uio];
 
     /// The names the configuration accepts, as [`DetectorKind::ALL`].
-    pub const NAMES: [&'static str; 3] = ["glr", "chi2", "parity"];
+    pub const NAMES: [&'static str; 5] = ["glr", "chi2", "parity", "fdf", "uio"];
 
     /// The configuration's name of the kind.
     #[must_use]
@@ -52,7 +57,7 @@ impl DetectorKind {
     pub fn statistic_dof(self, faults: usize, residual_dof: usize) -> usize {
         match self {
             Self::Glr => faults.max(1),
-            Self::Chi2 | Self::Parity => residual_dof.max(1),
+            Self::Chi2 | Self::Parity | Self::Fdf | Self::Uio => residual_dof.max(1),
         }
     }
 
@@ -63,7 +68,7 @@ impl DetectorKind {
     pub fn runs_kalman_filter(self) -> bool {
         match self {
             Self::Glr | Self::Chi2 => true,
-            Self::Parity => false,
+            Self::Parity | Self::Fdf | Self::Uio => false,
         }
     }
 
@@ -73,7 +78,7 @@ impl DetectorKind {
     pub fn maximises_over_onsets(self) -> bool {
         match self {
             Self::Glr => true,
-            Self::Chi2 | Self::Parity => false,
+            Self::Chi2 | Self::Parity | Self::Fdf | Self::Uio => false,
         }
     }
 }
@@ -101,7 +106,70 @@ impl Channel {
                     detail: "the channel has no parity settings".into(),
                 })?,
             )?),
+            DetectorKind::Fdf => {
+                let observer = self.observer_settings()?;
+                let (sys, _) = self.matrices_at_zero();
+                let gains = match &observer.gains {
+                    Some((l, v)) => FdfGains {
+                        l: l.clone(),
+                        v: v.clone(),
+                    },
+                    None => FdfGains::optimal(
+                        &sys.f,
+                        &sys.h,
+                        &sys.q,
+                        &sys.r,
+                        &self.cross_covariance.clone().unwrap_or_else(|| {
+                            nalgebra::DMatrix::zeros(self.dims.states, self.dims.outputs)
+                        }),
+                    )?,
+                };
+                let detector = FdfDetector::new(
+                    Box::new(self.model.clone()),
+                    self.dictionary()?,
+                    gains,
+                    self.x0.clone(),
+                    self.p0.clone(),
+                    observer.evaluation,
+                )?;
+                Box::new(match &self.cross_covariance {
+                    Some(s) => detector.with_cross_covariance(s.clone())?,
+                    None => detector,
+                })
+            }
+            DetectorKind::Uio => {
+                let observer = self.observer_settings()?;
+                let e = self.unknown_input.as_ref().ok_or(ModelError::Setting {
+                    what: "uio",
+                    detail: "the unknown-input observer needs model.E".into(),
+                })?;
+                Box::new(UioDetector::new(
+                    Box::new(self.model.clone()),
+                    e.base().clone(),
+                    self.dictionary()?,
+                    self.x0.clone(),
+                    observer.evaluation,
+                )?)
+            }
         })
+    }
+
+    fn observer_settings(&self) -> Result<&crate::channel::ObserverSettings, ModelError> {
+        self.observer.as_ref().ok_or(ModelError::Setting {
+            what: "observer",
+            detail: "the channel has no observer settings".into(),
+        })
+    }
+
+    /// The model's matrices at k = 0 with zero signals (an LTI model's matrices).
+    pub(crate) fn matrices_at_zero(&self) -> (glrmon_core::SystemMatrices, ()) {
+        use glrmon_core::StateSpace as _;
+        let mut sys = glrmon_core::SystemMatrices::zeros(self.dims);
+        let (u, p) = (vec![0.0; self.dims.inputs], vec![0.0; self.dims.signals]);
+        self.model
+            .clone()
+            .evaluate(0, &glrmon_core::Signals { u: &u, p: &p }, &mut sys);
+        (sys, ())
     }
 
     /// The GLR detector of the channel's model and faults, whatever its kind: for the
@@ -137,6 +205,67 @@ mod tests {
             assert_eq!(DetectorKind::from_name(name), Some(kind));
         }
         assert_eq!(DetectorKind::from_name("cusum"), None);
+    }
+
+    /// The observer kinds: the FDF with the optimal gains or given ones (an unstable
+    /// F − LH refused, naming L), the UIO only with `model.E` and with the existence
+    /// condition that fails named; the χ² dof is the residual's (p − rank HE for the
+    /// UIO).
+    #[test]
+    fn observer_settings_are_validated_against_the_model() {
+        let text = |model_extra: &str, glr: &str, observer: &str| {
+            format!(
+                r#"
+[[channels]]
+name = "motor"
+model = {{ F = [[0.2231, 0.0109], [-0.0022, 0.5488]], G = [[0.0047], [0.4512]], H = [[1.0, 0.0], [0.0, 1.0]], Q = 0.0001, R = 0.0025{model_extra} }}
+faults = [{{ name = "bias", kind = "sensor_bias", output = 0 }}]
+glr = {{ detector = "{glr}" }}
+{observer}
+"#
+            )
+        };
+        let cfg = crate::parse(&text("", "fdf", "")).unwrap();
+        assert_eq!(cfg.channels[0].statistic_dof, 2);
+        assert!(cfg.channels[0].observer.as_ref().unwrap().gains.is_none());
+        assert_eq!(cfg.channels[0].detector().unwrap().kind(), "fdf");
+        let cfg = crate::parse(&text(
+            "",
+            "fdf",
+            "observer = { L = [[0.1, 0.0], [0.0, 0.3]], V = [[1.0, 0.0]] }",
+        ))
+        .unwrap();
+        assert_eq!(cfg.channels[0].statistic_dof, 1);
+        let err = crate::parse(&text(
+            "",
+            "fdf",
+            "observer = { L = [[3.0, 0.0], [0.0, 0.3]] }",
+        ))
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("observer.L") && err.contains("not stable"),
+            "{err}"
+        );
+        let err = crate::parse(&text("", "uio", "")).unwrap_err().to_string();
+        assert!(
+            err.contains("model.E") && err.contains("give `model.E`"),
+            "{err}"
+        );
+        let cfg = crate::parse(&text(", E = [[-1.5537], [0.0]]", "uio", "")).unwrap();
+        assert_eq!(cfg.channels[0].statistic_dof, 1);
+        assert_eq!(cfg.channels[0].detector().unwrap().kind(), "uio");
+        let err = crate::parse(&text(", E = [[1.0, 0.0], [0.0, 1.0]]", "uio", ""))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("model.E"), "{err}");
+        let err = crate::parse(&text("", "glr", "observer = { evaluation = \"chi2\" }"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("applies to `glr.detector = \"fdf\" or \"uio\"`"),
+            "{err}"
+        );
     }
 
     /// The parity kind's order is checked against the model (naming the smallest order
@@ -188,7 +317,7 @@ glr = {{ detector = "parity"{glr} }}
 
     #[test]
     fn the_factory_builds_the_configured_kind() {
-        for (kind, memory) in [("glr", 30), ("chi2", 1), ("parity", 2)] {
+        for (kind, memory) in [("glr", 30), ("chi2", 1), ("parity", 2), ("fdf", 1)] {
             let cfg = crate::parse(&format!(
                 r#"
 [[channels]]

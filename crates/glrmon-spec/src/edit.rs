@@ -164,7 +164,8 @@ pub fn set_calibrated(
 /// then set to the same false-alarm probability per sample, the configured
 /// `false_alarm` (10⁻⁴ when none is given), since a threshold set for one kind's
 /// statistic (`threshold`, `[channels.glr.calibrated]`) means nothing for another's;
-/// `[channels.parity]` is removed for other kinds. Returns the edited text.
+/// `[channels.parity]` and `[channels.observer]` are removed for kinds they do not
+/// apply to. Returns the edited text.
 ///
 /// # Errors
 /// As [`set_calibrated`]: [`EditError::Toml`], [`EditError::NoChannels`],
@@ -184,6 +185,17 @@ pub fn set_detector(text: &str, channel: &str, kind: DetectorKind) -> Result<Str
         .ok_or_else(|| EditError::NoChannel(channel.to_owned()))?;
     if kind != DetectorKind::Parity {
         table.remove("parity");
+    }
+    if !matches!(kind, DetectorKind::Fdf | DetectorKind::Uio) {
+        table.remove("observer");
+    } else if kind == DetectorKind::Uio
+        && let Some(o) = table
+            .get_mut("observer")
+            .and_then(toml_edit::Item::as_table_like_mut)
+    {
+        // The UIO designs its own gain.
+        o.remove("L");
+        o.remove("V");
     }
     if kind.runs_kalman_filter() {
         // Sparse diagnosis needs the Kalman filter; other kinds refuse it.

@@ -41,8 +41,8 @@ mod validate;
 pub mod write;
 
 pub use crate::channel::{
-    Channel, Columns, Controller, DEFAULT_DIAGNOSIS_ALPHA, DiagnosisSettings, ResidualKind,
-    SimulationPlan, ThresholdSource,
+    Channel, Columns, Controller, DEFAULT_DIAGNOSIS_ALPHA, DiagnosisSettings, ObserverSettings,
+    ResidualKind, SimulationPlan, ThresholdSource,
 };
 pub use crate::config::{ChannelChoiceError, Config, RELOADABLE_GLR_KEYS};
 pub use crate::covariance::PSD_TOLERANCE;

@@ -316,6 +316,36 @@ pub struct ChannelSpec {
     /// `[channels.parity]`: the parity-space detector (`glr.detector = "parity"`).
     /// Default: the smallest order with a parity space, χ² evaluation.
     pub parity: Option<ParitySpec>,
+    /// `[channels.observer]`: the observer detectors (`glr.detector = "fdf"` or
+    /// `"uio"`). Default: the optimal gains, χ² evaluation.
+    pub observer: Option<ObserverSpec>,
+}
+
+/// `[channels.observer]`: the observer-based residual generators, for
+/// `glr.detector = "fdf"` (the fault-detection filter of Ahmad & Mohd-Mokhtar 2021, eqs.
+/// (9)-(10): X̂_{k+1} = F X̂_k + G U_k + L(Y_k − J U_k − H X̂_k), residual
+/// r_k = V(Y_k − J U_k − H X̂_k)) or `"uio"` (the unknown-input observer of Chen, Patton
+/// & Zhang 1996, decoupled from `model.E`, which it needs).
+#[derive(Debug, Clone, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ObserverSpec {
+    /// L: the FDF's observer gain, n×p, rows; F − LH must be stable. Default: the
+    /// unified optimal solution of the survey's eq. (18), the steady-state Kalman
+    /// predictor gain of Q, R, S (with V = Σ^{−1/2}). Not for `uio`, whose gain is
+    /// designed from the model.
+    #[serde(rename = "L")]
+    pub l: Option<Vec<Vec<f64>>>,
+    /// V: the FDF's residual weight, rows of p numbers. Default: Σ^{−1/2} with the
+    /// optimal L, the identity with a given L. Not for `uio`.
+    #[serde(rename = "V")]
+    pub v: Option<Vec<Vec<f64>>>,
+    /// `chi2` (default; rᵀΣ_r⁺r with the residual's covariance under Q, R) or `energy`
+    /// (the windowed energy of eq. (12) over `energy_window` samples: give
+    /// `glr.threshold`, e.g. J_th of eq. (13) or (19), or calibrate).
+    #[schemars(extend("enum" = ["chi2", "energy"]))]
+    pub evaluation: Option<String>,
+    /// Samples of the windowed energy (`evaluation = "energy"`), 1 to 100000. Default 10.
+    pub energy_window: Option<usize>,
 }
 
 /// `[channels.parity]`: the parity-space residual of Ahmad & Mohd-Mokhtar 2021, eqs.
@@ -617,9 +647,11 @@ pub struct GlrSpec {
     /// The detection statistic: `glr` (default; the windowed GLR of Zhang & Basseville
     /// 2014), `chi2` (the plain χ²(p) test of εᵀΣ⁻¹ε on each sample: the classical
     /// baseline, for comparing with the GLR on your data; alarms then carry r̂ = k) or
-    /// `parity` (the parity-space residual, `[channels.parity]`; detection only: no
-    /// magnitude or isolation; alarms carry the window's first sample as r̂).
-    #[schemars(extend("enum" = ["glr", "chi2", "parity"]))]
+    /// `parity` (the parity-space residual, `[channels.parity]`), `fdf` (the observer
+    /// fault-detection filter) or `uio` (the unknown-input observer,
+    /// `[channels.observer]`): these three detect only (no magnitude, no isolation);
+    /// alarms carry the first sample of the statistic's evidence as r̂.
+    #[schemars(extend("enum" = ["glr", "chi2", "parity", "fdf", "uio"]))]
     pub detector: Option<String>,
     /// Hysteresis h in [0, 1): an alarm episode ends below λ(1 − h). Default 0.1.
     #[serde(default = "default_hysteresis")]

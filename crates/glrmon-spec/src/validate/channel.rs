@@ -65,22 +65,45 @@ impl Validator {
         let kind = (glr.detector.as_deref())
             .and_then(DetectorKind::from_name)
             .unwrap_or_default();
-        let (parity, residual_dof) = if kind == DetectorKind::Parity {
-            match self.parity(prefix, spec.parity.as_ref(), &lpv, e.as_ref()) {
-                Some((settings, dof)) => (Some(settings), dof),
-                None => return None,
+        let (mut parity, mut observer, mut residual_dof) = (None, None, innovation_dof);
+        match kind {
+            DetectorKind::Parity => {
+                let (settings, dof) =
+                    self.parity(prefix, spec.parity.as_ref(), &lpv, e.as_ref())?;
+                (parity, residual_dof) = (Some(settings), dof);
             }
-        } else {
-            if spec.parity.is_some() {
+            DetectorKind::Fdf | DetectorKind::Uio => {
+                let (settings, dof) = self.observer(
+                    prefix,
+                    kind,
+                    spec.observer.as_ref(),
+                    (&lpv, e.as_ref(), cross.as_ref()),
+                )?;
+                (observer, residual_dof) = (Some(settings), dof);
+            }
+            DetectorKind::Glr | DetectorKind::Chi2 => {}
+        }
+        for (table, given, kinds) in [
+            ("parity", spec.parity.is_some(), "\"parity\""),
+            ("observer", spec.observer.is_some(), "\"fdf\" or \"uio\""),
+        ] {
+            let applies = match table {
+                "parity" => kind == DetectorKind::Parity,
+                _ => matches!(kind, DetectorKind::Fdf | DetectorKind::Uio),
+            };
+            if given && !applies {
                 self.error(
-                    join(prefix, "parity"),
-                    "applies to `glr.detector = \"parity\"`".into(),
+                    join(prefix, table),
+                    format!("applies to `glr.detector = {kinds}`"),
                 );
             }
-            (None, innovation_dof)
-        };
+        }
         let detection = self.glr(prefix, glr, &faults, residual_dof);
-        if parity.is_some_and(|p| matches!(p.evaluation, Evaluation::Energy { .. }))
+        let energy = parity.is_some_and(|p| matches!(p.evaluation, Evaluation::Energy { .. }))
+            || observer
+                .as_ref()
+                .is_some_and(|o| matches!(o.evaluation, Evaluation::Energy { .. }));
+        if energy
             && !matches!(
                 detection.threshold_source,
                 ThresholdSource::Explicit | ThresholdSource::Calibrated { .. }
@@ -88,8 +111,8 @@ impl Validator {
         {
             self.error(
                 join(prefix, "glr.threshold"),
-                "the parity residual's windowed energy (`parity.evaluation = \"energy\"`) \
-                 has no χ² law for `false_alarm` to set its threshold: give `threshold` \
+                "a residual's windowed energy (`evaluation = \"energy\"`) has no χ² law \
+                 for `false_alarm` to set its threshold: give `threshold` \
                  (e.g. the bound J_th = δ_d on the disturbance's energy, or any positive \
                  value that `glrmon calibrate --write` then replaces)"
                     .into(),
@@ -158,6 +181,7 @@ impl Validator {
                 .detector_kind
                 .statistic_dof(faults.len(), residual_dof),
             parity,
+            observer,
             isolation_thresholds: glr
                 .calibrated
                 .as_ref()

@@ -17,6 +17,160 @@ use crate::schema::ParitySpec;
 const MAX_ORDER: usize = 64;
 
 impl Validator {
+    /// `evaluation` and `energy_window` of a residual generator's table (`paths` name
+    /// them in errors).
+    pub(super) fn evaluation(
+        &mut self,
+        evaluation_path: &str,
+        window_path: &str,
+        evaluation: Option<&str>,
+        energy_window: Option<usize>,
+    ) -> Evaluation {
+        let evaluation = match evaluation {
+            None | Some("chi2") => Evaluation::Chi2,
+            Some("energy") => {
+                let window = energy_window.unwrap_or(10);
+                if window == 0 || window > limits::MAX_WINDOW {
+                    self.error(
+                        window_path.to_owned(),
+                        format!("{window} is not in 1..={}", limits::MAX_WINDOW),
+                    );
+                }
+                Evaluation::Energy { window }
+            }
+            Some(other) => {
+                self.error(
+                    evaluation_path.to_owned(),
+                    locate::not_one_of(other, &["chi2", "energy"]),
+                );
+                Evaluation::Chi2
+            }
+        };
+        if energy_window.is_some() && !matches!(evaluation, Evaluation::Energy { .. }) {
+            self.error(
+                window_path.to_owned(),
+                "applies to `evaluation = \"energy\"`".into(),
+            );
+        }
+        evaluation
+    }
+
+    /// `[channels.observer]` for the `fdf` or `uio` kind, checked against the model
+    /// at k = 0 (the gains' stability, the UIO's existence conditions, each named),
+    /// and the dimension of the residual the χ² evaluation tests.
+    pub(super) fn observer(
+        &mut self,
+        prefix: &str,
+        kind: crate::DetectorKind,
+        spec: Option<&crate::schema::ObserverSpec>,
+        (model, e, cross): (&Lpv, Option<&LpvMatrix>, Option<&nalgebra::DMatrix<f64>>),
+    ) -> Option<(crate::ObserverSettings, usize)> {
+        use glrmon_core::detector::{FdfGains, UioDesign};
+        let before = self.errors.len();
+        let path = |f: &str| join(prefix, &format!("observer.{f}"));
+        let spec = spec.cloned().unwrap_or_default();
+        let evaluation = self.evaluation(
+            &path("evaluation"),
+            &path("energy_window"),
+            spec.evaluation.as_deref(),
+            spec.energy_window,
+        );
+        let dims = model.dims();
+        let rows = |this: &mut Self, key: &str, m: &Option<Vec<Vec<f64>>>, cols: usize| {
+            let m = m.as_ref()?;
+            let ok = !m.is_empty() && m.iter().all(|r| r.len() == cols);
+            if !ok {
+                this.error(
+                    path(key),
+                    format!("must be rows of {cols} numbers each (at least one row)"),
+                );
+                return None;
+            }
+            if m.iter().flatten().any(|x| !x.is_finite()) {
+                this.error(path(key), "holds a value that is not finite".into());
+                return None;
+            }
+            Some(nalgebra::DMatrix::from_fn(m.len(), cols, |i, j| m[i][j]))
+        };
+        let mut sys = SystemMatrices::zeros(dims);
+        let (u, p) = (vec![0.0; dims.inputs], vec![0.0; dims.signals]);
+        model
+            .clone()
+            .evaluate(0, &Signals { u: &u, p: &p }, &mut sys);
+        let (gains, dof) = match kind {
+            crate::DetectorKind::Uio => {
+                for (key, given) in [("L", spec.l.is_some()), ("V", spec.v.is_some())] {
+                    if given {
+                        self.error(
+                            path(key),
+                            "applies to `detector = \"fdf\"`: the unknown-input observer \
+                             designs its gain from the model"
+                                .into(),
+                        );
+                    }
+                }
+                let Some(e) = e else {
+                    self.error(
+                        join(prefix, "model.E"),
+                        "the `uio` detector decouples its residual from the unknown input \
+                         E d_k: give `model.E`"
+                            .into(),
+                    );
+                    return None;
+                };
+                match UioDesign::new(&sys, e.base()) {
+                    Ok(design) => (None, design.rank()),
+                    Err(err) => {
+                        self.error(join(prefix, "model.E"), err.to_string());
+                        return None;
+                    }
+                }
+            }
+            _ => {
+                let l = rows(self, "L", &spec.l, dims.outputs);
+                let v = rows(self, "V", &spec.v, dims.outputs);
+                if self.errors.len() > before {
+                    return None;
+                }
+                match (l, v) {
+                    (Some(l), v) => {
+                        let v = v.unwrap_or_else(|| {
+                            nalgebra::DMatrix::identity(dims.outputs, dims.outputs)
+                        });
+                        let gains = FdfGains { l, v };
+                        if let Err(err) = gains.check(&sys.f, &sys.h) {
+                            self.error(path("L"), err.to_string());
+                            return None;
+                        }
+                        let dof = gains.v.nrows().min(dims.outputs);
+                        (Some((gains.l, gains.v)), dof)
+                    }
+                    (None, Some(_)) => {
+                        self.error(
+                            path("V"),
+                            "give `L` with `V` (the optimal gains come as a pair)".into(),
+                        );
+                        return None;
+                    }
+                    (None, None) => {
+                        let s = cross
+                            .cloned()
+                            .unwrap_or_else(|| nalgebra::DMatrix::zeros(dims.states, dims.outputs));
+                        if let Err(err) = FdfGains::optimal(&sys.f, &sys.h, &sys.q, &sys.r, &s) {
+                            self.error(join(prefix, "model"), err.to_string());
+                            return None;
+                        }
+                        (None, dims.outputs)
+                    }
+                }
+            }
+        };
+        if self.errors.len() > before {
+            return None;
+        }
+        Some((crate::ObserverSettings { gains, evaluation }, dof))
+    }
+
     /// The parity settings and the dimension of the residual the χ² evaluation tests
     /// (the parity space's; 1 for the optimal vector of eq. (7)), from the model at
     /// k = 0 with zero signals (an LPV model's parity space is checked again at every
@@ -46,32 +200,12 @@ impl Validator {
                 "the parity detector needs a constant E (its H_d,s is built once)".into(),
             );
         }
-        let evaluation = match spec.evaluation.as_deref() {
-            None | Some("chi2") => Evaluation::Chi2,
-            Some("energy") => {
-                let window = spec.energy_window.unwrap_or(10);
-                if window == 0 || window > limits::MAX_WINDOW {
-                    self.error(
-                        path("energy_window"),
-                        format!("{window} is not in 1..={}", limits::MAX_WINDOW),
-                    );
-                }
-                Evaluation::Energy { window }
-            }
-            Some(other) => {
-                self.error(
-                    path("evaluation"),
-                    locate::not_one_of(other, &["chi2", "energy"]),
-                );
-                Evaluation::Chi2
-            }
-        };
-        if spec.energy_window.is_some() && !matches!(evaluation, Evaluation::Energy { .. }) {
-            self.error(
-                path("energy_window"),
-                "applies to `evaluation = \"energy\"`".into(),
-            );
-        }
+        let evaluation = self.evaluation(
+            &path("evaluation"),
+            &path("energy_window"),
+            spec.evaluation.as_deref(),
+            spec.energy_window,
+        );
         if self.errors.len() > before {
             return None;
         }
