@@ -6,7 +6,10 @@
 //!   innovation, the Γ signature window bank and the moving-window GLR of Zhang &
 //!   Basseville 2014, §3-§5, with the sufficient statistics minmax isolation needs;
 //! - [`Chi2Detector`] (`chi2.rs`): the classical baseline, the χ² test of one
-//!   sample's normalized innovation εᵀΣ⁻¹ε, on the same filter.
+//!   sample's normalized innovation εᵀΣ⁻¹ε, on the same filter;
+//! - [`RlsDetector`] (`rls.rs`): parameter estimation, the ARX parameters of each
+//!   output estimated by recursive least squares and tested against their nominal
+//!   values.
 //!
 //! # Adding a kind
 //! A new kind is a new module here implementing [`Detector`], allocation-free in
@@ -18,10 +21,12 @@
 mod chi2;
 pub mod evaluation;
 mod glr;
+mod rls;
 
 pub use chi2::Chi2Detector;
 pub use evaluation::{EnergyWindow, Evaluation};
 pub use glr::{DEFAULT_STEADY_TOLERANCE, GlrDetector, WindowSettings};
+pub use rls::{ArxForm, DEFAULT_EXCITATION, EquationError, RlsDetector, RlsSettings};
 
 use nalgebra::DVector;
 
