@@ -15,7 +15,10 @@
 //!   unified optimal ones of their eq. (18), evaluated by χ² or windowed energy;
 //! - [`UioDetector`] (`uio.rs`): the unknown-input observer of Chen, Patton & Zhang
 //!   1996, a fixed-gain observer of an LTI model whose residual is decoupled from an
-//!   unknown input, with the χ² or windowed-energy evaluation.
+//!   unknown input, with the χ² or windowed-energy evaluation;
+//! - [`RlsDetector`] (`rls.rs`): parameter estimation, the ARX parameters of each
+//!   output estimated by recursive least squares and tested against their nominal
+//!   values.
 //!
 //! # Adding a kind
 //! A new kind is a new module here implementing [`Detector`], allocation-free in
@@ -29,6 +32,7 @@ pub mod evaluation;
 mod fdf;
 mod glr;
 pub mod parity;
+mod rls;
 mod uio;
 
 pub use chi2::Chi2Detector;
@@ -38,6 +42,7 @@ pub use fdf::{
     residual_covariance, spectral_radius,
 };
 pub use glr::{DEFAULT_STEADY_TOLERANCE, GlrDetector, WindowSettings};
+pub use rls::{ArxForm, DEFAULT_EXCITATION, EquationError, RlsDetector, RlsSettings};
 pub use uio::{
     RESIDUAL_RANK_TOLERANCE, UioCondition, UioDesign, UioDetector, check_uio_conditions,
 };
