@@ -49,7 +49,8 @@ impl KindEvaluation {
 /// Runs `injected` through channel `channel` of the configuration `text` once per kind
 /// of `kinds` (the configuration edited by [`glrmon_spec::edit::set_detector`]), with
 /// the same protocol: the onset and length given, else those of the configuration as
-/// written.
+/// written, and the fault gone from `end` on if given; every kind at `false_alarm` per
+/// sample if given, else at the configuration's.
 ///
 /// # Errors
 /// [`EvalError::Protocol`] when the configuration cannot run a kind (naming it and
@@ -60,15 +61,17 @@ pub fn compare(
     kinds: &[DetectorKind],
     injected: &[(String, f64)],
     (onset, samples, runs, seed): (Option<u64>, Option<u64>, u64, u64),
+    end: Option<u64>,
+    false_alarm: Option<f64>,
 ) -> Result<(Protocol, Vec<KindEvaluation>), EvalError> {
     let base = glrmon_spec::parse(text).map_err(|e| EvalError::Protocol(e.to_string()))?;
     let base = base
         .pick_channel(Some(channel))
         .map_err(|e| EvalError::Protocol(e.to_string()))?;
-    let protocol = Protocol::for_channel(base, onset, samples, runs, seed)?;
+    let protocol = Protocol::for_channel(base, onset, samples, runs, seed)?.with_end(end)?;
     let mut out = Vec::new();
     for &kind in kinds {
-        let edited = glrmon_spec::edit::set_detector(text, channel, kind)
+        let edited = glrmon_spec::edit::set_detector(text, channel, kind, false_alarm)
             .map_err(|e| EvalError::Protocol(format!("detector `{}`: {e}", kind.name())))?;
         let cfg = glrmon_spec::parse(&edited)
             .map_err(|e| EvalError::Protocol(format!("detector `{}`: {e}", kind.name())))?;

@@ -145,6 +145,9 @@ pub struct Protocol {
     pub runs: u64,
     /// Seed of the first run (run i uses `seed + i`).
     pub seed: u64,
+    /// The sample from which the injected fault is gone again (a fault that ends: the
+    /// survey's actuator stuck from 2.5 s to 3.5 s), or `None` for a fault that lasts.
+    pub end: Option<u64>,
 }
 
 impl Protocol {
@@ -176,7 +179,24 @@ impl Protocol {
             samples,
             runs,
             seed,
+            end: None,
         })
+    }
+
+    /// The protocol with the injected fault gone from sample `end` on.
+    ///
+    /// # Errors
+    /// [`EvalError::Protocol`] when `end` is not after the onset.
+    pub fn with_end(self, end: Option<u64>) -> Result<Self, EvalError> {
+        if let Some(end) = end
+            && end <= self.onset
+        {
+            return Err(EvalError::Protocol(format!(
+                "--end {end} is not after the onset {}",
+                self.onset
+            )));
+        }
+        Ok(Self { end, ..self })
     }
 }
 
@@ -222,6 +242,7 @@ pub fn evaluate(
         samples,
         runs,
         seed,
+        end,
     } = protocol;
     let groups = Monitor::from_channel(channel)?.isolation_groups().to_vec();
     let mut results = Vec::new();
@@ -232,7 +253,9 @@ pub fn evaluate(
                     scope.spawn(move || {
                         (0..runs)
                             .filter(|i| i % threads == t)
-                            .map(|i| one_run(channel, seed + i, fault, *magnitude, onset, samples))
+                            .map(|i| {
+                                one_run(channel, seed + i, fault, *magnitude, (onset, end), samples)
+                            })
                             .collect::<Vec<_>>()
                     })
                 })
@@ -254,7 +277,8 @@ pub fn evaluate(
 }
 
 /// One run: the channel simulated with `seed`, `fault` of `magnitude` injected at
-/// `onset`, `samples` samples through the channel's monitor as live.
+/// `onset` (until `end`, when given), `samples` samples through the channel's monitor
+/// as live.
 ///
 /// # Errors
 /// [`EvalError`] when the simulator or the monitor cannot be built for the channel.
@@ -263,10 +287,13 @@ pub fn one_run(
     seed: u64,
     fault: &str,
     magnitude: f64,
-    onset: u64,
+    (onset, end): (u64, Option<u64>),
     samples: u64,
 ) -> Result<Run, EvalError> {
     let mut sim = simulator(channel, seed, fault, magnitude, onset)?;
+    if let Some(end) = end {
+        sim = sim.with_fault_end(end);
+    }
     let mut mon = Monitor::from_channel(channel)?;
     let tests = mon.isolation_groups().to_vec();
     // Detection, onset and isolation come from the alarm and isolation records.
@@ -673,7 +700,7 @@ mod tests {
         let channel = &cfg.channels[0];
         let mut seen = 0;
         for seed in 1..4 {
-            let run = one_run(channel, seed, "g0_leak", -2e-5, 300, 500).unwrap();
+            let run = one_run(channel, seed, "g0_leak", -2e-5, (300, None), 500).unwrap();
             if run.isolated_at.is_none() {
                 assert!(run.minmax.is_empty());
                 continue;
@@ -692,7 +719,7 @@ mod tests {
         }
         assert!(seen > 0);
         let runs: Vec<Run> = (1..4)
-            .map(|seed| one_run(channel, seed, "g0_leak", -2e-5, 300, 500).unwrap())
+            .map(|seed| one_run(channel, seed, "g0_leak", -2e-5, (300, None), 500).unwrap())
             .collect();
         let groups = Monitor::from_channel(channel)
             .unwrap()
@@ -719,7 +746,7 @@ mod tests {
         let delay = u64::from(channel.isolation_delay);
         assert!(delay > 0);
         for seed in 1..6 {
-            let run = one_run(channel, seed, "x0_jump", 4.0, 201, 400).unwrap();
+            let run = one_run(channel, seed, "x0_jump", 4.0, (201, None), 400).unwrap();
             // The same run with the per-sample statistics.
             let mut sim = simulator(channel, seed, "x0_jump", 4.0, 201).unwrap();
             let mut mon = Monitor::from_channel(channel).unwrap();

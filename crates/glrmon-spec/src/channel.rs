@@ -124,6 +124,15 @@ impl fmt::Display for ResidualKind {
     }
 }
 
+/// The RLS detector's settings of a channel (`[channels.rls]`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RlsChannelSettings {
+    /// Forgetting, P_0, excitation level.
+    pub rls: glrmon_core::RlsSettings,
+    /// How the residual becomes the decision statistic.
+    pub evaluation: glrmon_core::detector::Evaluation,
+}
+
 /// The observer detectors' settings of a channel (`[channels.observer]`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ObserverSettings {
@@ -298,6 +307,8 @@ pub struct Channel {
     /// The observer detectors' settings (`[channels.observer]`), for `detector =
     /// "fdf"` or `"uio"`.
     pub observer: Option<ObserverSettings>,
+    /// The RLS detector's settings (`[channels.rls]`), for `detector = "rls"`.
+    pub rls: Option<RlsChannelSettings>,
     /// Largest gap filled by predict-only steps.
     pub max_gap: u64,
     /// How many indices before the last processed one a sample is refused as late;

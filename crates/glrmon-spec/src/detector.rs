@@ -7,7 +7,7 @@
 //! from [`DetectorKind::NAMES`].
 
 use glrmon_core::detector::parity::{Disturbance, ParityDetector};
-use glrmon_core::detector::{FdfDetector, FdfGains, UioDetector};
+use glrmon_core::detector::{FdfDetector, FdfGains, RlsDetector, UioDetector};
 use glrmon_core::{Chi2Detector, Detector, GlrDetector, ModelError};
 
 use crate::Channel;
@@ -27,14 +27,23 @@ pub enum DetectorKind {
     Fdf,
     /// The unknown-input observer of Chen, Patton & Zhang 1996.
     Uio,
+    /// Parameter estimation: recursive least squares on the model's ARX form.
+    Rls,
 }
 
 impl DetectorKind {
     /// Every kind, in declaration order (a kind's index is its discriminant).
-    pub const ALL: [Self; 5] = [Self::Glr, Self::Chi2, Self::Parity, Self::Fdf, Self::Uio];
+    pub const ALL: [Self; 6] = [
+        Self::Glr,
+        Self::Chi2,
+        Self::Parity,
+        Self::Fdf,
+        Self::Uio,
+        Self::Rls,
+    ];
 
     /// The names the configuration accepts, as [`DetectorKind::ALL`].
-    pub const NAMES: [&'static str; 5] = ["glr", "chi2", "parity", "fdf", "uio"];
+    pub const NAMES: [&'static str; 6] = ["glr", "chi2", "parity", "fdf", "uio", "rls"];
 
     /// The configuration's name of the kind.
     #[must_use]
@@ -57,7 +66,7 @@ impl DetectorKind {
     pub fn statistic_dof(self, faults: usize, residual_dof: usize) -> usize {
         match self {
             Self::Glr => faults.max(1),
-            Self::Chi2 | Self::Parity | Self::Fdf | Self::Uio => residual_dof.max(1),
+            Self::Chi2 | Self::Parity | Self::Fdf | Self::Uio | Self::Rls => residual_dof.max(1),
         }
     }
 
@@ -68,7 +77,7 @@ impl DetectorKind {
     pub fn runs_kalman_filter(self) -> bool {
         match self {
             Self::Glr | Self::Chi2 => true,
-            Self::Parity | Self::Fdf | Self::Uio => false,
+            Self::Parity | Self::Fdf | Self::Uio | Self::Rls => false,
         }
     }
 
@@ -78,7 +87,7 @@ impl DetectorKind {
     pub fn maximises_over_onsets(self) -> bool {
         match self {
             Self::Glr => true,
-            Self::Chi2 | Self::Parity | Self::Fdf | Self::Uio => false,
+            Self::Chi2 | Self::Parity | Self::Fdf | Self::Uio | Self::Rls => false,
         }
     }
 }
@@ -137,6 +146,18 @@ impl Channel {
                     None => detector,
                 })
             }
+            DetectorKind::Rls => {
+                let settings = self.rls.as_ref().ok_or(ModelError::Setting {
+                    what: "rls",
+                    detail: "the channel has no RLS settings".into(),
+                })?;
+                Box::new(rls_detector(
+                    &self.model,
+                    self.cross_covariance.as_ref(),
+                    self.dictionary()?,
+                    settings,
+                )?)
+            }
             DetectorKind::Uio => {
                 let observer = self.observer_settings()?;
                 let e = self.unknown_input.as_ref().ok_or(ModelError::Setting {
@@ -190,6 +211,26 @@ impl Channel {
             (None, Some(s)) => detector.with_cross_covariance(s.clone()),
             (None, None) => Ok(detector),
         }
+    }
+}
+
+/// The RLS detector of `settings` for `model` (with the noises' cross-covariance S if
+/// given): the factory's, and validation's check of the model's ARX form.
+pub(crate) fn rls_detector(
+    model: &glrmon_core::Lpv,
+    cross: Option<&nalgebra::DMatrix<f64>>,
+    faults: glrmon_core::FaultDictionary,
+    settings: &crate::channel::RlsChannelSettings,
+) -> Result<RlsDetector, ModelError> {
+    let detector = RlsDetector::new(
+        Box::new(model.clone()),
+        faults,
+        settings.rls,
+        settings.evaluation,
+    )?;
+    match cross {
+        Some(s) => detector.with_cross_covariance(s.clone()),
+        None => Ok(detector),
     }
 }
 
@@ -259,6 +300,20 @@ glr = {{ detector = "{glr}" }}
             .unwrap_err()
             .to_string();
         assert!(err.contains("model.E"), "{err}");
+        let cfg = crate::parse(&text("", "rls", "rls = { forgetting = 0.98 }")).unwrap();
+        assert_eq!(
+            cfg.channels[0].statistic_dof, 8,
+            "2 outputs × (a1, a2, b1, b2)"
+        );
+        let det = cfg.channels[0].detector().unwrap();
+        assert_eq!((det.kind(), det.memory()), ("rls", 50));
+        let err = crate::parse(&text("", "rls", "rls = { forgetting = 1.5 }"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("rls.forgetting") && err.contains("not in (0, 1]"),
+            "{err}"
+        );
         let err = crate::parse(&text("", "glr", "observer = { evaluation = \"chi2\" }"))
             .unwrap_err()
             .to_string();

@@ -161,17 +161,22 @@ pub fn set_calibrated(
 
 /// Sets `glr.detector` of `channel` in the configuration `text` to `kind`, for
 /// comparing kinds on the same channel (`glrmon evaluate --detector`): every kind is
-/// then set to the same false-alarm probability per sample, the configured
-/// `false_alarm` (10⁻⁴ when none is given), since a threshold set for one kind's
+/// then set to the same false-alarm probability per sample, `false_alarm` if given,
+/// else the configured one (10⁻⁴ when none is given), since a threshold set for one kind's
 /// statistic (`threshold`, `[channels.glr.calibrated]`) means nothing for another's;
-/// `[channels.parity]` and `[channels.observer]` are removed for kinds they do not
+/// `[channels.parity]`, `[channels.observer]` and `[channels.rls]` are removed for kinds they do not
 /// apply to. Returns the edited text.
 ///
 /// # Errors
 /// As [`set_calibrated`]: [`EditError::Toml`], [`EditError::NoChannels`],
 /// [`EditError::NoChannel`], [`EditError::GlrNotTable`], and [`EditError::Invalid`]
 /// when the channel cannot run `kind` (e.g. a parity space that is empty).
-pub fn set_detector(text: &str, channel: &str, kind: DetectorKind) -> Result<String, EditError> {
+pub fn set_detector(
+    text: &str,
+    channel: &str,
+    kind: DetectorKind,
+    false_alarm: Option<f64>,
+) -> Result<String, EditError> {
     let mut doc: toml_edit::DocumentMut = text
         .parse()
         .map_err(|e: toml_edit::TomlError| EditError::Toml(e.to_string()))?;
@@ -185,6 +190,9 @@ pub fn set_detector(text: &str, channel: &str, kind: DetectorKind) -> Result<Str
         .ok_or_else(|| EditError::NoChannel(channel.to_owned()))?;
     if kind != DetectorKind::Parity {
         table.remove("parity");
+    }
+    if kind != DetectorKind::Rls {
+        table.remove("rls");
     }
     if !matches!(kind, DetectorKind::Fdf | DetectorKind::Uio) {
         table.remove("observer");
@@ -216,7 +224,9 @@ pub fn set_detector(text: &str, channel: &str, kind: DetectorKind) -> Result<Str
     for key in ["threshold", "calibrated", "threshold_mode"] {
         glr.remove(key);
     }
-    if explicit && !glr.contains_key("false_alarm") {
+    if let Some(p) = false_alarm {
+        glr.insert("false_alarm", toml_edit::value(p));
+    } else if explicit && !glr.contains_key("false_alarm") {
         glr.insert("false_alarm", toml_edit::value(1e-4));
     }
     glr.insert("detector", toml_edit::value(kind.name()));

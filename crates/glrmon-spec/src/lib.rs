@@ -42,7 +42,7 @@ pub mod write;
 
 pub use crate::channel::{
     Channel, Columns, Controller, DEFAULT_DIAGNOSIS_ALPHA, DiagnosisSettings, ObserverSettings,
-    ResidualKind, SimulationPlan, ThresholdSource,
+    ResidualKind, RlsChannelSettings, SimulationPlan, ThresholdSource,
 };
 pub use crate::config::{ChannelChoiceError, Config, RELOADABLE_GLR_KEYS};
 pub use crate::covariance::PSD_TOLERANCE;

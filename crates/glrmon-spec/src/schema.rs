@@ -319,6 +319,36 @@ pub struct ChannelSpec {
     /// `[channels.observer]`: the observer detectors (`glr.detector = "fdf"` or
     /// `"uio"`). Default: the optimal gains, χ² evaluation.
     pub observer: Option<ObserverSpec>,
+    /// `[channels.rls]`: the parameter-estimation detector (`glr.detector = "rls"`).
+    /// Default: forgetting 0.99, χ² evaluation.
+    pub rls: Option<RlsSpec>,
+}
+
+/// `[channels.rls]`: parameter estimation (the survey's parameter-estimation methods):
+/// the ARX parameters of each output, derived from the model (its characteristic
+/// polynomial and numerators), estimated by recursive least squares with forgetting
+/// on regressors whitened by the model's equation error, and tested against their
+/// nominal values. LTI models with at least one known input; the test is suspended
+/// (and says so) while the input does not excite the parameters.
+#[derive(Debug, Clone, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RlsSpec {
+    /// λ_f in (0, 1]: the forgetting factor; the estimate remembers about 1/(1 − λ_f)
+    /// samples. Default 0.99.
+    pub forgetting: Option<f64>,
+    /// p0 > 0: the initial covariance P_0 = p0·I around the nominal parameters.
+    /// Default 1000.
+    pub p0: Option<f64>,
+    /// The excitation level in (0, 1) below which the test is suspended: the smallest
+    /// eigenvalue of the regressors' normalised information. Default 1e-6.
+    pub excitation: Option<f64>,
+    /// `chi2` (default; (θ̂ − θ_nom)ᵀΣ_θ⁺(θ̂ − θ_nom), approximately χ² with the
+    /// parameters' number) or `energy` (windowed energy over `energy_window` samples:
+    /// give `glr.threshold` or calibrate).
+    #[schemars(extend("enum" = ["chi2", "energy"]))]
+    pub evaluation: Option<String>,
+    /// Samples of the windowed energy (`evaluation = "energy"`), 1 to 100000. Default 10.
+    pub energy_window: Option<usize>,
 }
 
 /// `[channels.observer]`: the observer-based residual generators, for
@@ -649,9 +679,10 @@ pub struct GlrSpec {
     /// baseline, for comparing with the GLR on your data; alarms then carry r̂ = k) or
     /// `parity` (the parity-space residual, `[channels.parity]`), `fdf` (the observer
     /// fault-detection filter) or `uio` (the unknown-input observer,
-    /// `[channels.observer]`): these three detect only (no magnitude, no isolation);
+    /// `[channels.observer]`) or `rls` (parameter estimation, `[channels.rls]`): these
+    /// four detect only (no magnitude, no isolation);
     /// alarms carry the first sample of the statistic's evidence as r̂.
-    #[schemars(extend("enum" = ["glr", "chi2", "parity", "fdf", "uio"]))]
+    #[schemars(extend("enum" = ["glr", "chi2", "parity", "fdf", "uio", "rls"]))]
     pub detector: Option<String>,
     /// Hysteresis h in [0, 1): an alarm episode ends below λ(1 − h). Default 0.1.
     #[serde(default = "default_hysteresis")]

@@ -49,16 +49,25 @@ pub(crate) struct EvaluateArgs {
     /// Samples per run (default onset + 2·w).
     #[arg(long)]
     samples: Option<u64>,
+    /// The sample from which the injected fault is gone again (a fault that ends, such
+    /// as an actuator stuck for a while); default: it lasts to the end of the run.
+    #[arg(long, value_name = "K")]
+    end: Option<u64>,
     /// Seed of the first run (run i uses seed + i).
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Compare detector kinds side by side on the same injected faults and noise:
-    /// `glr`, `chi2`, `parity`, `fdf`, `uio` (comma-separated). Each runs at the channel's
+    /// `glr`, `chi2`, `parity`, `fdf`, `uio`, `rls` (comma-separated). Each runs at the channel's
     /// `false_alarm` per sample (10⁻⁴ when the configuration sets a threshold another
     /// way) and one table gives each kind's detection rate, median delay, false alarms
     /// per 10⁴ fault-free samples and correct isolations (for the kinds that isolate).
     #[arg(long, value_name = "KIND,…", value_delimiter = ',', conflicts_with_all = ["json", "report"])]
     detector: Vec<String>,
+    /// With `--detector`: the false-alarm probability per sample every kind's threshold
+    /// is set for (the survey's DC motor comparison uses 0.1); default the channel's
+    /// `false_alarm`.
+    #[arg(long, value_name = "P", requires = "detector")]
+    false_alarm: Option<f64>,
     /// Print the results as JSON instead of the table.
     #[arg(long)]
     json: bool,
@@ -137,6 +146,8 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
             &kinds,
             &injected,
             (args.onset, args.samples, args.runs, args.seed),
+            args.end,
+            args.false_alarm,
         )
         .map_err(eval_error)?;
         print!(
@@ -146,6 +157,7 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     let protocol = Protocol::for_channel(channel, args.onset, args.samples, args.runs, args.seed)
+        .and_then(|p| p.with_end(args.end))
         .map_err(eval_error)?;
     let Protocol { onset, samples, .. } = protocol;
     let results = glrmon_eval::evaluate(channel, &injected, protocol).map_err(eval_error)?;
@@ -164,7 +176,7 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
                 &channel.name,
                 &columns,
                 &summaries,
-                (onset, samples),
+                (onset, samples, protocol.end),
                 channel.period
             )
         );
@@ -205,9 +217,12 @@ fn side_by_side(
     kinds: &[glrmon_eval::compare::KindEvaluation],
     period: Option<f64>,
 ) -> String {
+    let until = protocol
+        .end
+        .map_or_else(String::new, |e| format!(" until k = {e}"));
     let mut s = format!(
-        "channel \"{channel}\": fault injected at k = {}, {} samples per run, {} runs per fault, \
-         seeds {}…, the same for every kind\n\n",
+        "channel \"{channel}\": fault injected at k = {}{until}, {} samples per run, {} runs \
+         per fault, seeds {}…, the same for every kind\n\n",
         protocol.onset, protocol.samples, protocol.runs, protocol.seed
     );
     for k in kinds {
@@ -262,18 +277,19 @@ fn side_by_side(
 }
 
 /// The evaluation as text: detection table (and, when the channel's sampling period is
-/// known, the delays in time), confusion matrix, Fig. 8 table. `protocol` is the onset
-/// and the samples per run.
+/// known, the delays in time), confusion matrix, Fig. 8 table. `protocol` is the onset,
+/// the samples per run and the fault's end.
 fn text(
     channel: &str,
     columns: &[String],
     results: &[FaultEvaluation],
-    protocol: (u64, u64),
+    protocol: (u64, u64, Option<u64>),
     period: Option<f64>,
 ) -> String {
-    let (onset, samples) = protocol;
+    let (onset, samples, end) = protocol;
+    let until = end.map_or_else(String::new, |e| format!(" until k = {e}"));
     let mut s = format!(
-        "channel \"{channel}\": fault injected at k = {onset}, {samples} samples per run\n\n"
+        "channel \"{channel}\": fault injected at k = {onset}{until}, {samples} samples per run\n\n"
     );
     let _ = writeln!(
         s,
@@ -419,7 +435,7 @@ mod tests {
             "pipe",
             &columns,
             std::slice::from_ref(&r),
-            (300, 500),
+            (300, 500, None),
             Some(120.0),
         );
         assert!(
@@ -428,7 +444,7 @@ mod tests {
             ),
             "{with}"
         );
-        let without = text("pipe", &columns, &[r], (300, 500), None);
+        let without = text("pipe", &columns, &[r], (300, 500, None), None);
         assert!(!without.contains("delays in time"), "{without}");
         assert_eq!(crate::span::duration(0.58), "0.5800 s");
     }

@@ -65,7 +65,8 @@ impl Validator {
         let kind = (glr.detector.as_deref())
             .and_then(DetectorKind::from_name)
             .unwrap_or_default();
-        let (mut parity, mut observer, mut residual_dof) = (None, None, innovation_dof);
+        let (mut parity, mut observer, mut rls, mut residual_dof) =
+            (None, None, None, innovation_dof);
         match kind {
             DetectorKind::Parity => {
                 let (settings, dof) =
@@ -81,14 +82,20 @@ impl Validator {
                 )?;
                 (observer, residual_dof) = (Some(settings), dof);
             }
+            DetectorKind::Rls => {
+                let (settings, dof) = self.rls(prefix, spec.rls.as_ref(), &lpv, cross.as_ref())?;
+                (rls, residual_dof) = (Some(settings), dof);
+            }
             DetectorKind::Glr | DetectorKind::Chi2 => {}
         }
         for (table, given, kinds) in [
             ("parity", spec.parity.is_some(), "\"parity\""),
             ("observer", spec.observer.is_some(), "\"fdf\" or \"uio\""),
+            ("rls", spec.rls.is_some(), "\"rls\""),
         ] {
             let applies = match table {
                 "parity" => kind == DetectorKind::Parity,
+                "rls" => kind == DetectorKind::Rls,
                 _ => matches!(kind, DetectorKind::Fdf | DetectorKind::Uio),
             };
             if given && !applies {
@@ -102,7 +109,8 @@ impl Validator {
         let energy = parity.is_some_and(|p| matches!(p.evaluation, Evaluation::Energy { .. }))
             || observer
                 .as_ref()
-                .is_some_and(|o| matches!(o.evaluation, Evaluation::Energy { .. }));
+                .is_some_and(|o| matches!(o.evaluation, Evaluation::Energy { .. }))
+            || rls.is_some_and(|r| matches!(r.evaluation, Evaluation::Energy { .. }));
         if energy
             && !matches!(
                 detection.threshold_source,
@@ -182,6 +190,7 @@ impl Validator {
                 .statistic_dof(faults.len(), residual_dof),
             parity,
             observer,
+            rls,
             isolation_thresholds: glr
                 .calibrated
                 .as_ref()

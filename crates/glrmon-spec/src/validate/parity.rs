@@ -55,6 +55,71 @@ impl Validator {
         evaluation
     }
 
+    /// `[channels.rls]`, checked by building the detector on the model (its ARX form:
+    /// an LTI model with inputs reaching every output, noise that can be whitened),
+    /// and the number of parameters the χ² evaluation tests.
+    pub(super) fn rls(
+        &mut self,
+        prefix: &str,
+        spec: Option<&crate::schema::RlsSpec>,
+        model: &Lpv,
+        cross: Option<&nalgebra::DMatrix<f64>>,
+    ) -> Option<(crate::RlsChannelSettings, usize)> {
+        use glrmon_core::{Column, Detector as _, Fault, FaultDictionary, Onset, RlsSettings};
+        let before = self.errors.len();
+        let path = |f: &str| join(prefix, &format!("rls.{f}"));
+        let spec = spec.cloned().unwrap_or_default();
+        let defaults = RlsSettings::default();
+        let settings = RlsSettings {
+            forgetting: spec.forgetting.unwrap_or(defaults.forgetting),
+            p0: spec.p0.unwrap_or(defaults.p0),
+            excitation: spec.excitation.unwrap_or(defaults.excitation),
+        };
+        if !(settings.forgetting > 0.0 && settings.forgetting <= 1.0) {
+            self.error(
+                path("forgetting"),
+                format!("{} is not in (0, 1]", settings.forgetting),
+            );
+        }
+        if !(settings.p0.is_finite() && settings.p0 > 0.0) {
+            self.error(
+                path("p0"),
+                format!("{} must be finite and positive", settings.p0),
+            );
+        }
+        if !(settings.excitation > 0.0 && settings.excitation < 1.0) {
+            self.error(
+                path("excitation"),
+                format!("{} is not in (0, 1)", settings.excitation),
+            );
+        }
+        let evaluation = self.evaluation(
+            &path("evaluation"),
+            &path("energy_window"),
+            spec.evaluation.as_deref(),
+            spec.energy_window,
+        );
+        if self.errors.len() > before {
+            return None;
+        }
+        let channel = crate::RlsChannelSettings {
+            rls: settings,
+            evaluation,
+        };
+        let probe = FaultDictionary::new(
+            model.dims(),
+            vec![Fault::output("probe", Onset::Step, Column::Zero)],
+        )
+        .ok()?;
+        match crate::detector::rls_detector(model, cross, probe, &channel) {
+            Ok(detector) => Some((channel, detector.residual_len())),
+            Err(err) => {
+                self.error(join(prefix, "rls"), err.to_string());
+                None
+            }
+        }
+    }
+
     /// `[channels.observer]` for the `fdf` or `uio` kind, checked against the model
     /// at k = 0 (the gains' stability, the UIO's existence conditions, each named),
     /// and the dimension of the residual the χ² evaluation tests.
