@@ -993,10 +993,14 @@ fn simulate_end_cuts_the_fault_off() {
 #[test]
 fn evaluate_compares_detector_kinds_side_by_side() {
     let cfg = config("examples/dc-motor-parity.toml");
+    let dir = TempDir::new("evaluate-kinds");
+    let report = dir.file("kinds.html");
     let out = glrmon(&[
         "evaluate",
         "--config",
         &cfg,
+        "--report",
+        &report,
         "--detector",
         "glr,chi2,parity",
         "--runs",
@@ -1023,6 +1027,15 @@ fn evaluate_compares_detector_kinds_side_by_side() {
     }
     assert!(row("glr").trim_end().ends_with("100.0%"), "{}", row("glr"));
     assert!(row("parity").trim_end().ends_with('–'), "{}", row("parity"));
+    let html = std::fs::read_to_string(&report).unwrap();
+    assert_eq!(html.matches("<svg").count(), 3, "one delay histogram per kind");
+    for kind in ["glr", "chi2", "parity"] {
+        assert!(html.contains(&format!("Detection delay, {kind}")), "{kind}");
+    }
+    assert!(
+        html.contains("seeds</th><td>1 … 20, the same for every kind"),
+        "{html}"
+    );
     let bad = glrmon(&[
         "evaluate",
         "--config",

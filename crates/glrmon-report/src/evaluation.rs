@@ -362,6 +362,10 @@ impl Evaluation {
     }
 
     fn delay_figure(&self, f: &FaultEvaluation, fig_id: &mut usize) -> String {
+        self.delay_figure_titled(f, "Detection delay", fig_id)
+    }
+
+    fn delay_figure_titled(&self, f: &FaultEvaluation, title: &str, fig_id: &mut usize) -> String {
         let delays: Vec<i64> = f
             .delays
             .iter()
@@ -369,7 +373,7 @@ impl Evaluation {
             .collect();
         let hist = Histogram::integers(&delays, MAX_BINS);
         let mut fig = histogram_figure(
-            "Detection delay",
+            title,
             &hist,
             "detection delay k − r (samples)",
             Range::NonNegative,
@@ -849,5 +853,130 @@ mod tests {
         assert_eq!(html.matches("no runs to show").count(), 2);
         assert!(html.contains("20 runs did not detect within the 250 samples"));
         assert!(!html.contains("NaN"));
+    }
+}
+
+/// Detector kinds side by side (`glrmon evaluate --detector … --report`): one page with
+/// the same injected faults and seeds through each kind, a table of every kind's
+/// figures per fault, and per fault the kinds' delay histograms next to each other.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Comparison {
+    /// The page title.
+    pub title: String,
+    /// One evaluation per kind, in the order compared (their `title` is unused; the
+    /// faults, onset, samples, runs and seeds are the same in each).
+    pub kinds: Vec<ComparedKind>,
+    /// The sample from which the injected fault was gone again, if it ended.
+    pub end: Option<u64>,
+}
+
+/// One kind of a [`Comparison`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ComparedKind {
+    /// The kind's name (`glr`, `parity`, …).
+    pub name: String,
+    /// Whether its alarms name faults (else its isolation column shows –).
+    pub isolates: bool,
+    /// What its runs gave.
+    pub evaluation: Evaluation,
+}
+
+impl Comparison {
+    /// Writes the comparison as one self-contained HTML page.
+    ///
+    /// # Errors
+    ///
+    /// Any error of `out`.
+    pub fn write_html<W: Write>(&self, mut out: W) -> io::Result<()> {
+        let title = escape(&self.title);
+        write!(
+            out,
+            "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{title}</title><style>{CSS}{EVAL_CSS}</style></head><body>\n<h1>{title}</h1>\n"
+        )?;
+        let Some(first) = self.kinds.first().map(|k| &k.evaluation) else {
+            return out.write_all(b"<p>No detector kinds compared.</p></body></html>\n");
+        };
+        let last_seed = first.seed.saturating_add(first.runs.saturating_sub(1));
+        let mut s = String::from("<table class=\"setup\">");
+        let until = self
+            .end
+            .map_or_else(String::new, |e| format!(" until k = {e}"));
+        for (label, value) in [
+            (
+                "configuration",
+                format!("<code>{}</code>", escape(&first.config)),
+            ),
+            (
+                "channel",
+                format!("<code>{}</code>", escape(&first.channel)),
+            ),
+            ("fault onset r", format!("k = {}{until}", first.onset)),
+            ("samples per run", first.samples.to_string()),
+            ("runs per fault", first.runs.to_string()),
+            (
+                "seeds",
+                format!("{} … {last_seed}, the same for every kind", first.seed),
+            ),
+        ] {
+            let _ = write!(s, "<tr><th>{label}</th><td>{value}</td></tr>");
+        }
+        s.push_str("</table>\n<h2>Kinds</h2>\n<table class=\"summary\"><tr><th>kind</th><th>method</th><th>threshold h</th></tr>\n");
+        for k in &self.kinds {
+            let e = &k.evaluation;
+            let _ = writeln!(
+                s,
+                "<tr><td><code>{}</code></td><td>{}</td><td class=\"num\">{}</td></tr>",
+                escape(&k.name),
+                escape(&e.detector),
+                fmt_num(e.threshold)
+            );
+        }
+        s.push_str("</table>\n<h2>Side by side</h2>\n<table class=\"summary\"><tr><th>injected fault</th><th>kind</th><th>detection rate</th><th>delay p10 (samples)</th><th>delay p50</th><th>delay p90</th><th>false alarms before r</th><th>isolated correctly</th></tr>\n");
+        for (i, f0) in first.faults.iter().enumerate() {
+            for k in &self.kinds {
+                let e = &k.evaluation;
+                let Some(f) = e.faults.get(i) else { continue };
+                let q = |j: usize| f.delay_quantiles.map_or("–".to_owned(), |q| fmt_num(q[j]));
+                let isolated = e
+                    .outcomes
+                    .iter()
+                    .position(|c| *c == f.fault)
+                    .and_then(|c| f.isolated.get(c))
+                    .filter(|_| k.isolates)
+                    .map_or("–".to_owned(), |n| percent(*n, f.runs));
+                let _ = writeln!(
+                    s,
+                    "<tr><td><code>{}</code> θ = {}</td><td><code>{}</code></td><td class=\"num detected\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{isolated}</td></tr>",
+                    escape(&f0.fault),
+                    fmt_num(f0.magnitude),
+                    escape(&k.name),
+                    percent(f.detected, f.runs),
+                    q(0),
+                    q(1),
+                    q(2),
+                    f.false_alarms,
+                );
+            }
+        }
+        s.push_str("</table>\n<p class=\"note\">Isolated correctly: runs whose isolation named the injected fault alone, for the kinds that isolate (– for those that only detect).</p>\n");
+        out.write_all(s.as_bytes())?;
+        let mut fig_id = 0;
+        for (i, f0) in first.faults.iter().enumerate() {
+            let mut s = format!(
+                "<section id=\"fault-{i}\">\n<h2>Injected fault <code>{}</code>, θ = {}: detection delay per kind</h2>\n<div class=\"hists\">\n",
+                escape(&f0.fault),
+                fmt_num(f0.magnitude)
+            );
+            for k in &self.kinds {
+                if let Some(f) = k.evaluation.faults.get(i) {
+                    let title = format!("Detection delay, {}", k.name);
+                    s.push_str(&k.evaluation.delay_figure_titled(f, &title, &mut fig_id));
+                }
+            }
+            s.push_str("</div>\n</section>\n");
+            out.write_all(s.as_bytes())?;
+        }
+        out.write_all(b"</body></html>\n")?;
+        out.flush()
     }
 }

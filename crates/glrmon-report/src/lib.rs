@@ -11,7 +11,9 @@ mod labels;
 mod sink;
 mod svg;
 
-pub use evaluation::{DecisionError, Evaluation, FaultEvaluation, MinmaxEvaluation};
+pub use evaluation::{
+    ComparedKind, Comparison, DecisionError, Evaluation, FaultEvaluation, MinmaxEvaluation,
+};
 pub use histogram::Histogram;
 pub use labels::{ChannelLabels, FaultLabel, MagnitudeUnit, SignalLabel};
 pub use sink::ReportSink;

@@ -60,8 +60,9 @@ pub(crate) struct EvaluateArgs {
     /// `glr`, `chi2`, `parity`, `fdf`, `uio`, `rls` (comma-separated). Each runs at the channel's
     /// `false_alarm` per sample (10⁻⁴ when the configuration sets a threshold another
     /// way) and one table gives each kind's detection rate, median delay, false alarms
-    /// per 10⁴ fault-free samples and correct isolations (for the kinds that isolate).
-    #[arg(long, value_name = "KIND,…", value_delimiter = ',', conflicts_with_all = ["json", "report"])]
+    /// per 10⁴ fault-free samples and correct isolations (for the kinds that isolate);
+    /// with `--report`, one page with each kind's figures and delay histograms.
+    #[arg(long, value_name = "KIND,…", value_delimiter = ',', conflicts_with_all = ["json", "json_out", "minmax_histograms"])]
     detector: Vec<String>,
     /// With `--detector`: the false-alarm probability per sample every kind's threshold
     /// is set for (the survey's DC motor comparison uses 0.1); default the channel's
@@ -154,6 +155,42 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
             "{}",
             side_by_side(&channel.name, protocol, &kinds, channel.period)
         );
+        if let Some(path) = &args.report {
+            let comparison = glrmon_report::Comparison {
+                title: format!(
+                    "glrmon evaluate: detector kinds on channel {}",
+                    channel.name
+                ),
+                kinds: kinds
+                    .iter()
+                    .map(|k| glrmon_report::ComparedKind {
+                        name: k.kind.name().to_owned(),
+                        isolates: k.isolates,
+                        evaluation: Evaluation {
+                            title: String::new(),
+                            config: args.config.display().to_string(),
+                            channel: channel.name.clone(),
+                            detector: k.describe.clone(),
+                            threshold: k.threshold,
+                            onset: protocol.onset,
+                            samples: protocol.samples,
+                            runs: protocol.runs,
+                            seed: protocol.seed,
+                            outcomes: k.columns.clone(),
+                            faults: k.faults.clone(),
+                            minmax_histograms: false,
+                        },
+                    })
+                    .collect(),
+                end: protocol.end,
+            };
+            let write = || -> std::io::Result<()> {
+                let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+                comparison.write_html(&mut out)?;
+                out.flush()
+            };
+            write().with_context(|| format!("writing the report {}", path.display()))?;
+        }
         return Ok(());
     }
     let protocol = Protocol::for_channel(channel, args.onset, args.samples, args.runs, args.seed)
