@@ -107,7 +107,7 @@ SYSTEMDDIR ?= $(PREFIX)/lib/systemd/system
 PROFILE ?= release
 BIN := $${CARGO_TARGET_DIR:-target}/$(PROFILE)/glrmon
 ROOT = $(DESTDIR)$(PREFIX)
-DOCS := README.md docs/OPERATIONS.md docs/CONFIG.md docs/CLI.md docs/WIRE.md docs/IDENTIFY.md docs/MODELS.md LICENSE-MIT LICENSE-APACHE
+DOCS := README.md docs/OPERATIONS.md docs/CONFIG.md docs/CLI.md docs/WIRE.md docs/IDENTIFY.md docs/MODELS.md docs/DETECTORS.md LICENSE-MIT LICENSE-APACHE
 install: ## install glrmon (PREFIX=/usr/local SYSCONFDIR=/etc DESTDIR=; PROFILE=debug to skip the release build)
 	@if [ "$(PROFILE)" = release ]; then $(CARGO) build --release -q -p glrmon-cli; else $(CARGO) build -q -p glrmon-cli; fi
 	@tmp=$$(mktemp -d) && \
