@@ -398,6 +398,16 @@ impl Monitor {
         self.alarm.is_active()
     }
 
+    /// θ̂ of the step just taken, one value per fault; empty for a kind that estimates
+    /// none (its zeros are not an estimate).
+    fn estimated_magnitude(&self) -> Vec<f64> {
+        if self.detector.estimates_magnitude() {
+            self.out.magnitude.iter().copied().collect()
+        } else {
+            Vec::new()
+        }
+    }
+
     /// The `stat` record of the step just taken at k, with the estimate of the episode
     /// going on, if any.
     fn push_stat(&self, k: u64, t: Option<f64>, records: &mut Vec<Record>) {
@@ -851,7 +861,7 @@ impl Monitor {
             glr,
             threshold: self.settings.tuning.alarm.threshold,
             onset,
-            magnitude: self.out.magnitude.iter().copied().collect(),
+            magnitude: self.estimated_magnitude(),
             isolation,
             faults: self.fault_names.clone(),
             update_k,
@@ -894,7 +904,7 @@ impl Monitor {
             glr,
             threshold: self.settings.tuning.alarm.threshold,
             onset,
-            magnitude: self.out.magnitude.iter().copied().collect(),
+            magnitude: self.estimated_magnitude(),
             isolation,
             faults: self.fault_names.clone(),
         }));
