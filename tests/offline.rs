@@ -1028,7 +1028,11 @@ fn evaluate_compares_detector_kinds_side_by_side() {
     assert!(row("glr").trim_end().ends_with("100.0%"), "{}", row("glr"));
     assert!(row("parity").trim_end().ends_with('–'), "{}", row("parity"));
     let html = std::fs::read_to_string(&report).unwrap();
-    assert_eq!(html.matches("<svg").count(), 3, "one delay histogram per kind");
+    assert_eq!(
+        html.matches("<svg").count(),
+        3,
+        "one delay histogram per kind"
+    );
     for kind in ["glr", "chi2", "parity"] {
         assert!(html.contains(&format!("Detection delay, {kind}")), "{kind}");
     }
