@@ -353,7 +353,21 @@ fn settings(channel: &Channel) -> String {
             let _ = writeln!(s, "  model consistency: off");
         }
     }
-    if let Some(e) = &channel.unknown_input {
+    if let Some(e) = &channel.unknown_input
+        && !channel.detector_kind.runs_kalman_filter()
+    {
+        let _ = writeln!(
+            s,
+            "  unknown input: E has {} column(s){}; what the `{}` detector does with it is on its `detector:` line",
+            e.shape().1,
+            if channel.unknown_input_outputs.is_some() {
+                " and reaches the outputs through Fd"
+            } else {
+                ""
+            },
+            channel.detector_kind.name()
+        );
+    } else if let Some(e) = &channel.unknown_input {
         let _ = writeln!(
             s,
             "  unknown input: E has {} column(s), decoupled from the innovation: the GLR runs on {} of the {} output directions (Zhang 2021 §III-B); faults in range(E) are not detectable",
@@ -590,6 +604,16 @@ fn isolability_section(
     s: &mut String,
     warnings: &mut Vec<String>,
 ) -> Result<(), ReportError> {
+    if !channel.detector_kind.runs_kalman_filter() {
+        // The GLR's window information is not what this kind runs on; its own design
+        // was checked when the configuration was read (the `detector:` line above).
+        let _ = writeln!(
+            s,
+            "  isolability: not computed (the `{}` detector does not isolate)",
+            channel.detector_kind.name()
+        );
+        return Ok(());
+    }
     let work = report_work(channel);
     if work > REPORT_WORK_BUDGET {
         // The filter alone (a 2-sample window), so that a diverging model is still

@@ -116,6 +116,9 @@ pub fn from_channel(channel: &Channel, seed: u64) -> Result<Simulator, SimError>
             e.clone(),
             expression_source(plan.unknown_input.clone(), seed ^ UNKNOWN_INPUT_STREAM),
         )?;
+        if let Some(fd) = &channel.unknown_input_outputs {
+            sim = sim.with_unknown_input_on_outputs(fd.clone())?;
+        }
     }
     Ok(sim)
 }
@@ -287,6 +290,48 @@ input = 0
             expected = 0.5 * expected + if (5..14).contains(&k) { 3.0 } else { 0.0 };
         }
         assert!((faulty[29].y[0] - clean[29].y[0]).abs() < 1e-3, "released");
+    }
+
+    /// `model.Fd`: the unknown input d_k reaches the outputs as Fd d_k (survey eq. (2))
+    /// and the state as E d_k; with E = 0 and d_k = 2 + k the first output differs from
+    /// the run without Fd by exactly 3(2 + k) and the second not at all (the same seeds,
+    /// the same noise).
+    #[test]
+    fn the_unknown_input_reaches_the_outputs_through_fd() {
+        let config = |fd: &str| {
+            format!(
+                r#"
+[[channels]]
+name = "plant"
+[channels.model]
+F = [[0.5, 0.0], [0.0, 0.5]]
+H = [[1.0, 0.0], [0.0, 1.0]]
+Q = 0.01
+R = 0.01
+E = [[0.0], [0.0]]
+{fd}
+[channels.glr]
+detector = "parity"
+[channels.simulation]
+unknown_input = ["2 + k"]
+[[channels.faults]]
+name = "bias"
+kind = "sensor_bias"
+output = 1
+"#
+            )
+        };
+        let with = glrmon_spec::parse(&config("Fd = [[3.0], [0.0]]")).unwrap();
+        let without = glrmon_spec::parse(&config("")).unwrap();
+        let a = run(from_channel(&with.channels[0], 4).unwrap(), 20);
+        let b = run(from_channel(&without.channels[0], 4).unwrap(), 20);
+        for (k, (a, b)) in a.iter().zip(&b).enumerate() {
+            assert!(
+                (a.y[0] - b.y[0] - 3.0 * (2.0 + k as f64)).abs() < 1e-9,
+                "k = {k}"
+            );
+            assert_eq!(a.y[1], b.y[1]);
+        }
     }
 
     #[test]

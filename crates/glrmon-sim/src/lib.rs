@@ -105,6 +105,8 @@ pub struct Simulator {
     signals: Option<SignalFn>,
     /// E (constant or LPV), d_k, d_k's buffer and E_k's.
     unknown: Option<(LpvMatrix, SignalFn, DVector<f64>, DMatrix<f64>)>,
+    /// F_d, the unknown input's effect on the outputs (p×q), when it has one.
+    unknown_output: Option<DMatrix<f64>>,
     dims: Dims,
     rng: Rng,
     k: u64,
@@ -163,6 +165,7 @@ impl Simulator {
             inputs: None,
             signals: None,
             unknown: None,
+            unknown_output: None,
             dims,
             rng: Rng::new(seed),
             k: 0,
@@ -315,6 +318,30 @@ impl Simulator {
         Ok(self)
     }
 
+    /// The unknown input's effect on the outputs, Y_k gets + F_d d_k (Ahmad &
+    /// Mohd-Mokhtar 2021, eq. (2)), with the d_k of [`Simulator::with_unknown_input`].
+    ///
+    /// # Errors
+    /// [`SimError::Dimension`] without an unknown input, or when F_d is not p×q.
+    pub fn with_unknown_input_on_outputs(mut self, fd: DMatrix<f64>) -> Result<Self, SimError> {
+        let Some((e, ..)) = &self.unknown else {
+            return Err(SimError::Dimension(
+                "F_d needs the unknown input d_k of with_unknown_input".into(),
+            ));
+        };
+        if fd.shape() != (self.dims.outputs, e.shape().1) {
+            return Err(SimError::Dimension(format!(
+                "F_d is {}×{}, expected {}×{} (outputs × unknown inputs)",
+                fd.nrows(),
+                fd.ncols(),
+                self.dims.outputs,
+                e.shape().1
+            )));
+        }
+        self.unknown_output = Some(fd);
+        Ok(self)
+    }
+
     /// The model's dimensions.
     #[must_use]
     pub fn dims(&self) -> Dims {
@@ -365,6 +392,11 @@ impl Simulator {
                 self.phi.as_mut_slice(),
             );
         }
+        // d_k, shared by both equations.
+        if let Some((e, d, buf, at_k)) = &mut self.unknown {
+            d(k, buf.as_mut_slice());
+            e.evaluate_into(&out.p, at_k);
+        }
         // Y_k
         psd_sqrt(&self.sys.r, &mut self.sqrt_r);
         for v in self.noise_v.iter_mut() {
@@ -373,6 +405,9 @@ impl Simulator {
         let v = &self.sqrt_r * &self.noise_v;
         let mut u = DVector::from_column_slice(&self.u_model);
         let mut y = &self.sys.h * &self.x + &self.sys.j * &u + &v;
+        if let (Some(fd), Some((_, _, buf, _))) = (&self.unknown_output, &self.unknown) {
+            y += fd * buf;
+        }
         if let (Some(f), Some(inj)) = (&self.faults, &self.injection)
             && self.fault_end.is_none_or(|e| k < e)
         {
@@ -418,10 +453,8 @@ impl Simulator {
             }
         };
         let mut x = &self.sys.f * &self.x + &self.sys.g * &u + w;
-        if let Some((e, d, buf, at_k)) = &mut self.unknown {
-            d(k, buf.as_mut_slice());
-            e.evaluate_into(&out.p, at_k);
-            x += &*at_k * &*buf;
+        if let Some((_, _, buf, at_k)) = &self.unknown {
+            x += at_k * buf;
         }
         if let (Some(f), Some(inj)) = (&self.faults, &self.injection)
             && self.fault_end.is_none_or(|e| k + 1 < e)

@@ -265,6 +265,8 @@ pub struct Channel {
     pub discretised: Option<glrmon_core::Discretisation>,
     /// Unknown-input matrix E (n×q, constant or LPV), if given.
     pub unknown_input: Option<LpvMatrix>,
+    /// F_d (p×q): the unknown input's effect on the outputs (`model.Fd`), if given.
+    pub unknown_input_outputs: Option<DMatrix<f64>>,
     /// Cross-covariance S = E(W_kV_kᵀ) (n×p) of the noises, if given.
     pub cross_covariance: Option<DMatrix<f64>>,
     /// Raw plant units → model units (`[channels.scaling]`), applied on intake.

@@ -107,7 +107,9 @@ impl Channel {
                 self.dictionary()?,
                 self.unknown_input.as_ref().map(|e| Disturbance {
                     state: e.base().clone(),
-                    output: nalgebra::DMatrix::zeros(self.dims.outputs, e.shape().1),
+                    output: self.unknown_input_outputs.clone().unwrap_or_else(|| {
+                        nalgebra::DMatrix::zeros(self.dims.outputs, e.shape().1)
+                    }),
                 }),
                 self.cross_covariance.clone(),
                 self.parity.ok_or(ModelError::Setting {
@@ -319,6 +321,49 @@ glr = {{ detector = "{glr}" }}
             .to_string();
         assert!(
             err.contains("applies to `glr.detector = \"fdf\" or \"uio\"`"),
+            "{err}"
+        );
+    }
+
+    /// `model.Fd`, the unknown input's effect on the outputs: the parity kind decouples
+    /// it (perfectly from order 2 on for the DC motor with d on the speed sensor), the
+    /// Kitanidis-based kinds refuse it, and it needs E.
+    #[test]
+    fn the_output_unknown_input_is_for_the_parity_kind() {
+        let text = |model_extra: &str, detector: &str| {
+            format!(
+                r#"
+[[channels]]
+name = "motor"
+model = {{ F = [[0.2231, 0.0109], [-0.0022, 0.5488]], G = [[0.0047], [0.4512]], H = [[1.0, 0.0], [0.0, 1.0]], Q = 0.0001, R = 0.0025{model_extra} }}
+faults = [{{ name = "bias", kind = "sensor_bias", output = 1 }}]
+glr = {{ detector = "{detector}" }}
+"#
+            )
+        };
+        let fd = ", E = [[0.0], [0.0]], Fd = [[1.0], [0.0]]";
+        let cfg = crate::parse(&text(fd, "parity")).unwrap();
+        let c = &cfg.channels[0];
+        assert_eq!(c.parity.unwrap().order, 2);
+        assert!(
+            c.detector()
+                .unwrap()
+                .describe()
+                .contains("disturbance decoupled")
+        );
+        let with_e = ", E = [[-1.5537], [0.0]], Fd = [[1.0], [0.0]]";
+        for kind in ["glr", "chi2", "uio"] {
+            let err = crate::parse(&text(with_e, kind)).unwrap_err().to_string();
+            assert!(
+                err.contains("model.Fd") && err.contains("state only"),
+                "{kind}: {err}"
+            );
+        }
+        let err = crate::parse(&text(", Fd = [[1.0], [0.0]]", "parity"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("model.Fd") && err.contains("needs model.E"),
             "{err}"
         );
     }

@@ -448,6 +448,14 @@ pub struct ModelSpec {
     /// full column rank. Constant. Default: none.
     #[serde(rename = "E")]
     pub e: Option<MatrixSpec>,
+    /// Fd: the unknown input's effect on the outputs, p×q (Y_k gets + Fd d_k with the d_k
+    /// of `E`: the survey's F_d), constant; needs `E` (zeros if d reaches only the
+    /// outputs). Only the `parity` detector decouples it (M[H_o,s H_d,s] = 0 with F_d
+    /// in H_d,s); the Kalman-based kinds (`glr`, `chi2`) and `uio` decouple state unknown
+    /// inputs only and refuse it; `fdf` and `rls` do not decouple. `glrmon simulate`
+    /// adds it to the outputs. Default: none (zero).
+    #[serde(rename = "Fd")]
+    pub fd: Option<MatrixSpec>,
     /// S: cross-covariance E(W_k V_kᵀ), n×p, constant, of correlated process and
     /// measurement noises: an identified innovation model x⁺ = Ax + Bu + Ke,
     /// y = Cx + Du + e is written Q = K·Re·Kᵀ, R = Re, S = K·Re, and runs at its own

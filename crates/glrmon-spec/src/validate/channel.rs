@@ -23,7 +23,16 @@ impl Validator {
         }
         self.glr_ranges(prefix, &spec.glr);
         let m = self.model(prefix, &spec.model, spec.period)?;
-        let diagnosis = self.diagnosis(prefix, spec, &m.h, m.e.as_ref().map(LpvMatrix::base));
+        let kind = (spec.glr.detector.as_deref())
+            .and_then(DetectorKind::from_name)
+            .unwrap_or_default();
+        let diagnosis = self.diagnosis(
+            prefix,
+            spec,
+            &m.h,
+            m.e.as_ref().map(LpvMatrix::base),
+            kind.runs_kalman_filter(),
+        );
         let dims = self.dims(prefix, spec.signals, &m)?;
         let scaling = spec
             .scaling
@@ -47,6 +56,7 @@ impl Validator {
             q,
             r,
             e,
+            fd,
             cross,
             p0,
             x0,
@@ -62,15 +72,12 @@ impl Validator {
         self.observability(prefix, &lpv);
         let glr = &spec.glr;
         let innovation_dof = dims.outputs - e.as_ref().map_or(0, |e| e.shape().1).min(dims.outputs);
-        let kind = (glr.detector.as_deref())
-            .and_then(DetectorKind::from_name)
-            .unwrap_or_default();
         let (mut parity, mut observer, mut rls, mut residual_dof) =
             (None, None, None, innovation_dof);
         match kind {
             DetectorKind::Parity => {
                 let (settings, dof) =
-                    self.parity(prefix, spec.parity.as_ref(), &lpv, e.as_ref())?;
+                    self.parity(prefix, spec.parity.as_ref(), &lpv, e.as_ref(), fd.as_ref())?;
                 (parity, residual_dof) = (Some(settings), dof);
             }
             DetectorKind::Fdf | DetectorKind::Uio => {
@@ -104,6 +111,21 @@ impl Validator {
                     format!("applies to `glr.detector = {kinds}`"),
                 );
             }
+        }
+        if fd.is_some()
+            && matches!(
+                kind,
+                DetectorKind::Glr | DetectorKind::Chi2 | DetectorKind::Uio
+            )
+        {
+            self.error(
+                join(prefix, "model.Fd"),
+                format!(
+                    "the `{}` detector decouples unknown inputs of the state only (F_d = 0); \
+                     the `parity` detector decouples F_d too",
+                    kind.name()
+                ),
+            );
         }
         let detection = self.glr(prefix, glr, &faults, residual_dof);
         let energy = parity.is_some_and(|p| matches!(p.evaluation, Evaluation::Energy { .. }))
@@ -160,6 +182,7 @@ impl Validator {
             model: lpv,
             discretised,
             unknown_input: e,
+            unknown_input_outputs: fd,
             cross_covariance: cross,
             scaling,
             columns,

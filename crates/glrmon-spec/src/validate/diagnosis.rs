@@ -21,11 +21,19 @@ impl Validator {
         spec: &ChannelSpec,
         h: &LpvMatrix,
         e: Option<&DMatrix<f64>>,
+        kalman: bool,
     ) -> DiagnosisSettings {
         let d: &DiagnosisSpec = &spec.diagnosis;
         let dpath = |f: &str| join(prefix, &format!("diagnosis.{f}"));
         let residual = self.residual(prefix, spec);
-        if let Some(e) = e {
+        // The Kitanidis filter's condition, for the kinds that run it and for the
+        // Kitanidis residual of sparse diagnosis when it is asked for; the other kinds
+        // check their own.
+        let kitanidis_asked =
+            residual == ResidualKind::Kitanidis && (d.enabled || d.residual.is_some());
+        if let Some(e) = e
+            && (kalman || kitanidis_asked)
+        {
             self.decoupling(prefix, h, e);
         }
         let history = self.history(prefix, d, spec.glr.window);

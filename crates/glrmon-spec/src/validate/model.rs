@@ -26,6 +26,8 @@ pub(super) struct Matrices {
     pub(super) r: LpvMatrix,
     /// The unknown-input matrix E, if given and n×q.
     pub(super) e: Option<LpvMatrix>,
+    /// F_d, the unknown input's effect on the outputs, if given and p×q.
+    pub(super) fd: Option<DMatrix<f64>>,
     /// The cross-covariance S, if given and valid.
     pub(super) cross: Option<DMatrix<f64>>,
     /// P_0 (the identity when not given), unless it was refused.
@@ -100,6 +102,31 @@ impl Validator {
         let e =
             e.filter(|e| self.shape(prefix, "E", e, (n, e.shape().1), &format!("F is {n}×{n}")));
         let cross = self.cross_covariance(prefix, model, (n, p), e.is_some(), (&q, &r));
+        let fd = model.fd.as_ref().and_then(|fd| {
+            let Some(e) = &e else {
+                self.error(
+                    join(prefix, "model.Fd"),
+                    "needs model.E: F_d is the effect on the outputs of E's unknown input \
+                     (give E = zeros if it reaches only the outputs)"
+                        .into(),
+                );
+                return None;
+            };
+            let q_cols = e.shape().1;
+            let m = self.matrix(prefix, "Fd", fd, None)?;
+            if !m.terms().is_empty() {
+                self.error(join(prefix, "model.Fd"), "must be constant".into());
+                return None;
+            }
+            self.shape(
+                prefix,
+                "Fd",
+                &m,
+                (p, q_cols),
+                &format!("H has {p} rows and E {q_cols} columns"),
+            )
+            .then(|| m.base().clone())
+        });
         Some(Matrices {
             f,
             g,
@@ -108,6 +135,7 @@ impl Validator {
             q,
             r,
             e,
+            fd,
             cross,
             p0,
             x0,

@@ -246,6 +246,7 @@ impl Validator {
         spec: Option<&ParitySpec>,
         model: &Lpv,
         e: Option<&LpvMatrix>,
+        fd: Option<&nalgebra::DMatrix<f64>>,
     ) -> Option<(ParitySettings, usize)> {
         let before = self.errors.len();
         let path = |f: &str| join(prefix, &format!("parity.{f}"));
@@ -282,7 +283,9 @@ impl Validator {
             .evaluate(0, &Signals { u: &u, p: &p }, &mut sys);
         let disturbance = e.map(|e| Disturbance {
             state: e.base().clone(),
-            output: nalgebra::DMatrix::zeros(dims.outputs, e.shape().1),
+            output: fd
+                .cloned()
+                .unwrap_or_else(|| nalgebra::DMatrix::zeros(dims.outputs, e.shape().1)),
         });
         let free = smallest_order(&sys, None, MAX_ORDER, tolerance);
         let Some(free) = free else {
