@@ -19,8 +19,8 @@ mod window;
 
 pub use alarm::{AlarmSettings, AlarmState, AlarmTransition, EpisodeEnd};
 pub use detector::{
-    Chi2Detector, DEFAULT_STEADY_TOLERANCE, Detector, FdfDetector, FdfGains, GlrDetector, Sample,
-    StepOutput, UioDesign, UioDetector, WindowSettings,
+    Chi2Detector, CusumDetector, DEFAULT_STEADY_TOLERANCE, Detector, FdfDetector, FdfGains,
+    GlrDetector, Sample, StepOutput, UioDesign, UioDetector, WindowSettings,
 };
 pub use error::{ModelError, StepError};
 pub use filter::innovation::InnovationFilter;
