@@ -19,8 +19,9 @@ mod window;
 
 pub use alarm::{AlarmSettings, AlarmState, AlarmTransition, EpisodeEnd};
 pub use detector::{
-    ArxForm, Chi2Detector, DEFAULT_STEADY_TOLERANCE, Detector, FdfDetector, FdfGains, GlrDetector,
-    RlsDetector, RlsSettings, Sample, StepOutput, UioDesign, UioDetector, WindowSettings,
+    ArxForm, Chi2Detector, CusumDetector, DEFAULT_STEADY_TOLERANCE, Detector, FdfDetector,
+    FdfGains, GlrDetector, RlsDetector, RlsSettings, Sample, StepOutput, UioDesign, UioDetector,
+    WindowSettings,
 };
 pub use error::{ModelError, StepError};
 pub use filter::innovation::InnovationFilter;

@@ -850,6 +850,14 @@ impl GlrDetector {
         self.settings
     }
 
+    /// The plant model, for the kinds built on this detector that derive their design
+    /// from its matrices (the CUSUM's steady fault signatures). Mutable because
+    /// [`StateSpace::evaluate`] takes `&mut self`; evaluating it changes nothing the
+    /// detector holds (it keeps its own copy of each sample's matrices).
+    pub fn model_mut(&mut self) -> &mut dyn StateSpace {
+        self.model.as_mut()
+    }
+
     /// The Kalman innovation filter (X̂, P, ε, Σ, K).
     #[must_use]
     pub fn filter(&self) -> &InnovationFilter {

@@ -7,6 +7,8 @@
 //!   Basseville 2014, §3-§5, with the sufficient statistics minmax isolation needs;
 //! - [`Chi2Detector`] (`chi2.rs`): the classical baseline, the χ² test of one
 //!   sample's normalized innovation εᵀΣ⁻¹ε, on the same filter;
+//! - [`CusumDetector`] (`cusum.rs`): Page's CUSUM of the same innovation for faults of
+//!   known magnitude, on their steady signatures (Basseville & Nikiforov 1993, §2.2);
 //! - [`parity::ParityDetector`] (`parity.rs`): the parity-space residual of Ahmad &
 //!   Mohd-Mokhtar 2021, eqs. (4)-(8), over a window of s + 1 samples, decoupled from a
 //!   disturbance or with the optimal parity vector of eq. (7);
@@ -28,6 +30,7 @@
 //! report, `calibrate`, `evaluate` and `validate` then run it unchanged.
 
 mod chi2;
+mod cusum;
 pub mod evaluation;
 mod fdf;
 mod glr;
@@ -36,6 +39,7 @@ mod rls;
 mod uio;
 
 pub use chi2::Chi2Detector;
+pub use cusum::{CusumDetector, RICCATI_TOLERANCE};
 pub use evaluation::{EnergyWindow, Evaluation};
 pub use fdf::{
     FdfDetector, FdfGains, disturbance_gain, energy_threshold, error_covariance,
