@@ -69,10 +69,23 @@ pub fn compare(
         .pick_channel(Some(channel))
         .map_err(|e| EvalError::Protocol(e.to_string()))?;
     let protocol = Protocol::for_channel(base, onset, samples, runs, seed)?.with_end(end)?;
+    // A CUSUM without configured magnitudes is tuned for the injected ones (1 for a
+    // fault not injected).
+    let cusum: Vec<f64> = base
+        .fault_names
+        .iter()
+        .map(|name| {
+            injected
+                .iter()
+                .find(|(n, _)| n == name)
+                .map_or(1.0, |(_, m)| *m)
+        })
+        .collect();
     let mut out = Vec::new();
     for &kind in kinds {
-        let edited = glrmon_spec::edit::set_detector(text, channel, kind, false_alarm)
-            .map_err(|e| EvalError::Protocol(format!("detector `{}`: {e}", kind.name())))?;
+        let edited =
+            glrmon_spec::edit::set_detector(text, channel, kind, false_alarm, Some(&cusum))
+                .map_err(|e| EvalError::Protocol(format!("detector `{}`: {e}", kind.name())))?;
         let cfg = glrmon_spec::parse(&edited)
             .map_err(|e| EvalError::Protocol(format!("detector `{}`: {e}", kind.name())))?;
         let ch = cfg

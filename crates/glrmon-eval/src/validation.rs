@@ -298,8 +298,13 @@ fn settings(channel: &Channel) -> String {
                 .map_or_else(|e| format!("cannot be built: {e}"), |d| d.describe());
             let _ = writeln!(
                 s,
-                "  detector: {} — {described} (detection only: no magnitude, no isolation)",
-                kind.name()
+                "  detector: {} — {described}{}",
+                kind.name(),
+                if kind.runs_kalman_filter() {
+                    " (Page's onset; the GLR's magnitudes and isolation)"
+                } else {
+                    " (detection only: no magnitude, no isolation)"
+                }
             );
         }
     }
@@ -496,6 +501,11 @@ fn episode_end_text(channel: &Channel) -> String {
 fn threshold_text(channel: &Channel) -> String {
     match channel.threshold_source {
         ThresholdSource::Explicit => format!("{:.4} (explicit)", channel.alarm.threshold),
+        ThresholdSource::Siegmund { false_alarm } => format!(
+            "{:.4} (Siegmund's approximation of the CUSUM's mean time to a false alarm: \
+             {false_alarm:e} per sample)",
+            channel.alarm.threshold
+        ),
         ThresholdSource::Bonferroni { false_alarm } => format!(
             "{:.4} (χ²({}) upper quantile at {false_alarm:e}/(w − s), Bonferroni: conservative)",
             channel.alarm.threshold,

@@ -52,6 +52,12 @@ pub enum ThresholdSource {
         /// α.
         false_alarm: f64,
     },
+    /// The CUSUM's threshold for a per-sample false-alarm probability α from
+    /// Siegmund's approximation of its mean run length, α/m per fault's CUSUM.
+    Siegmund {
+        /// α.
+        false_alarm: f64,
+    },
     /// Found by `glrmon calibrate` on fault-free data.
     Calibrated {
         /// What it was calibrated for: a mean number of samples between false-alarm
@@ -311,6 +317,9 @@ pub struct Channel {
     pub observer: Option<ObserverSettings>,
     /// The RLS detector's settings (`[channels.rls]`), for `detector = "rls"`.
     pub rls: Option<RlsChannelSettings>,
+    /// The magnitudes the CUSUM is tuned for (`[channels.cusum]`), one per fault, for
+    /// `detector = "cusum"`.
+    pub cusum_magnitudes: Option<Vec<f64>>,
     /// Largest gap filled by predict-only steps.
     pub max_gap: u64,
     /// How many indices before the last processed one a sample is refused as late;

@@ -8,7 +8,7 @@
 
 use glrmon_core::detector::parity::{Disturbance, ParityDetector};
 use glrmon_core::detector::{FdfDetector, FdfGains, RlsDetector, UioDetector};
-use glrmon_core::{Chi2Detector, Detector, GlrDetector, ModelError};
+use glrmon_core::{Chi2Detector, CusumDetector, Detector, GlrDetector, ModelError};
 
 use crate::Channel;
 
@@ -21,6 +21,8 @@ pub enum DetectorKind {
     Glr,
     /// The classical χ² test of one sample's εᵀΣ⁻¹ε (the baseline to compare with).
     Chi2,
+    /// Page's CUSUM of the innovation for faults of known magnitude.
+    Cusum,
     /// The parity-space residual of Ahmad & Mohd-Mokhtar 2021, eqs. (4)-(8).
     Parity,
     /// The observer fault-detection filter of the survey, eqs. (9)-(10), (18).
@@ -33,9 +35,10 @@ pub enum DetectorKind {
 
 impl DetectorKind {
     /// Every kind, in declaration order (a kind's index is its discriminant).
-    pub const ALL: [Self; 6] = [
+    pub const ALL: [Self; 7] = [
         Self::Glr,
         Self::Chi2,
+        Self::Cusum,
         Self::Parity,
         Self::Fdf,
         Self::Uio,
@@ -43,7 +46,7 @@ impl DetectorKind {
     ];
 
     /// The names the configuration accepts, as [`DetectorKind::ALL`].
-    pub const NAMES: [&'static str; 6] = ["glr", "chi2", "parity", "fdf", "uio", "rls"];
+    pub const NAMES: [&'static str; 7] = ["glr", "chi2", "cusum", "parity", "fdf", "uio", "rls"];
 
     /// The configuration's name of the kind.
     #[must_use]
@@ -66,7 +69,9 @@ impl DetectorKind {
     pub fn statistic_dof(self, faults: usize, residual_dof: usize) -> usize {
         match self {
             Self::Glr => faults.max(1),
-            Self::Chi2 | Self::Parity | Self::Fdf | Self::Uio | Self::Rls => residual_dof.max(1),
+            Self::Chi2 | Self::Cusum | Self::Parity | Self::Fdf | Self::Uio | Self::Rls => {
+                residual_dof.max(1)
+            }
         }
     }
 
@@ -76,7 +81,7 @@ impl DetectorKind {
     #[must_use]
     pub fn runs_kalman_filter(self) -> bool {
         match self {
-            Self::Glr | Self::Chi2 => true,
+            Self::Glr | Self::Chi2 | Self::Cusum => true,
             Self::Parity | Self::Fdf | Self::Uio | Self::Rls => false,
         }
     }
@@ -87,7 +92,7 @@ impl DetectorKind {
     pub fn maximises_over_onsets(self) -> bool {
         match self {
             Self::Glr => true,
-            Self::Chi2 | Self::Parity | Self::Fdf | Self::Uio | Self::Rls => false,
+            Self::Chi2 | Self::Cusum | Self::Parity | Self::Fdf | Self::Uio | Self::Rls => false,
         }
     }
 }
@@ -102,6 +107,13 @@ impl Channel {
         Ok(match self.detector_kind {
             DetectorKind::Glr => Box::new(self.glr_detector()?),
             DetectorKind::Chi2 => Box::new(Chi2Detector::new(self.glr_detector()?)),
+            DetectorKind::Cusum => Box::new(CusumDetector::new(
+                self.glr_detector()?,
+                self.cusum_magnitudes.clone().ok_or(ModelError::Setting {
+                    what: "cusum",
+                    detail: "the channel has no CUSUM magnitudes".into(),
+                })?,
+            )?),
             DetectorKind::Parity => Box::new(ParityDetector::new(
                 Box::new(self.model.clone()),
                 self.dictionary()?,
@@ -247,7 +259,7 @@ mod tests {
             assert_eq!(kind.name(), name);
             assert_eq!(DetectorKind::from_name(name), Some(kind));
         }
-        assert_eq!(DetectorKind::from_name("cusum"), None);
+        assert_eq!(DetectorKind::from_name("kalman"), None);
     }
 
     /// The observer kinds: the FDF with the optimal gains or given ones (an unstable
@@ -366,6 +378,59 @@ glr = {{ detector = "{detector}" }}
             err.contains("model.Fd") && err.contains("needs model.E"),
             "{err}"
         );
+    }
+
+    /// The CUSUM kind: magnitudes one per fault, step faults only (a ramp refused by
+    /// name), and a threshold from `false_alarm` by Siegmund's approximation, larger for
+    /// a smaller α.
+    #[test]
+    fn cusum_settings_are_validated() {
+        let text = |fault_kind: &str, cusum: &str, glr: &str| {
+            format!(
+                r#"
+[[channels]]
+name = "motor"
+model = {{ F = [[0.2231, 0.0109], [-0.0022, 0.5488]], G = [[0.0047], [0.4512]], H = [[1.0, 0.0], [0.0, 1.0]], Q = 0.0001, R = 0.0025 }}
+faults = [{{ name = "speed", kind = "{fault_kind}", output = 0 }}]
+glr = {{ detector = "cusum"{glr} }}
+{cusum}
+"#
+            )
+        };
+        let cfg = crate::parse(&text("sensor_bias", "cusum = { magnitudes = [0.1] }", "")).unwrap();
+        let c = &cfg.channels[0];
+        assert!(matches!(
+            c.threshold_source,
+            crate::ThresholdSource::Siegmund { false_alarm } if false_alarm == 1e-4
+        ));
+        let h4 = c.alarm.threshold;
+        let cfg = crate::parse(&text(
+            "sensor_bias",
+            "cusum = { magnitudes = [0.1] }",
+            ", false_alarm = 1e-6",
+        ))
+        .unwrap();
+        assert!(cfg.channels[0].alarm.threshold > h4);
+        assert_eq!(cfg.channels[0].detector().unwrap().kind(), "cusum");
+        let err = crate::parse(&text(
+            "sensor_bias",
+            "cusum = { magnitudes = [0.1, 2.0] }",
+            "",
+        ))
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("cusum.magnitudes") && err.contains("2 values for 1 faults"),
+            "{err}"
+        );
+        let err = crate::parse(&text("sensor_drift", "cusum = { magnitudes = [0.1] }", ""))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("cusum") && err.contains("ramp"), "{err}");
+        let err = crate::parse(&text("sensor_bias", "", ""))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("needs `[channels.cusum] magnitudes`"), "{err}");
     }
 
     /// The parity kind's order is checked against the model (naming the smallest order

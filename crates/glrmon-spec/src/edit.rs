@@ -164,8 +164,10 @@ pub fn set_calibrated(
 /// then set to the same false-alarm probability per sample, `false_alarm` if given,
 /// else the configured one (10⁻⁴ when none is given), since a threshold set for one kind's
 /// statistic (`threshold`, `[channels.glr.calibrated]`) means nothing for another's;
-/// `[channels.parity]`, `[channels.observer]` and `[channels.rls]` are removed for kinds they do not
-/// apply to. Returns the edited text.
+/// `[channels.parity]`, `[channels.observer]`, `[channels.rls]` and `[channels.cusum]`
+/// are removed for kinds they do not apply to; the CUSUM's magnitudes are
+/// `cusum_magnitudes` where the channel has no `[channels.cusum]`. Returns the edited
+/// text.
 ///
 /// # Errors
 /// As [`set_calibrated`]: [`EditError::Toml`], [`EditError::NoChannels`],
@@ -176,6 +178,7 @@ pub fn set_detector(
     channel: &str,
     kind: DetectorKind,
     false_alarm: Option<f64>,
+    cusum_magnitudes: Option<&[f64]>,
 ) -> Result<String, EditError> {
     let mut doc: toml_edit::DocumentMut = text
         .parse()
@@ -193,6 +196,18 @@ pub fn set_detector(
     }
     if kind != DetectorKind::Rls {
         table.remove("rls");
+    }
+    if kind != DetectorKind::Cusum {
+        table.remove("cusum");
+    } else if let Some(m) = cusum_magnitudes
+        && !table.contains_key("cusum")
+    {
+        let mut cusum = toml_edit::Table::new();
+        cusum.insert(
+            "magnitudes",
+            toml_edit::value(m.iter().copied().collect::<toml_edit::Array>()),
+        );
+        table.insert("cusum", toml_edit::Item::Table(cusum));
     }
     if !matches!(kind, DetectorKind::Fdf | DetectorKind::Uio) {
         table.remove("observer");

@@ -322,6 +322,25 @@ pub struct ChannelSpec {
     /// `[channels.rls]`: the parameter-estimation detector (`glr.detector = "rls"`).
     /// Default: forgetting 0.99, χ² evaluation.
     pub rls: Option<RlsSpec>,
+    /// `[channels.cusum]`: the CUSUM detector (`glr.detector = "cusum"`). Required
+    /// with it.
+    pub cusum: Option<CusumSpec>,
+}
+
+/// `[channels.cusum]`: Page's CUSUM on the Kalman innovation, the optimal sequential
+/// test for a fault of known magnitude (the test the GLR generalises to unknown ones):
+/// one CUSUM per fault along the innovation's steady response to it, the statistic
+/// 2·max_j g_j (on the GLR's scale), Page's onset estimate, the GLR's magnitudes and
+/// isolation. Step faults with constant columns (sensor and actuator biases, constant
+/// Ψ/Φ), LTI models without `E`. With `glr.false_alarm` the threshold comes from
+/// Siegmund's approximation of the mean time to a false alarm.
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CusumSpec {
+    /// The magnitude θ_j each fault's CUSUM is tuned for, one per fault in dictionary
+    /// order (finite, non-zero, in the fault's units): a fault near this size is
+    /// detected fastest. Required.
+    pub magnitudes: Vec<f64>,
 }
 
 /// `[channels.rls]`: parameter estimation (the survey's parameter-estimation methods):
@@ -688,9 +707,10 @@ pub struct GlrSpec {
     /// `parity` (the parity-space residual, `[channels.parity]`), `fdf` (the observer
     /// fault-detection filter) or `uio` (the unknown-input observer,
     /// `[channels.observer]`) or `rls` (parameter estimation, `[channels.rls]`): these
-    /// four detect only (no magnitude, no isolation);
+    /// four detect only (no magnitude, no isolation); `cusum` (Page's CUSUM for faults
+    /// of known magnitude, `[channels.cusum]`) keeps the GLR's magnitudes and isolation;
     /// alarms carry the first sample of the statistic's evidence as r̂.
-    #[schemars(extend("enum" = ["glr", "chi2", "parity", "fdf", "uio", "rls"]))]
+    #[schemars(extend("enum" = ["glr", "chi2", "cusum", "parity", "fdf", "uio", "rls"]))]
     pub detector: Option<String>,
     /// Hysteresis h in [0, 1): an alarm episode ends below λ(1 − h). Default 0.1.
     #[serde(default = "default_hysteresis")]

@@ -57,7 +57,7 @@ pub(crate) struct EvaluateArgs {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Compare detector kinds side by side on the same injected faults and noise:
-    /// `glr`, `chi2`, `parity`, `fdf`, `uio`, `rls` (comma-separated). Each runs at the channel's
+    /// `glr`, `chi2`, `cusum`, `parity`, `fdf`, `uio`, `rls` (comma-separated; a `cusum` without `[channels.cusum]` is tuned for the injected magnitudes). Each runs at the channel's
     /// `false_alarm` per sample (10⁻⁴ when the configuration sets a threshold another
     /// way) and one table gives each kind's detection rate, median delay, false alarms
     /// per 10⁴ fault-free samples and correct isolations (for the kinds that isolate);

@@ -1252,3 +1252,69 @@ mod tests {
         assert_eq!(det.magnitudes(), [0.3, 0.05].as_slice());
     }
 }
+
+/// The threshold h on [`CusumDetector`]'s statistic 2·max_j g_j for a false-alarm
+/// probability per sample `false_alarm`, from Siegmund's approximation of the mean run
+/// length of a CUSUM with N(−δ²/2, δ²) increments under no fault,
+/// ARL₀ ≈ (e^b − b − 1)/(δ²/2), b = h/2 + 1.166δ (Basseville & Nikiforov 1993, §5.2),
+/// set to m/α for each of the m faults' CUSUMs (so that their union alarms at most α per
+/// sample, Bonferroni), the largest over the faults. `information` holds δ_j² =
+/// ρ_jᵀΣ⁻¹ρ_j ([`CusumDetector::information`]). `None` for an α outside (0, 1) or a
+/// non-positive δ².
+#[must_use]
+pub fn siegmund_threshold(information: &[f64], false_alarm: f64) -> Option<f64> {
+    if !(false_alarm > 0.0 && false_alarm < 1.0) || information.is_empty() {
+        return None;
+    }
+    let m = information.len() as f64;
+    let mut worst = f64::NEG_INFINITY;
+    for &d2 in information {
+        if !(d2.is_finite() && d2 > 0.0) {
+            return None;
+        }
+        // Solve e^b − b − 1 = c for b > 0 by Newton from above (the left side is convex
+        // and increasing there, so the iterates decrease monotonically to the root).
+        let c = m * d2 / (2.0 * false_alarm);
+        let mut b = (c + 1.0).ln() + 1.0;
+        for _ in 0..100 {
+            let f = b.exp() - b - 1.0 - c;
+            let step = f / (b.exp() - 1.0);
+            b -= step;
+            if step.abs() <= 1e-14 * b.abs() {
+                break;
+            }
+        }
+        worst = worst.max(2.0 * (b - 1.166 * d2.sqrt()));
+    }
+    Some(worst.max(0.0))
+}
+
+#[cfg(test)]
+mod siegmund_tests {
+    use super::siegmund_threshold;
+
+    /// The threshold inverts Siegmund's formula: at h the approximate ARL₀ of each
+    /// fault's CUSUM is m/α (to 1e-9 relative), for one and for three faults; a
+    /// smaller α gives a larger h.
+    #[test]
+    fn the_siegmund_threshold_inverts_the_run_length_approximation() {
+        let arl = |h: f64, d2: f64| {
+            let b = h / 2.0 + 1.166 * d2.sqrt();
+            (b.exp() - b - 1.0) / (d2 / 2.0)
+        };
+        let h = siegmund_threshold(&[1.0], 1.0 / 338.1).unwrap();
+        assert!((arl(h, 1.0) / 338.1 - 1.0).abs() < 1e-9, "h = {h}");
+        assert!((h - 8.0).abs() < 0.01, "h = {h} (the ARL 338.1 of h = 8)");
+        let info = [0.5, 2.0, 8.0];
+        let h3 = siegmund_threshold(&info, 1e-4).unwrap();
+        let arls: Vec<f64> = info.iter().map(|&d2| arl(h3, d2)).collect();
+        assert!(arls.iter().all(|&a| a >= 3e4 * (1.0 - 1e-9)), "{arls:?}");
+        assert!(
+            arls.iter().any(|&a| (a / 3e4 - 1.0).abs() < 1e-9),
+            "{arls:?}"
+        );
+        assert!(siegmund_threshold(&[1.0], 1e-6).unwrap() > h);
+        assert_eq!(siegmund_threshold(&[1.0], 1.5), None);
+        assert_eq!(siegmund_threshold(&[0.0], 0.01), None);
+    }
+}

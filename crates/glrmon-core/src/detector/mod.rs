@@ -39,7 +39,7 @@ mod rls;
 mod uio;
 
 pub use chi2::Chi2Detector;
-pub use cusum::{CusumDetector, RICCATI_TOLERANCE};
+pub use cusum::{CusumDetector, RICCATI_TOLERANCE, siegmund_threshold};
 pub use evaluation::{EnergyWindow, Evaluation};
 pub use fdf::{
     FdfDetector, FdfGains, disturbance_gain, energy_threshold, error_covariance,

@@ -93,7 +93,7 @@ impl Validator {
                 let (settings, dof) = self.rls(prefix, spec.rls.as_ref(), &lpv, cross.as_ref())?;
                 (rls, residual_dof) = (Some(settings), dof);
             }
-            DetectorKind::Glr | DetectorKind::Chi2 => {}
+            DetectorKind::Glr | DetectorKind::Chi2 | DetectorKind::Cusum => {}
         }
         for (table, given, kinds) in [
             ("parity", spec.parity.is_some(), "\"parity\""),
@@ -170,7 +170,40 @@ impl Validator {
             return None;
         }
         let n = dims.states;
-        Some(Channel {
+        let cusum_magnitudes = match (kind, &spec.cusum) {
+            (DetectorKind::Cusum, None) => {
+                self.error(
+                    join(prefix, "cusum"),
+                    "`glr.detector = \"cusum\"` needs `[channels.cusum] magnitudes`, the \
+                     magnitude each fault's CUSUM is tuned for"
+                        .into(),
+                );
+                return None;
+            }
+            (DetectorKind::Cusum, Some(c)) => {
+                if c.magnitudes.len() != faults.len() {
+                    self.error(
+                        join(prefix, "cusum.magnitudes"),
+                        format!(
+                            "has {} values for {} faults: one per fault, in dictionary order",
+                            c.magnitudes.len(),
+                            faults.len()
+                        ),
+                    );
+                    return None;
+                }
+                Some(c.magnitudes.clone())
+            }
+            (_, Some(_)) => {
+                self.error(
+                    join(prefix, "cusum"),
+                    "applies to `glr.detector = \"cusum\"`".into(),
+                );
+                return None;
+            }
+            (_, None) => None,
+        };
+        let mut channel = Channel {
             name: spec.name.clone(),
             payload,
             key: spec
@@ -214,6 +247,7 @@ impl Validator {
             parity,
             observer,
             rls,
+            cusum_magnitudes,
             isolation_thresholds: glr
                 .calibrated
                 .as_ref()
@@ -228,7 +262,45 @@ impl Validator {
             diagnosis,
             consistency,
             faults,
-        })
+        };
+        if kind == DetectorKind::Cusum {
+            self.cusum_threshold(prefix, &mut channel);
+        }
+        (self.errors.len() == before).then_some(channel)
+    }
+
+    /// The CUSUM built on the channel (its design errors named at `cusum`), and its
+    /// threshold from `false_alarm` by Siegmund's approximation, replacing the χ²
+    /// quantile the GLR's settings gave (an explicit or calibrated one is kept).
+    fn cusum_threshold(&mut self, prefix: &str, channel: &mut Channel) {
+        let detector = match channel.glr_detector().and_then(|glr| {
+            glrmon_core::CusumDetector::new(
+                glr,
+                channel.cusum_magnitudes.clone().unwrap_or_default(),
+            )
+        }) {
+            Ok(d) => d,
+            Err(err) => {
+                self.error(join(prefix, "cusum"), err.to_string());
+                return;
+            }
+        };
+        let false_alarm = match channel.threshold_source {
+            ThresholdSource::Chi2 { false_alarm }
+            | ThresholdSource::Bonferroni { false_alarm }
+            | ThresholdSource::KnownOnset { false_alarm } => false_alarm,
+            _ => return,
+        };
+        match glrmon_core::detector::siegmund_threshold(detector.information(), false_alarm) {
+            Some(h) => {
+                channel.alarm.threshold = h;
+                channel.threshold_source = ThresholdSource::Siegmund { false_alarm };
+            }
+            None => self.error(
+                join(prefix, "glr.false_alarm"),
+                format!("{false_alarm} gives no CUSUM threshold"),
+            ),
+        }
     }
 
     /// The memory the channel needs (GLR window bank, diagnosis history) within
