@@ -1012,7 +1012,7 @@ fn evaluate_compares_detector_kinds_side_by_side() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         text.contains(
-            "parity space of order 2 (dimension 4), χ²(4) of rᵀΣ_r⁻¹r (threshold 23.5127)"
+            "parity space of order 2 (dimension 4; the smallest order with one is 1), χ²(4) of rᵀΣ_r⁻¹r (threshold 23.5127)"
         ),
         "{text}"
     );
@@ -1206,7 +1206,7 @@ unknown_input = ["3*sin(0.02*k)"]
     ok(&out);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
-        text.contains("parity space of order 2 (dimension 1, disturbance decoupled)"),
+        text.contains("parity space of order 2 (dimension 1, disturbance decoupled; the smallest order with one is 2)"),
         "{text}"
     );
     let far = |kind: &str| -> f64 {

@@ -148,6 +148,9 @@ pub struct ParityDetector {
     cross: Option<DMatrix<f64>>,
     constant: bool,
     decoupling: Decoupling,
+    /// The smallest order with a parity space (decoupled from the disturbance where
+    /// one is, at k = 0), for reports.
+    smallest: Option<usize>,
     /// (s + 1)p.
     rows: usize,
     /// Rows of M in use (the parity space's dimension, or 1 for the optimal vector).
@@ -280,6 +283,7 @@ impl ParityDetector {
             cross,
             constant,
             decoupling: Decoupling::NotNeeded,
+            smallest: None,
             rows,
             m_rows: 0,
             systems,
@@ -310,6 +314,14 @@ impl ParityDetector {
         };
         this.design()?;
         Ok(this)
+    }
+
+    /// The smallest order whose parity space is not empty: decoupled from the
+    /// disturbance when some order up to max(s, 4n + 4) decouples it, else of H_o,s
+    /// alone (the model at k = 0).
+    #[must_use]
+    pub fn smallest_order(&self) -> Option<usize> {
+        self.smallest
     }
 
     /// How the residual treats the disturbance.
@@ -353,6 +365,12 @@ impl ParityDetector {
                 },
             });
         }
+        let max = s.max(4 * n + 4);
+        self.smallest = self
+            .disturbance
+            .as_ref()
+            .and_then(|d| smallest_order(&self.systems[0], Some(d), max, tol))
+            .or_else(|| smallest_order(&self.systems[0], None, max, tol));
         self.build_blocks();
         let rank = self.null_space();
         let dimension = self.rows - rank;
@@ -976,8 +994,11 @@ impl Detector for ParityDetector {
             Evaluation::Chi2 => format!("χ²({}) of rᵀΣ_r⁻¹r", self.m_rows),
             Evaluation::Energy { window } => format!("energy over {window} samples"),
         };
+        let smallest = self
+            .smallest
+            .map_or_else(String::new, |o| format!("; the smallest order with one is {o}"));
         format!(
-            "parity space of order {} (dimension {}{decoupling}), {evaluation}",
+            "parity space of order {} (dimension {}{decoupling}{smallest}), {evaluation}",
             self.settings.order, self.m_rows
         )
     }
@@ -1210,6 +1231,8 @@ mod tests {
     fn the_parity_matrix_annihilates_the_observability_matrix() {
         let mut model = dc_motor();
         let sys = lti_matrices(&mut model);
+        assert_eq!(detector(dc_motor(), 3).smallest_order(), Some(1));
+        assert_eq!(detector(plant(), 4).smallest_order(), Some(2));
         for s in 1..4 {
             let det = detector(dc_motor(), s);
             let (ho, _, _) = stacked(&sys, None, s);
