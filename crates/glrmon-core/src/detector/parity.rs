@@ -994,9 +994,9 @@ impl Detector for ParityDetector {
             Evaluation::Chi2 => format!("χ²({}) of rᵀΣ_r⁻¹r", self.m_rows),
             Evaluation::Energy { window } => format!("energy over {window} samples"),
         };
-        let smallest = self
-            .smallest
-            .map_or_else(String::new, |o| format!("; the smallest order with one is {o}"));
+        let smallest = self.smallest.map_or_else(String::new, |o| {
+            format!("; the smallest order with one is {o}")
+        });
         format!(
             "parity space of order {} (dimension {}{decoupling}{smallest}), {evaluation}",
             self.settings.order, self.m_rows
