@@ -24,6 +24,17 @@ pub struct KindEvaluation {
     pub faults: Vec<FaultEvaluation>,
 }
 
+/// What [`compare`] ran.
+#[derive(Debug, Clone)]
+pub struct Compared {
+    /// The protocol every kind ran.
+    pub protocol: Protocol,
+    /// The kinds that ran, in the order asked.
+    pub kinds: Vec<KindEvaluation>,
+    /// The kinds the channel cannot run, with why.
+    pub skipped: Vec<(DetectorKind, String)>,
+}
+
 impl KindEvaluation {
     /// False alarms (before the onset) per 10⁴ fault-free samples, over every fault's
     /// runs.
@@ -52,9 +63,13 @@ impl KindEvaluation {
 /// written, and the fault gone from `end` on if given; every kind at `false_alarm` per
 /// sample if given, else at the configuration's.
 ///
+/// A kind the channel cannot run (a `cusum` on ramp faults, a `uio` without `model.E`)
+/// is left out and named with the reason in the second list, so that the others still
+/// compare.
+///
 /// # Errors
-/// [`EvalError::Protocol`] when the configuration cannot run a kind (naming it and
-/// why) or the protocol is invalid; as [`evaluate`].
+/// [`EvalError::Protocol`] when the protocol is invalid or no kind can run (naming
+/// each and why); as [`evaluate`].
 pub fn compare(
     text: &str,
     channel: &str,
@@ -63,7 +78,7 @@ pub fn compare(
     (onset, samples, runs, seed): (Option<u64>, Option<u64>, u64, u64),
     end: Option<u64>,
     false_alarm: Option<f64>,
-) -> Result<(Protocol, Vec<KindEvaluation>), EvalError> {
+) -> Result<Compared, EvalError> {
     let base = glrmon_spec::parse(text).map_err(|e| EvalError::Protocol(e.to_string()))?;
     let base = base
         .pick_channel(Some(channel))
@@ -82,12 +97,19 @@ pub fn compare(
         })
         .collect();
     let mut out = Vec::new();
+    let mut skipped = Vec::new();
     for &kind in kinds {
         let edited =
             glrmon_spec::edit::set_detector(text, channel, kind, false_alarm, Some(&cusum))
-                .map_err(|e| EvalError::Protocol(format!("detector `{}`: {e}", kind.name())))?;
-        let cfg = glrmon_spec::parse(&edited)
-            .map_err(|e| EvalError::Protocol(format!("detector `{}`: {e}", kind.name())))?;
+                .map_err(|e| e.to_string())
+                .and_then(|t| glrmon_spec::parse(&t).map_err(|e| e.to_string()));
+        let cfg = match edited {
+            Ok(cfg) => cfg,
+            Err(why) => {
+                skipped.push((kind, why));
+                continue;
+            }
+        };
         let ch = cfg
             .pick_channel(Some(channel))
             .map_err(|e| EvalError::Protocol(e.to_string()))?;
@@ -106,5 +128,16 @@ pub fn compare(
             faults,
         });
     }
-    Ok((protocol, out))
+    if out.is_empty() {
+        let why: Vec<String> = skipped
+            .iter()
+            .map(|(k, why)| format!("detector `{}`: {why}", k.name()))
+            .collect();
+        return Err(EvalError::Protocol(why.join("\n")));
+    }
+    Ok(Compared {
+        protocol,
+        kinds: out,
+        skipped,
+    })
 }

@@ -114,21 +114,7 @@ impl Channel {
                     detail: "the channel has no CUSUM magnitudes".into(),
                 })?,
             )?),
-            DetectorKind::Parity => Box::new(ParityDetector::new(
-                Box::new(self.model.clone()),
-                self.dictionary()?,
-                self.unknown_input.as_ref().map(|e| Disturbance {
-                    state: e.base().clone(),
-                    output: self.unknown_input_outputs.clone().unwrap_or_else(|| {
-                        nalgebra::DMatrix::zeros(self.dims.outputs, e.shape().1)
-                    }),
-                }),
-                self.cross_covariance.clone(),
-                self.parity.ok_or(ModelError::Setting {
-                    what: "parity",
-                    detail: "the channel has no parity settings".into(),
-                })?,
-            )?),
+            DetectorKind::Parity => Box::new(self.parity_detector()?),
             DetectorKind::Fdf => {
                 let observer = self.observer_settings()?;
                 let (sys, _) = self.matrices_at_zero();
@@ -187,6 +173,29 @@ impl Channel {
                 )?)
             }
         })
+    }
+
+    /// The channel's parity detector (`detector = "parity"`).
+    ///
+    /// # Errors
+    /// As [`ParityDetector::new`]; a channel without parity settings.
+    pub fn parity_detector(&self) -> Result<ParityDetector, ModelError> {
+        ParityDetector::new(
+            Box::new(self.model.clone()),
+            self.dictionary()?,
+            self.unknown_input.as_ref().map(|e| Disturbance {
+                state: e.base().clone(),
+                output: self
+                    .unknown_input_outputs
+                    .clone()
+                    .unwrap_or_else(|| nalgebra::DMatrix::zeros(self.dims.outputs, e.shape().1)),
+            }),
+            self.cross_covariance.clone(),
+            self.parity.ok_or(ModelError::Setting {
+                what: "parity",
+                detail: "the channel has no parity settings".into(),
+            })?,
+        )
     }
 
     fn observer_settings(&self) -> Result<&crate::channel::ObserverSettings, ModelError> {
@@ -376,6 +385,41 @@ glr = {{ detector = "{detector}" }}
             .to_string();
         assert!(
             err.contains("model.Fd") && err.contains("needs model.E"),
+            "{err}"
+        );
+    }
+
+    /// Designs the earlier checks cannot judge are refused when the configuration is
+    /// read, not when the daemon starts: a parity space of an LPV model that needs the
+    /// optimal vector (LTI only); an FDF weight V with dependent rows (its χ² would
+    /// have fewer degrees of freedom than its threshold assumes).
+    #[test]
+    fn residual_generators_that_cannot_be_built_are_refused() {
+        let lpv = r#"
+[[channels]]
+name = "plant"
+signals = 1
+model = { F = { base = [[0.5, 1.0], [0.0, 0.8]], p0 = [[0.1, 0.0], [0.0, 0.0]] }, G = [[0.0], [1.0]], H = [[1.0, 0.0]], Q = 0.0025, R = 0.0025, E = [[1.0], [0.0]] }
+faults = [{ name = "bias", kind = "sensor_bias", output = 0 }]
+glr = { detector = "parity" }
+parity = { order = 2 }
+"#;
+        let err = crate::parse(lpv).unwrap_err().to_string();
+        assert!(
+            err.contains("glr.detector") && err.contains("LTI models only"),
+            "{err}"
+        );
+        let fdf = r#"
+[[channels]]
+name = "motor"
+model = { F = [[0.2231, 0.0109], [-0.0022, 0.5488]], G = [[0.0047], [0.4512]], H = [[1.0, 0.0], [0.0, 1.0]], Q = 0.0001, R = 0.0025 }
+faults = [{ name = "bias", kind = "sensor_bias", output = 0 }]
+glr = { detector = "fdf" }
+observer = { L = [[0.1, 0.0], [0.0, 0.3]], V = [[1.0, 0.0], [2.0, 0.0]] }
+"#;
+        let err = crate::parse(fdf).unwrap_err().to_string();
+        assert!(
+            err.contains("observer.V") && err.contains("rank 1"),
             "{err}"
         );
     }

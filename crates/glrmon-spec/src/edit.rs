@@ -165,7 +165,9 @@ pub fn set_calibrated(
 /// else the configured one (10⁻⁴ when none is given), since a threshold set for one kind's
 /// statistic (`threshold`, `[channels.glr.calibrated]`) means nothing for another's;
 /// `[channels.parity]`, `[channels.observer]`, `[channels.rls]` and `[channels.cusum]`
-/// are removed for kinds they do not apply to; the CUSUM's magnitudes are
+/// are removed for kinds they do not apply to, and a residual kind's `evaluation` is
+/// its χ² test (a windowed energy has no law to set a threshold from); the CUSUM's
+/// magnitudes are
 /// `cusum_magnitudes` where the channel has no `[channels.cusum]`. Returns the edited
 /// text.
 ///
@@ -193,6 +195,17 @@ pub fn set_detector(
         .ok_or_else(|| EditError::NoChannel(channel.to_owned()))?;
     if kind != DetectorKind::Parity {
         table.remove("parity");
+    }
+    // Every kind at the same false-alarm probability: the residual kinds by their χ²
+    // law (a windowed energy has none, and its threshold is removed below).
+    for key in ["parity", "observer", "rls"] {
+        if let Some(t) = table
+            .get_mut(key)
+            .and_then(toml_edit::Item::as_table_like_mut)
+        {
+            t.remove("evaluation");
+            t.remove("energy_window");
+        }
     }
     if kind != DetectorKind::Rls {
         table.remove("rls");

@@ -11,7 +11,7 @@ use crate::limits;
 
 /// The sections of a file, in the order of the reference: (TOML header, schema
 /// definition, what it is for).
-const SECTIONS: [(&str, &str); 17] = [
+const SECTIONS: [(&str, &str); 21] = [
     ("[zenoh]", "ZenohSpec"),
     ("[daemon]", "DaemonSpec"),
     ("[recording]", "RecordingSpec"),
@@ -29,6 +29,10 @@ const SECTIONS: [(&str, &str); 17] = [
     ("[channels.diagnosis]", "DiagnosisSpec"),
     ("[channels.diagnosis.lasso]", "LassoSpec"),
     ("[channels.consistency]", "ConsistencySpec"),
+    ("[channels.cusum]", "CusumSpec"),
+    ("[channels.parity]", "ParitySpec"),
+    ("[channels.observer]", "ObserverSpec"),
+    ("[channels.rls]", "RlsSpec"),
 ];
 
 /// The text of docs/CONFIG.md.
@@ -379,7 +383,7 @@ expressions, limits) is checked by `glrmon validate`.
 
 [[channels]]            # one table per channel
 name = "tank"
-[channels.model]        #   required: F, H, Q, R (G, J, E, S, x0, P0); or A, B, Qc
+[channels.model]        #   required: F, H, Q, R (G, J, E, Fd, S, x0, P0); or A, B, Qc
 [channels.scaling]      #   optional: natural units
 [channels.columns]      #   optional: signal names (CSV columns) and units
 [[channels.faults]]     #   the fault dictionary, one table per fault
@@ -389,6 +393,10 @@ name = "tank"
 [channels.simulation]   #   optional: how glrmon simulate drives the channel
 [channels.diagnosis]    #   optional: sparse diagnosis (Zhang 2021)
 [channels.consistency]  #   optional: model-consistency test
+[channels.cusum]        #   with detector = "cusum": the magnitudes it is tuned for
+[channels.parity]       #   optional, detector = "parity": order, evaluation
+[channels.observer]     #   optional, detector = "fdf" or "uio": gains, evaluation
+[channels.rls]          #   optional, detector = "rls": forgetting, evaluation
 ```
 
 A channel's sub-tables may also be written inline, e.g.

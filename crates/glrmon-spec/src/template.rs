@@ -84,6 +84,7 @@ H = [[1.0, 0.0], [0.0, 1.0]]
 Q = 0.01                             # 0.01 * I
 R = 0.04
 # E = [[1.0], [0.0]]                 # unknown input (n x q, q < p); default: none
+# Fd = [[0.0], [0.0]]                # its effect on the outputs (p x q; parity only)
 # S = [[0.0, 0.0], [0.0, 0.0]]       # cov(W, V) (n x p); default: none
 # x0 = [0.0, 0.0]                    # default: zeros
 # P0 = 1.0                           # default: I
@@ -139,7 +140,7 @@ input = 0
 # threshold = 20.0                   # explicit lambda; default: from false_alarm
 # false_alarm = 1e-4                 # per sample
 # threshold_mode = "bonferroni"      # bonferroni | chi2
-# detector = "glr"                   # glr | chi2
+# detector = "glr"                   # glr | chi2 | cusum | parity | fdf | uio | rls
 # hysteresis = 0.1
 # clear_samples = 1
 # episode_end = "fault_gone"         # fault_gone | below_threshold
@@ -167,6 +168,27 @@ input = 0
 # interval = [17.5, 19.0]
 # source = "recordings/fault-free.mcap"
 # isolation = { level_bias = 6.1, valve_bias = 5.9 }
+
+# [channels.cusum]                   # detector = "cusum" (docs/DETECTORS.md)
+# magnitudes = [0.5]                 # one per fault: the size each CUSUM is tuned for
+#
+# [channels.parity]                  # detector = "parity"
+# order = 2                          # default: the smallest with a parity space
+# evaluation = "chi2"                # chi2 | energy (then give glr.threshold)
+# energy_window = 10
+#
+# [channels.observer]                # detector = "fdf" or "uio"
+# L = [[0.5, 0.0], [0.0, 0.5]]       # fdf gain (n x p); default: the optimal one
+# V = [[1.0, 0.0], [0.0, 1.0]]       # fdf residual weight; default: optimal
+# evaluation = "chi2"                # chi2 | energy
+# energy_window = 10
+#
+# [channels.rls]                     # detector = "rls" (needs an exciting input)
+# forgetting = 0.99
+# p0 = 1000.0
+# excitation = 1e-6
+# evaluation = "chi2"                # chi2 | energy
+# energy_window = 10
 
 # [channels.simulation]              # glrmon simulate; expressions of k
 # inputs = ["sin(0.05*k)"]           # default: 0

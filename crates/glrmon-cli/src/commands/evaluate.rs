@@ -141,7 +141,11 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
             .collect::<Result<Vec<_>, _>>()?;
         let text = std::fs::read_to_string(&args.config)
             .with_context(|| format!("reading {}", args.config.display()))?;
-        let (protocol, kinds) = glrmon_eval::compare::compare(
+        let glrmon_eval::compare::Compared {
+            protocol,
+            kinds,
+            skipped,
+        } = glrmon_eval::compare::compare(
             &text,
             &channel.name,
             &kinds,
@@ -151,6 +155,14 @@ pub(crate) fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
             args.false_alarm,
         )
         .map_err(eval_error)?;
+        for (kind, why) in &skipped {
+            eprintln!(
+                "glrmon evaluate: detector `{}` cannot run on channel \"{}\", left out: {}",
+                kind.name(),
+                channel.name,
+                why.lines().collect::<Vec<_>>().join(" ")
+            );
+        }
         print!(
             "{}",
             side_by_side(&channel.name, protocol, &kinds, channel.period)

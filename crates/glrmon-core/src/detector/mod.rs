@@ -68,9 +68,9 @@ use crate::window::FollowedEvidence;
 ///   (and a malformed sample) with its state unchanged, and a missing sample is
 ///   bridged by [`Detector::predict_only`] or, where the kind cannot bridge one,
 ///   by [`Detector::restart`];
-/// - [`Detector::step`] overwrites a [`StepOutput`] made once by [`StepOutput::new`]
-///   with [`Detector::dims`]`.outputs` and [`Detector::faults`]`.len()`, and does
-///   not allocate;
+/// - [`Detector::step`] overwrites a [`StepOutput`] made once by
+///   [`StepOutput::for_detector`] (its innovation, residual and magnitude lengths are
+///   the kind's), and does not allocate;
 /// - the decision statistic is [`StepOutput::glr`] (compared with the channel's
 ///   threshold), with the onset estimate [`StepOutput::onset`] and one magnitude per
 ///   fault of the dictionary; [`StepOutput::normalized_innovation`] is the residual's
@@ -299,7 +299,7 @@ pub struct Sample<'a> {
     pub p: &'a [f64],
 }
 
-/// What one step produced. Allocated once with [`StepOutput::new`], overwritten by
+/// What one step produced. Allocated once with [`StepOutput::for_detector`], overwritten by
 /// every [`Detector::step`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct StepOutput {

@@ -246,6 +246,18 @@ impl ParityDetector {
                 detail: format!("S is {}×{}, expected {n}×{p}", s.nrows(), s.ncols()),
             });
         }
+        if faults.dims() != dims {
+            return Err(ModelError::Dimension {
+                what: "fault dictionary",
+                detail: "built for other dimensions than the model's".into(),
+            });
+        }
+        if matches!(settings.evaluation, Evaluation::Energy { window: 0 }) {
+            return Err(ModelError::Setting {
+                what: "energy_window",
+                detail: "must be at least 1 sample".into(),
+            });
+        }
         if !(settings.rank_tolerance > 0.0 && settings.rank_tolerance < 1.0) {
             return Err(ModelError::Setting {
                 what: "rank_tolerance",
@@ -352,7 +364,7 @@ impl ParityDetector {
         let q = self.disturbance.as_ref().map_or(0, |d| d.state.ncols());
         let state_free_dimension = parity_dimension(&self.systems[0], None, s, tol);
         if state_free_dimension == 0 {
-            let max = s + 4 * n + 4;
+            let max = (s + 4 * n + 4).min(64);
             return Err(ModelError::Setting {
                 what: "parity order",
                 detail: match smallest_order(&self.systems[0], None, max, tol) {
@@ -365,7 +377,9 @@ impl ParityDetector {
                 },
             });
         }
-        let max = s.max(4 * n + 4);
+        // Only up to the configured order: the search costs a QR per order, and an
+        // order above s that decoupled d would not change this detector.
+        let max = s;
         self.smallest = self
             .disturbance
             .as_ref()
@@ -379,6 +393,14 @@ impl ParityDetector {
             if q > 0 {
                 self.decoupling = Decoupling::Perfect;
             }
+        } else if self.disturbance.is_none() {
+            return Err(ModelError::Setting {
+                what: "parity order",
+                detail: format!(
+                    "s = {s}: the parity space is empty at the rank tolerance {tol:e} (a rank \
+                     decision at the tolerance's edge): raise the order"
+                ),
+            });
         } else if self.constant {
             let ratio = self.optimal_vector()?;
             self.decoupling = Decoupling::Optimal { ratio };
@@ -393,10 +415,10 @@ impl ParityDetector {
                     smallest_order(
                         &self.systems[0],
                         self.disturbance.as_ref(),
-                        s + 4 * n + 4,
+                        (s + 4 * n + 4).min(64),
                         tol
                     )
-                    .map_or_else(|| "none".to_owned(), |o| o.to_string())
+                    .map_or_else(|| "none up to 64".to_owned(), |o| o.to_string())
                 ),
             });
         }
@@ -483,10 +505,12 @@ impl ParityDetector {
         let rows = self.rows;
         let tol = self.settings.rank_tolerance;
         let sys = self.systems[0].clone();
-        let d = self
-            .disturbance
-            .clone()
-            .expect("optimal only with a disturbance");
+        let Some(d) = self.disturbance.clone() else {
+            return Err(ModelError::Setting {
+                what: "parity decoupling",
+                detail: "the optimal parity vector needs a disturbance".into(),
+            });
+        };
         let (ho, _, hd) = stacked(&sys, Some(&d), s);
         let hf = fault_toeplitz(&sys, &self.faults, s).ok_or_else(|| ModelError::Setting {
             what: "parity decoupling",
@@ -1047,12 +1071,13 @@ impl Detector for ParityDetector {
             self.build_blocks();
             let rank = self.null_space();
             if self.rows - rank != self.m_rows {
-                self.filled -= 1;
+                self.filled = 0;
                 return Err(StepError::Numerical {
                     what: "the parity space's dimension changed with the model's matrices",
                 });
             }
             if self.covariance().is_err() {
+                self.filled = 0;
                 return Err(StepError::Numerical {
                     what: "the parity residual's covariance is not positive definite",
                 });

@@ -11,6 +11,7 @@ use crate::names::validate_name;
 use crate::schema::{self, ChannelSpec, ConsistencySpec, GlrSpec};
 use crate::{Channel, DetectorKind, PayloadFormat, ThresholdSource, limits, locate};
 use glrmon_core::detector::Evaluation;
+use glrmon_core::threshold::chi2_upper_quantile;
 
 impl Validator {
     /// A channel, or `None` when it has an error. The model comes first: the shapes
@@ -265,8 +266,41 @@ impl Validator {
         };
         if kind == DetectorKind::Cusum {
             self.cusum_threshold(prefix, &mut channel);
+        } else if !kind.runs_kalman_filter() {
+            self.residual_generator(prefix, &mut channel);
         }
         (self.errors.len() == before).then_some(channel)
+    }
+
+    /// The residual generator built on the channel, so that a design the checks before
+    /// could not judge (an LPV model, the optimal parity vector's faults) is refused
+    /// here rather than when the daemon starts; for `parity`, the χ² threshold set
+    /// again if the detector's parity space differs from the one validated.
+    fn residual_generator(&mut self, prefix: &str, channel: &mut Channel) {
+        let built = if channel.detector_kind == DetectorKind::Parity {
+            channel.parity_detector().map(|det| {
+                let dof = det.dof();
+                if dof != channel.statistic_dof {
+                    channel.statistic_dof = dof;
+                    if let ThresholdSource::Chi2 { false_alarm } = channel.threshold_source
+                        && let Ok(t) = chi2_upper_quantile(dof as f64, false_alarm)
+                    {
+                        channel.alarm.threshold = t;
+                    }
+                }
+            })
+        } else {
+            channel.detector().map(|_| ())
+        };
+        if let Err(err) = built {
+            self.error(
+                join(prefix, "glr.detector"),
+                format!(
+                    "the `{}` detector cannot be built on this model: {err}",
+                    channel.detector_kind.name()
+                ),
+            );
+        }
     }
 
     /// The CUSUM built on the channel (its design errors named at `cusum`), and its

@@ -183,6 +183,14 @@ impl Validator {
                     );
                     return None;
                 };
+                if !e.terms().is_empty() {
+                    self.error(
+                        join(prefix, "model.E"),
+                        "the `uio` detector needs a constant E (its gains are designed once)"
+                            .into(),
+                    );
+                    return None;
+                }
                 match UioDesign::new(&sys, e.base()) {
                     Ok(design) => (None, design.rank()),
                     Err(err) => {
@@ -202,6 +210,21 @@ impl Validator {
                         let v = v.unwrap_or_else(|| {
                             nalgebra::DMatrix::identity(dims.outputs, dims.outputs)
                         });
+                        let rank = v
+                            .clone()
+                            .svd(false, false)
+                            .rank(1e-9 * v.amax().max(f64::MIN_POSITIVE));
+                        if rank < v.nrows() {
+                            self.error(
+                                path("V"),
+                                format!(
+                                    "has {} rows of rank {rank}: give independent rows (the χ² \
+                                     test has one degree of freedom per row)",
+                                    v.nrows()
+                                ),
+                            );
+                            return None;
+                        }
                         let gains = FdfGains { l, v };
                         if let Err(err) = gains.check(&sys.f, &sys.h) {
                             self.error(path("L"), err.to_string());
