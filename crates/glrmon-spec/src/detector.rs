@@ -424,6 +424,47 @@ observer = { L = [[0.1, 0.0], [0.0, 0.3]], V = [[1.0, 0.0], [2.0, 0.0]] }
         );
     }
 
+    /// A parity window too large for a channel's memory budget is refused at
+    /// `parity.order`, before any design work: 64 outputs, 64 states and 64 unknown
+    /// inputs at s = 64 need about 1.1 GB of matrices.
+    #[test]
+    fn a_parity_window_over_the_memory_budget_is_refused() {
+        let eye = |scale: f64| {
+            let rows: Vec<String> = (0..64)
+                .map(|i| {
+                    let row: Vec<String> = (0..64)
+                        .map(|j| {
+                            if i == j {
+                                format!("{scale}")
+                            } else {
+                                "0.0".into()
+                            }
+                        })
+                        .collect();
+                    format!("[{}]", row.join(", "))
+                })
+                .collect();
+            format!("[{}]", rows.join(", "))
+        };
+        let text = format!(
+            r#"
+[[channels]]
+name = "big"
+model = {{ F = {f}, H = {h}, E = {h}, Q = 0.01, R = 0.01 }}
+faults = [{{ name = "bias", kind = "sensor_bias", output = 0 }}]
+glr = {{ detector = "parity", window = 10 }}
+parity = {{ order = 64 }}
+"#,
+            f = eye(0.5),
+            h = eye(1.0)
+        );
+        let err = crate::parse(&text).unwrap_err().to_string();
+        assert!(
+            err.contains("parity.order") && err.contains("more than a channel's"),
+            "{err}"
+        );
+    }
+
     /// The CUSUM kind: magnitudes one per fault, step faults only (a ramp refused by
     /// name), and a threshold from `false_alarm` by Siegmund's approximation, larger for
     /// a smaller α.
@@ -502,6 +543,8 @@ glr = {{ detector = "parity"{glr} }}
         assert_eq!(cfg.channels[0].statistic_dof, 3);
         let expected = glrmon_core::threshold::chi2_upper_quantile(3.0, 1e-4).unwrap();
         assert!((cfg.channels[0].alarm.threshold - expected).abs() < 1e-12);
+        let err = crate::parse(&text("parity = { order = 64 }", ""));
+        assert!(err.is_ok(), "64 × 1 output is small: {err:?}");
         let err = crate::parse(&text("parity = { order = 1 }", ""))
             .unwrap_err()
             .to_string();

@@ -16,7 +16,43 @@ use crate::schema::ParitySpec;
 /// The largest parity order accepted.
 const MAX_ORDER: usize = 64;
 
+/// The bytes a parity detector of order `order` allocates: with N = (s + 1)p rows, four
+/// N×N matrices (M, chol Σ_r, Σ_Y, MΣ_Y), [H_o,s H_d,s] and its Householder vectors
+/// (N × (n + (s + 1)q) each), H_w,s and its product with Q (N × sn each), H_u,s
+/// (N × (s + 1)l), and the window's s + 1 sets of model matrices.
+fn parity_bytes(dims: glrmon_core::Dims, q: usize, order: usize) -> u64 {
+    let (n, l, p) = (dims.states as u64, dims.inputs as u64, dims.outputs as u64);
+    let (s, q) = (order as u64, q as u64);
+    let rows = (s + 1) * p;
+    let matrices = 4 * rows * rows
+        + 2 * rows * (n + (s + 1) * q)
+        + 2 * rows * s * n
+        + rows * (s + 1) * l
+        + (s + 1) * (2 * n * n + n * l + p * n + p * l + p * p);
+    8 * matrices
+}
+
 impl Validator {
+    /// Whether a parity window of `order` fits a channel's memory budget (an error at
+    /// `path` when not).
+    fn parity_fits(&mut self, path: &str, dims: glrmon_core::Dims, q: usize, order: usize) -> bool {
+        let bytes = parity_bytes(dims, q, order);
+        if bytes <= limits::CHANNEL_MEMORY_BUDGET {
+            return true;
+        }
+        self.error(
+            path.to_owned(),
+            format!(
+                "s = {order} needs about {} for the parity window's matrices ((s + 1)p = {} \
+                 rows), more than a channel's {}: lower the order",
+                limits::human_bytes(bytes),
+                (order + 1) * dims.outputs,
+                limits::human_bytes(limits::CHANNEL_MEMORY_BUDGET)
+            ),
+        );
+        false
+    }
+
     /// `evaluation` and `energy_window` of a residual generator's table (`paths` name
     /// them in errors).
     pub(super) fn evaluation(
@@ -310,6 +346,12 @@ impl Validator {
                 .cloned()
                 .unwrap_or_else(|| nalgebra::DMatrix::zeros(dims.outputs, e.shape().1)),
         });
+        let q = disturbance.as_ref().map_or(0, |d| d.state.ncols());
+        if let Some(order) = spec.order.filter(|&o| o <= MAX_ORDER)
+            && !self.parity_fits(&path("order"), dims, q, order)
+        {
+            return None;
+        }
         let free = smallest_order(&sys, None, MAX_ORDER, tolerance);
         let Some(free) = free else {
             self.error(
@@ -320,8 +362,11 @@ impl Validator {
             );
             return None;
         };
+        // The smallest order decoupling the disturbance, only when the order is to be
+        // chosen (a QR per order tried).
         let decoupled = disturbance
             .as_ref()
+            .filter(|_| spec.order.is_none())
             .and_then(|d| smallest_order(&sys, Some(d), MAX_ORDER, tolerance));
         let order = match spec.order {
             Some(s) if s > MAX_ORDER => {
@@ -341,6 +386,9 @@ impl Validator {
             Some(s) => s,
             None => decoupled.unwrap_or(free),
         };
+        if !self.parity_fits(&path("order"), dims, q, order) {
+            return None;
+        }
         let dof = match &disturbance {
             None => parity_dimension(&sys, None, order, tolerance),
             Some(d) => match parity_dimension(&sys, Some(d), order, tolerance) {
