@@ -790,34 +790,7 @@ impl GlrDetector {
     }
 
     fn check(&self, s: &Sample<'_>) -> Result<(), StepError> {
-        if s.k == u64::MAX {
-            return Err(StepError::IndexTooLarge { k: s.k });
-        }
-        if let Some(next) = self.next_k
-            && s.k != next
-        {
-            return Err(StepError::OutOfOrder {
-                expected: next,
-                got: s.k,
-            });
-        }
-        for (field, v, expected) in [
-            ("u", s.u, self.dims.inputs),
-            ("y", s.y, self.dims.outputs),
-            ("p", s.p, self.dims.signals),
-        ] {
-            if v.len() != expected {
-                return Err(StepError::WrongDimension {
-                    field,
-                    expected,
-                    got: v.len(),
-                });
-            }
-            if let Some(index) = v.iter().position(|x| !x.is_finite()) {
-                return Err(StepError::NonFinite { field, index });
-            }
-        }
-        Ok(())
+        super::check_sample(self.dims, self.next_k, s)
     }
 
     /// The index the detector expects next (`None` before the first sample).
