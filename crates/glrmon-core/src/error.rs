@@ -95,6 +95,15 @@ pub enum StepError {
         /// The missing sample.
         k: u64,
     },
+    /// Sample k is missing and the detector cannot bridge a gap (e.g. the kernel
+    /// method's images integrate every sample): it must restart.
+    #[error("sample {k} is missing and cannot be bridged: {reason}")]
+    GapNotBridged {
+        /// The missing sample.
+        k: u64,
+        /// Why the kind cannot bridge it.
+        reason: &'static str,
+    },
 }
 
 /// The predicate of [`StepError::WrongDimension`].

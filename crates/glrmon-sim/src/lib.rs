@@ -13,6 +13,7 @@
 #![warn(missing_docs)]
 
 pub mod channel;
+pub mod kernel_example;
 pub mod rng;
 pub mod scenarios;
 pub mod tank;

@@ -20,7 +20,11 @@
 //!   unknown input, with the χ² or windowed-energy evaluation;
 //! - [`RlsDetector`] (`rls.rs`): parameter estimation, the ARX parameters of each
 //!   output estimated by recursive least squares and tested against their nominal
-//!   values.
+//!   values;
+//! - [`KernelDetector`] (`kernel/`): the kernel-based deadbeat estimator and fault
+//!   detection and isolation of Li, Boem, Pin & Parisini for a continuous-time model
+//!   with bounded noise: thresholds that guarantee no false alarm, and isolation
+//!   among candidate fault functions of the estimated state.
 //!
 //! # Adding a kind
 //! A new kind is a new module here implementing [`Detector`], allocation-free in
@@ -34,6 +38,7 @@ mod cusum;
 pub mod evaluation;
 mod fdf;
 mod glr;
+pub mod kernel;
 pub mod parity;
 mod rls;
 mod uio;
@@ -46,6 +51,9 @@ pub use fdf::{
     residual_covariance, spectral_radius,
 };
 pub use glr::{DEFAULT_STEADY_TOLERANCE, GlrDetector, WindowSettings};
+pub use kernel::{
+    Candidate, CandidateFn, KernelDetector, KernelModel, KernelSettings, KernelVerdict,
+};
 pub use rls::{ArxForm, DEFAULT_EXCITATION, EquationError, RlsDetector, RlsSettings};
 pub use uio::{
     RESIDUAL_RANK_TOLERANCE, UioCondition, UioDesign, UioDetector, check_uio_conditions,
@@ -114,7 +122,8 @@ pub trait Detector: std::fmt::Debug + Send {
     ///
     /// # Errors
     /// [`StepError::OutOfOrder`] when k is not the next index,
-    /// [`StepError::UnknownInputGap`] where the kind cannot bridge a gap,
+    /// [`StepError::UnknownInputGap`] or [`StepError::GapNotBridged`] where the kind
+    /// cannot bridge a gap,
     /// [`StepError::Numerical`] on a numerical failure.
     fn predict_only(&mut self, k: u64) -> Result<(), StepError>;
 
