@@ -19,9 +19,10 @@ mod window;
 
 pub use alarm::{AlarmSettings, AlarmState, AlarmTransition, EpisodeEnd};
 pub use detector::{
-    ArxForm, Chi2Detector, CusumDetector, DEFAULT_STEADY_TOLERANCE, Detector, FdfDetector,
-    FdfGains, GlrDetector, RlsDetector, RlsSettings, Sample, StepOutput, UioDesign, UioDetector,
-    WindowSettings,
+    ArxForm, Candidate, CandidateFn, Chi2Detector, CusumDetector, DEFAULT_STEADY_TOLERANCE,
+    Detector, FdfDetector, FdfGains, GlrDetector, KernelDetector, KernelModel, KernelSettings,
+    KernelVerdict, ResidualIsolation, RlsDetector, RlsSettings, Sample, StepOutput, UioDesign,
+    UioDetector, WindowSettings,
 };
 pub use error::{ModelError, StepError};
 pub use filter::innovation::InnovationFilter;

@@ -193,6 +193,22 @@ pub trait Detector: std::fmt::Debug + Send {
         0
     }
 
+    /// Isolation by the kind's own residual tests, for kinds that isolate without
+    /// Fisher statistics (the kernel method's exclusion of candidate fault functions,
+    /// Li, Boem, Pin & Parisini, Prop. 4.2): one test per fault of
+    /// [`Detector::faults`], in its order. `None` when the kind has none or no
+    /// isolation episode is open. Allocates: for alarms and their updates.
+    fn residual_isolation(&self) -> Option<Vec<ResidualIsolation>> {
+        None
+    }
+
+    /// A counter that changes whenever [`Detector::residual_isolation`]'s verdict
+    /// changes (a candidate excluded, an episode opened): the monitor publishes an
+    /// isolation update at that sample. Constant for the kinds without.
+    fn isolation_revision(&self) -> u64 {
+        0
+    }
+
     /// Whether [`StepOutput::magnitude`] carries a magnitude estimate θ̂ per fault.
     /// Kinds that only detect leave it zero and say so here, so that no one reads
     /// zeros as an estimate.
@@ -293,6 +309,27 @@ impl<D: Detector + ?Sized> Detector for Box<D> {
     fn estimates_magnitude(&self) -> bool {
         (**self).estimates_magnitude()
     }
+    fn residual_isolation(&self) -> Option<Vec<ResidualIsolation>> {
+        (**self).residual_isolation()
+    }
+    fn isolation_revision(&self) -> u64 {
+        (**self).isolation_revision()
+    }
+}
+
+/// One fault's isolation test in [`Detector::residual_isolation`]: its residual
+/// against its threshold, and the verdict so far in the episode.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResidualIsolation {
+    /// The isolation residual (r_FI,i of the kernel method) at the last sample.
+    pub statistic: f64,
+    /// Its threshold (σ_FI,i) at the last sample.
+    pub threshold: f64,
+    /// Whether the residual has exceeded its threshold at some sample of the
+    /// episode: the fault is not the one acting.
+    pub excluded: bool,
+    /// Whether the fault is isolated: every other one is excluded.
+    pub isolated: bool,
 }
 
 /// One sample of a channel: index k, known inputs U_k, outputs Y_k, signals p(k).

@@ -25,7 +25,7 @@ use crate::error::{ModelError, StepError};
 use crate::model::Dims;
 use crate::model::fault::{Column, Fault, FaultDictionary, Onset};
 
-use super::{Detector, Sample, StepOutput, check_sample};
+use super::{Detector, ResidualIsolation, Sample, StepOutput, check_sample};
 use decomposition::Decomposition;
 use estimator::DeadbeatEstimator;
 use residual::{FaultImage, FaultImageBounds};
@@ -173,6 +173,8 @@ pub struct KernelDetector {
     verdict: KernelVerdict,
     quiet: u64,
     rearm_samples: u64,
+    revision: u64,
+    isolation_tests: Vec<(f64, f64)>,
     next: Option<u64>,
     active_from: Option<u64>,
 }
@@ -364,6 +366,7 @@ impl KernelDetector {
         let detection = FaultImage::new(omega, dt, p, order, dims.inputs, 0);
         let isolation = FaultImage::new(omega, dt, p, order, dims.inputs, candidates.len());
         let rearm_samples = ((settings.rearm / dt).ceil() as u64).max(1);
+        let candidate_count = candidates.len();
         Ok(Self {
             dims,
             design,
@@ -382,6 +385,8 @@ impl KernelDetector {
             candidates,
             quiet: 0,
             rearm_samples,
+            revision: 0,
+            isolation_tests: vec![(0.0, 0.0); candidate_count],
             next: None,
             active_from: None,
             settings,
@@ -527,7 +532,9 @@ impl Detector for KernelDetector {
             if self.verdict.detected_at.is_none() {
                 self.verdict.detected_at = Some(k);
                 self.verdict.excluded_at.fill(None);
+                self.isolation_tests.fill((0.0, 0.0));
                 self.isolation.reset();
+                self.revision += 1;
             }
         } else if self.verdict.detected_at.is_some() {
             self.quiet += 1;
@@ -535,6 +542,7 @@ impl Detector for KernelDetector {
                 self.verdict.detected_at = None;
                 self.verdict.excluded_at.fill(None);
                 self.quiet = 0;
+                self.revision += 1;
             }
         }
         let m = self.candidates.len();
@@ -571,8 +579,10 @@ impl Detector for KernelDetector {
                 let s = self.candidates[i].lipschitz * state_image + sigma;
                 out.residual[2 + 2 * i] = r;
                 out.residual[3 + 2 * i] = s;
+                self.isolation_tests[i] = (r, s);
                 if self.verdict.excluded_at[i].is_none() && r > s + floor {
                     self.verdict.excluded_at[i] = Some(k);
+                    self.revision += 1;
                 }
             }
         }
@@ -593,7 +603,9 @@ impl Detector for KernelDetector {
         self.isolation.reset();
         self.verdict.detected_at = None;
         self.verdict.excluded_at.fill(None);
+        self.isolation_tests.fill((0.0, 0.0));
         self.quiet = 0;
+        self.revision += 1;
         self.next = None;
         self.active_from = None;
         self.state.fill(0.0);
@@ -606,6 +618,33 @@ impl Detector for KernelDetector {
 
     fn residual_len(&self) -> usize {
         2 + 2 * self.candidates.len() + self.dims.states
+    }
+
+    fn residual_isolation(&self) -> Option<Vec<ResidualIsolation>> {
+        self.verdict.detected_at?;
+        if self.candidates.is_empty() {
+            return None;
+        }
+        let isolated = self.verdict.isolated();
+        Some(
+            self.isolation_tests
+                .iter()
+                .zip(&self.verdict.excluded_at)
+                .enumerate()
+                .map(
+                    |(i, (&(statistic, threshold), excluded))| ResidualIsolation {
+                        statistic,
+                        threshold,
+                        excluded: excluded.is_some(),
+                        isolated: isolated == Some(i),
+                    },
+                )
+                .collect(),
+        )
+    }
+
+    fn isolation_revision(&self) -> u64 {
+        self.revision
     }
 
     fn estimates_magnitude(&self) -> bool {

@@ -115,7 +115,7 @@ fn noise_free_estimate_is_exact_after_activation_and_blind_to_the_fault() {
         .iter()
         .copied()
         .fold(0.0, f64::max);
-    eprintln!(
+    println!(
         "T_a = {ta} s, max |x̂ − x| = {before:.3e} before and {after:.3e} after the fault (max |x| = {scale:.2})"
     );
     assert!(before < 1e-5 * scale, "{before}");
@@ -138,7 +138,7 @@ fn noise_free_estimate_is_exact_after_activation_and_blind_to_the_fault() {
         .copied()
         .fold(0.0, f64::max);
     let ratio = before / fine_err;
-    eprintln!("Δ = 0.5 ms: max |x̂ − x| = {fine_err:.3e}, ratio {ratio:.2}");
+    println!("Δ = 0.5 ms: max |x̂ − x| = {fine_err:.3e}, ratio {ratio:.2}");
     assert!((3.0..5.0).contains(&ratio), "ratio {ratio}");
 }
 
@@ -158,12 +158,12 @@ fn noise_free_residual_is_zero_before_the_fault_and_isolates_phi2() {
         .iter()
         .map(|r| r[0])
         .fold(0.0, f64::max);
-    eprintln!("r_FD max {r_before:.3e} before, {r_after:.3e} after the fault");
+    println!("r_FD max {r_before:.3e} before, {r_after:.3e} after the fault");
     assert!(r_before < 1e-5, "{r_before}");
     assert!(r_after > 1.0, "{r_after}");
     let detected = trace.detected_at.expect("detected") as f64 * 1e-3;
     let (isolated, which) = trace.isolated_at.expect("isolated");
-    eprintln!(
+    println!(
         "noise-free: T_d = {detected} s, T_i = {} s",
         isolated as f64 * 1e-3
     );
@@ -174,7 +174,7 @@ fn noise_free_residual_is_zero_before_the_fault_and_isolates_phi2() {
         .map(|r| r[4])
         .fold(0.0, f64::max);
     let r_fi1 = trace.residual.last().unwrap()[2];
-    eprintln!("r_FI,1 at the end {r_fi1:.3}, max r_FI,2 {r_fi2:.3e}");
+    println!("r_FI,1 at the end {r_fi1:.3}, max r_FI,2 {r_fi2:.3e}");
     assert!(r_fi2 < 1e-4 && r_fi1 > 0.5, "{r_fi1} {r_fi2}");
 }
 
@@ -207,7 +207,7 @@ fn noise_free_residual_is_the_fault_image_by_quadrature() {
         }
         let norm = image.iter().map(|v| v * v).sum::<f64>().sqrt();
         let r_fd = trace.residual[k][0];
-        eprintln!(
+        println!(
             "t = {} s: r_FD = {r_fd:.6}, ‖V_F f‖ by quadrature = {norm:.6}",
             k as f64 * 1e-3
         );
@@ -266,7 +266,7 @@ fn papers_noise_stays_below_the_guaranteed_threshold_where_the_paper_detects() {
         let sigma_end = trace.residual.last().unwrap()[1];
         let r_max = trace.residual.iter().map(|r| r[0]).fold(0.0, f64::max);
         let crossing = first_time(&trace, |r| r[0] > 1.0).expect("r_FD reaches 1");
-        eprintln!(
+        println!(
             "seed {seed}: max r_FD/σ_FD {max_stat:.3}, σ_FD(15 s) {sigma_end:.2}, max r_FD \
              {r_max:.3}, r_FD > 1 from {crossing:.3} s"
         );
@@ -289,7 +289,7 @@ fn low_noise_example_detects_and_isolates_phi2_with_the_guarantee() {
         let td = trace.detected_at.expect("detected") as f64 * 1e-3;
         let (ti, which) = trace.isolated_at.expect("isolated");
         let ti = ti as f64 * 1e-3;
-        eprintln!("seed {seed}: T_d = {td:.3} s, T_i = {ti:.3} s");
+        println!("seed {seed}: T_d = {td:.3} s, T_i = {ti:.3} s");
         assert!((5.0..7.0).contains(&td), "seed {seed}: T_d {td}");
         assert!((td..15.0).contains(&ti), "seed {seed}: T_i {ti}");
         assert_eq!(which, 1);
@@ -318,9 +318,79 @@ fn no_false_alarm_over_100_fault_free_seeds_at_both_noise_levels() {
         }
         assert_eq!(alarms, 0, "noise scale {scale}");
     }
-    eprintln!(
+    println!(
         "largest r_FD/σ_FD without fault: {:.3} (paper noise), {:.3} (low noise)",
         worst[0], worst[1]
     );
     assert!(worst[0] < 1.0 && worst[1] < 1.0);
+}
+
+#[test]
+fn settings_the_method_cannot_use_are_refused_by_name() {
+    let refuse = |settings: KernelSettings| {
+        KernelDetector::new(&model(), 0, settings, Vec::new())
+            .unwrap_err()
+            .to_string()
+    };
+    let base = noise_free(1e-3);
+    // The paper prints three rates ω₁, ω₂, ω₃ for n⋆ = 2 kernels: the third is refused.
+    let err = refuse(KernelSettings {
+        estimator_rates: vec![1.0, 2.0, 3.0],
+        ..base.clone()
+    });
+    assert!(err.contains("rates") && err.contains("n⋆ = 2"), "{err}");
+    let err = refuse(KernelSettings {
+        estimator_rates: vec![1.0, 1.0],
+        ..base.clone()
+    });
+    assert!(err.contains("twice"), "{err}");
+    // N = n⋆ − 1, which the paper allows, leaves a boundary term at τ = 0.
+    let err = refuse(KernelSettings {
+        kernel_order: 1,
+        ..base.clone()
+    });
+    assert!(err.contains("order") && err.contains("n⋆ = 2"), "{err}");
+    let err = refuse(KernelSettings {
+        activation: 1.0,
+        ..base.clone()
+    });
+    assert!(
+        err.contains("activation") && err.contains("never start"),
+        "{err}"
+    );
+    let err = refuse(KernelSettings {
+        floor: 0.0,
+        ..base.clone()
+    });
+    assert!(err.contains("floor"), "{err}");
+    let err = refuse(KernelSettings {
+        period: 30.0,
+        ..base.clone()
+    });
+    assert!(err.contains("period"), "{err}");
+    let err = refuse(KernelSettings {
+        output_noise: f64::NAN,
+        ..base
+    });
+    assert!(err.contains("output_noise"), "{err}");
+}
+
+#[test]
+fn a_gap_restarts_and_the_restarted_detector_repeats_itself() {
+    // The images need every sample: predict_only refuses, and after restart the same
+    // samples give the same bits.
+    let data = example::simulate(&ExampleRun {
+        samples: 3000,
+        ..ExampleRun::paper(0)
+    });
+    let mut det = detector(noise_free(1e-3));
+    assert!(matches!(
+        det.predict_only(0),
+        Err(StepError::GapNotBridged { k: 0, .. })
+    ));
+    let first = run(&mut det, &data);
+    det.restart().unwrap();
+    let second = run(&mut det, &data);
+    assert_eq!(first.residual, second.residual);
+    assert_eq!(first.statistic, second.statistic);
 }
