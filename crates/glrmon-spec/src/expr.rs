@@ -15,13 +15,15 @@
 //! power   := primary ("^" unary)?                right-associative: 2^3^2 = 2^9
 //! primary := number | "(" expr ")" | constant | variable
 //!          | function "(" expr ("," expr)* ")"
-//! variable := "k" | ("u" | "p") digits ("[" ("-" | "+")? digits "]")?
+//! variable := "k" | "t" | "x" digits | ("u" | "p") digits ("[" ("-" | "+")? digits "]")?
 //! ```
 //!
 //! - Numbers: `2`, `2.`, `.5`, `1e-3`, `1.5E+3`.
 //! - Variables: `u<i>` known input i, `p<i>` exogenous (scheduling) signal i, `k` the
 //!   sample index as f64. `u0[-3]` / `p2[-1]` read the value at sample k − 3 / k − 1;
-//!   `u0[0]` is `u0`; positive lags (the future) are errors.
+//!   `u0[0]` is `u0`; positive lags (the future) are errors. Only where the context
+//!   allows them (a candidate fault function of the `kernel` detector): `x<i>` the
+//!   estimated state i (0-based, no lags) and `t` the time in seconds.
 //! - Operators: `+ - * /`, unary `-` and `+`, `^` (power). Unary minus binds looser
 //!   than `^`, as in mathematics and Python: `-2^2 = -(2^2) = -4`, while `2^-1 = 0.5`.
 //! - Functions: `sin cos tan exp log sqrt abs` (one argument; `log` is the natural
@@ -52,7 +54,7 @@
 
 use std::fmt;
 
-use glrmon_core::{ColumnFn, Signals, SystemMatrices};
+use glrmon_core::{CandidateFn, ColumnFn, Signals, SystemMatrices};
 
 /// The longest source accepted by [`Expr::parse`], in bytes.
 pub const MAX_LEN: usize = 4096;
@@ -78,6 +80,11 @@ pub struct ExprContext {
     pub allow_lags: bool,
     /// Whether the random functions `uniform` and `normal` may be used.
     pub allow_random: bool,
+    /// Number of states the expression may read: `x0` … `x{states−1}` exist (0 in
+    /// every context but a candidate fault function's).
+    pub states: usize,
+    /// Whether the time `t` (seconds) may be used.
+    pub allow_t: bool,
 }
 
 impl ExprContext {
@@ -92,6 +99,25 @@ impl ExprContext {
             allow_k: false,
             allow_lags: true,
             allow_random: false,
+            states: 0,
+            allow_t: false,
+        }
+    }
+
+    /// The context of a candidate fault function φ(t, x, u) of the `kernel` detector:
+    /// the inputs, the estimated state `x0` … `x{states−1}` and the time `t`, without
+    /// lags (the function is evaluated only during an isolation episode, so no
+    /// history is kept), `k`, scheduling signals (φ receives none) or randomness.
+    #[must_use]
+    pub fn candidate(inputs: usize, states: usize) -> Self {
+        Self {
+            inputs,
+            signals: 0,
+            allow_k: false,
+            allow_lags: false,
+            allow_random: false,
+            states,
+            allow_t: true,
         }
     }
 }
@@ -147,10 +173,10 @@ pub enum ExprError {
         /// The offending token, quoted, or `end of expression`.
         found: String,
     },
-    /// A feature the context forbids: `k`, lags or random functions.
+    /// A feature the context forbids: `k`, `t`, lags or random functions.
     #[error("{what} not allowed here: \"{text}\" at byte {pos}")]
     NotAllowed {
-        /// `"k"`, `"lags"` or `"random functions"`.
+        /// `"k"`, `"t"`, `"lags"` or `"random functions"`.
         what: &'static str,
         /// The offending text, e.g. `u0[-1]`.
         text: String,
@@ -246,6 +272,17 @@ impl fmt::Debug for Env<'_> {
             .field("random", &self.random.is_some())
             .finish()
     }
+}
+
+/// The estimated state and the time a candidate fault function's expression reads
+/// (`x<i>`, `t`), beside its [`Env`]; [`Expr::eval`] gives it none (x<i> reads NaN,
+/// `t` 0).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct StateEnv<'a> {
+    /// x̂, read by `x<i>`.
+    pub x: &'a [f64],
+    /// The time in seconds, read by `t`.
+    pub t: f64,
 }
 
 /// Past samples' inputs and signals, for lagged variables: a ring buffer of fixed
@@ -420,6 +457,8 @@ impl Op2 {
 enum Node {
     Const(f64),
     K,
+    T,
+    State(usize),
     Input(usize),
     Signal(usize),
     LagInput {
@@ -506,6 +545,7 @@ pub struct Expr {
     uses_k: bool,
     highest_input: Option<usize>,
     highest_signal: Option<usize>,
+    highest_state: Option<usize>,
 }
 
 impl Expr {
@@ -537,6 +577,7 @@ impl Expr {
             uses_k: false,
             highest_input: None,
             highest_signal: None,
+            highest_state: None,
         };
         let root = parser.parse_expr()?;
         let end = parser.peek();
@@ -553,6 +594,7 @@ impl Expr {
             uses_k: parser.uses_k,
             highest_input: parser.highest_input,
             highest_signal: parser.highest_signal,
+            highest_state: parser.highest_state,
         })
     }
 
@@ -602,35 +644,50 @@ impl Expr {
         self.highest_signal
     }
 
+    /// The highest state index used (`x3` → 3).
+    #[must_use]
+    pub fn highest_state(&self) -> Option<usize> {
+        self.highest_state
+    }
+
     /// The value at the sample described by `env`. Takes `&self`, allocates nothing,
     /// never panics; arithmetic is IEEE (division by zero gives ±inf or NaN).
     pub fn eval(&self, env: &mut Env<'_>) -> f64 {
-        self.eval_node(self.root, env)
+        self.eval_node(self.root, env, StateEnv::default())
     }
 
-    fn eval_node(&self, i: usize, env: &mut Env<'_>) -> f64 {
+    /// [`Expr::eval`] with the estimated state and the time of `state` (for the
+    /// `x<i>` and `t` of a candidate fault function); a state index beyond
+    /// `state.x` reads NaN.
+    pub fn eval_with_state(&self, env: &mut Env<'_>, state: StateEnv<'_>) -> f64 {
+        self.eval_node(self.root, env, state)
+    }
+
+    fn eval_node(&self, i: usize, env: &mut Env<'_>, st: StateEnv<'_>) -> f64 {
         let Some(node) = self.nodes.get(i) else {
             return f64::NAN;
         };
         match *node {
             Node::Const(v) => v,
             Node::K => env.k as f64,
+            Node::T => st.t,
+            Node::State(j) => st.x.get(j).copied().unwrap_or(f64::NAN),
             Node::Input(j) => env.u.get(j).copied().unwrap_or(f64::NAN),
             Node::Signal(j) => env.p.get(j).copied().unwrap_or(f64::NAN),
             Node::LagInput { index, lag } => env.history.input(index, lag),
             Node::LagSignal { index, lag } => env.history.signal(index, lag),
-            Node::Unary(op, a) => op.apply(self.eval_node(a, env)),
+            Node::Unary(op, a) => op.apply(self.eval_node(a, env, st)),
             Node::Binary(op, a, b) => {
-                let x = self.eval_node(a, env);
-                let y = self.eval_node(b, env);
+                let x = self.eval_node(a, env, st);
+                let y = self.eval_node(b, env, st);
                 op.apply(x, y)
             }
             Node::Chain { first, start, len } => {
-                let mut acc = self.eval_node(first, env);
+                let mut acc = self.eval_node(first, env, st);
                 match self.links.get(start..start.saturating_add(len)) {
                     Some(links) => {
                         for &(op, x) in links {
-                            acc = op.apply(acc, self.eval_node(x, env));
+                            acc = op.apply(acc, self.eval_node(x, env, st));
                         }
                         acc
                     }
@@ -638,16 +695,16 @@ impl Expr {
                 }
             }
             Node::Uniform(a, b) => {
-                let lo = self.eval_node(a, env);
-                let hi = self.eval_node(b, env);
+                let lo = self.eval_node(a, env, st);
+                let hi = self.eval_node(b, env, st);
                 match env.random.as_deref_mut() {
                     Some(r) => lo + (hi - lo) * r.uniform(),
                     None => f64::NAN,
                 }
             }
             Node::Normal(a, b) => {
-                let mean = self.eval_node(a, env);
-                let sd = self.eval_node(b, env);
+                let mean = self.eval_node(a, env, st);
+                let sd = self.eval_node(b, env, st);
                 match env.random.as_deref_mut() {
                     Some(r) => mean + sd * r.normal(),
                     None => f64::NAN,
@@ -730,6 +787,54 @@ impl ColumnFn for ExprColumn {
             };
         }
         self.history.push(signals.u, signals.p);
+    }
+}
+
+/// A candidate fault function φ(t, x, u) of the `kernel` detector whose p⋆ entries are
+/// expressions of the context [`ExprContext::candidate`], e.g.
+/// `["x1 + x2", "cos(x3)", "cos(0.5*x4)"]`.
+#[derive(Debug)]
+pub struct ExprCandidate {
+    exprs: Vec<Expr>,
+    /// Empty (candidates have no lags): [`Env`] needs one.
+    history: SignalHistory,
+}
+
+impl ExprCandidate {
+    /// A candidate of `exprs` (one per fault channel) over `inputs` inputs.
+    #[must_use]
+    pub fn new(exprs: Vec<Expr>, inputs: usize) -> Self {
+        Self {
+            exprs,
+            history: SignalHistory::new(0, inputs, 0),
+        }
+    }
+
+    /// The entries.
+    #[must_use]
+    pub fn exprs(&self) -> &[Expr] {
+        &self.exprs
+    }
+}
+
+impl CandidateFn for ExprCandidate {
+    /// Evaluates each entry at (t, x, u), allocating nothing; entries of `out` beyond
+    /// the candidate's length are set to NaN (which the detector refuses).
+    fn evaluate(&mut self, t: f64, x: &[f64], u: &[f64], out: &mut [f64]) {
+        let mut env = Env {
+            k: 0,
+            u,
+            p: &[],
+            history: &self.history,
+            random: None,
+        };
+        let state = StateEnv { x, t };
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = match self.exprs.get(i) {
+                Some(e) => e.eval_with_state(&mut env, state),
+                None => f64::NAN,
+            };
+        }
     }
 }
 
@@ -898,6 +1003,7 @@ struct Parser<'a> {
     uses_k: bool,
     highest_input: Option<usize>,
     highest_signal: Option<usize>,
+    highest_state: Option<usize>,
 }
 
 impl<'a> Parser<'a> {
@@ -1140,7 +1246,20 @@ impl<'a> Parser<'a> {
                 self.uses_k = true;
                 return self.push(Node::K, t.start, t.end);
             }
+            "t" => {
+                if !self.ctx.allow_t {
+                    return Err(ExprError::NotAllowed {
+                        what: "t",
+                        text: "t".to_owned(),
+                        pos: t.start,
+                    });
+                }
+                return self.push(Node::T, t.start, t.end);
+            }
             _ => {}
+        }
+        if let Some(index) = state_variable(name) {
+            return self.parse_state(t, index);
         }
         if let Some(f) = Func::lookup(name) {
             return self.parse_call(t, f);
@@ -1178,8 +1297,16 @@ impl<'a> Parser<'a> {
             1 => names.push("p0".to_owned()),
             n => names.push(format!("p0..p{}", n - 1)),
         }
+        match self.ctx.states {
+            0 => {}
+            1 => names.push("x0".to_owned()),
+            n => names.push(format!("x0..x{}", n - 1)),
+        }
         if self.ctx.allow_k {
             names.push("k".to_owned());
+        }
+        if self.ctx.allow_t {
+            names.push("t".to_owned());
         }
         names.push("pi".to_owned());
         names.push("e".to_owned());
@@ -1231,6 +1358,38 @@ impl<'a> Parser<'a> {
         }
         self.max_lag = self.max_lag.max(lag);
         self.push(node, t.start, end)
+    }
+
+    /// `x<i>`: the estimated state i, where the context has states; never lagged.
+    fn parse_state(&mut self, t: Token, index: Option<usize>) -> Result<Sub, ExprError> {
+        let name = self.text(t.start, t.end);
+        let count = self.ctx.states;
+        let index = match index {
+            Some(i) if i < count => i,
+            _ => {
+                let hint = match count {
+                    0 => "the state x<i> is read only by a candidate fault function of the \
+                          `kernel` detector"
+                        .to_owned(),
+                    1 => "the model has 1 state: x0".to_owned(),
+                    n => format!("the model has {n} states: x0..x{}", n - 1),
+                };
+                return Err(ExprError::UnknownSignal {
+                    name: name.to_owned(),
+                    pos: t.start,
+                    hint,
+                });
+            }
+        };
+        if self.peek().tok == Tok::LBracket {
+            return Err(ExprError::NotAllowed {
+                what: "lags",
+                text: name.to_owned(),
+                pos: t.start,
+            });
+        }
+        self.highest_state = self.highest_state.max(Some(index));
+        self.push(Node::State(index), t.start, t.end)
     }
 
     /// Parses `[-n]` after the variable `var`; returns the lag and the span's end.
@@ -1327,6 +1486,15 @@ impl<'a> Parser<'a> {
     }
 }
 
+/// `x<digits>` → the state index (`None` when it overflows); `None` for other names.
+fn state_variable(name: &str) -> Option<Option<usize>> {
+    let digits = name.strip_prefix('x')?;
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    Some(digits.parse::<usize>().ok())
+}
+
 /// `u<digits>` → (true, index), `p<digits>` → (false, index); the index is `None` when
 /// it overflows.
 fn variable(name: &str) -> Option<(bool, Option<usize>)> {
@@ -1356,6 +1524,8 @@ mod tests {
             allow_k: true,
             allow_lags: true,
             allow_random: true,
+            states: 0,
+            allow_t: false,
         }
     }
 
@@ -1947,6 +2117,75 @@ mod tests {
         assert_eq!(c.max_lag(), 1);
     }
 
+    /// A candidate fault function reads the estimated state `x<i>` and the time `t`
+    /// (the paper's φ₁ and φ₂ at a state), only in its own context: elsewhere `x<i>`
+    /// is unknown and `t` not allowed; an index past the model's states and a lagged
+    /// state are refused.
+    #[test]
+    fn candidate_expressions_read_the_state_and_the_time() {
+        let ctx = ExprContext::candidate(1, 5);
+        let parse_all = |srcs: &[&str]| -> Vec<Expr> {
+            srcs.iter().map(|s| Expr::parse(s, &ctx).unwrap()).collect()
+        };
+        let x = [0.1, 0.2, -0.3, 0.4, 1.2];
+        let mut phi1 = ExprCandidate::new(parse_all(&["x1 + x2", "cos(x3)", "cos(0.5*x4)"]), 1);
+        let mut out = [0.0; 3];
+        phi1.evaluate(7.0, &x, &[2.0], &mut out);
+        assert!(close(out[0], -0.1) && close(out[1], 0.4f64.cos()));
+        assert!(close(out[2], 0.6f64.cos()));
+        let mut phi2 = ExprCandidate::new(
+            parse_all(&["x1 + x2", "20*exp(-abs(x3))", "sin(0.5*x4)"]),
+            1,
+        );
+        phi2.evaluate(7.0, &x, &[2.0], &mut out);
+        assert!(close(out[1], 20.0 * (-0.4f64).exp()) && close(out[2], 0.6f64.sin()));
+        let mut mixed = ExprCandidate::new(parse_all(&["t*u0 + x0"]), 1);
+        let mut two = [0.0; 2];
+        mixed.evaluate(1.5, &x, &[2.0], &mut two);
+        assert!(close(two[0], 3.1) && two[1].is_nan());
+        assert_eq!(
+            Expr::parse("x1 + x2", &ctx).unwrap().highest_state(),
+            Some(2)
+        );
+        // Plain evaluation has no state: x<i> reads NaN.
+        let e = Expr::parse("x0", &ctx).unwrap();
+        assert!(
+            e.eval(&mut Env {
+                k: 0,
+                u: &[],
+                p: &[],
+                history: &SignalHistory::new(0, 0, 0),
+                random: None,
+            })
+            .is_nan()
+        );
+        let err5 = err("x5 + 1", &ctx).to_string();
+        assert!(
+            err5.contains("\"x5\"") && err5.contains("5 states: x0..x4"),
+            "{err5}"
+        );
+        assert!(matches!(
+            err("x0[-1]", &ctx),
+            ExprError::NotAllowed { what: "lags", .. }
+        ));
+        assert!(matches!(
+            err("k", &ctx),
+            ExprError::NotAllowed { what: "k", .. }
+        ));
+        assert!(matches!(err("p0", &ctx), ExprError::UnknownSignal { .. }));
+        let fault = ExprContext::fault_column(1, 1);
+        let ex = err("2*x0", &fault).to_string();
+        assert!(ex.contains("\"x0\"") && ex.contains("kernel"), "{ex}");
+        assert_eq!(
+            err("sin(t)", &fault).to_string(),
+            "t not allowed here: \"t\" at byte 4"
+        );
+        assert!(matches!(
+            err("t", &all()),
+            ExprError::NotAllowed { what: "t", .. }
+        ));
+    }
+
     #[test]
     fn expr_column_through_the_column_fn_trait() {
         let ctx = ExprContext::fault_column(2, 2);
@@ -2005,6 +2244,8 @@ mod tests {
             allow_k: false,
             allow_lags: false,
             allow_random: false,
+            states: 0,
+            allow_t: false,
         };
         let mut history = SignalHistory::new(3, 2, 3);
         history.push(&[1.0, 2.0], &[3.0, 4.0, 5.0]);

@@ -430,6 +430,8 @@ impl Validator {
             allow_k: true,
             allow_lags: true,
             allow_random: false,
+            states: 0,
+            allow_t: false,
         };
         let mut exprs = Vec::new();
         let mut all_constant = true;

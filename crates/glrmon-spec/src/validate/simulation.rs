@@ -25,6 +25,8 @@ impl Validator {
             allow_k: true,
             allow_lags: false,
             allow_random: true,
+            states: 0,
+            allow_t: false,
         };
         let list =
             |v: &mut Self, field: &str, src: &[String], max: usize, what: &str| -> Vec<Expr> {
