@@ -253,6 +253,7 @@ mod tests {
     #[test]
     fn alarm_line_prints_the_ambiguous_faults() {
         let test = |fault: &str, rival: &str, minmax| IsolationResult {
+            excluded: None,
             fault: fault.into(),
             minmax,
             sensitivity: minmax,
@@ -292,6 +293,7 @@ mod tests {
             onset: 201,
             magnitude: vec![3.981, 0.005],
             isolation: vec![IsolationResult {
+                excluded: None,
                 fault: "x0_jump".into(),
                 minmax: 1213.1,
                 sensitivity: 1300.0,
@@ -330,6 +332,7 @@ mod tests {
             onset: 200,
             magnitude: vec![3.5],
             isolation: vec![IsolationResult {
+                excluded: None,
                 fault: "x0_jump".into(),
                 minmax: 0.5,
                 sensitivity: 1.5,
@@ -350,6 +353,7 @@ mod tests {
         let faults: Vec<String> = (0..31).map(|i| format!("y{i}_bias")).collect();
         let isolation: Vec<IsolationResult> = (0..31)
             .map(|i| IsolationResult {
+                excluded: None,
                 fault: format!("y{i}_bias"),
                 minmax: f64::from(i),
                 sensitivity: 100.0,

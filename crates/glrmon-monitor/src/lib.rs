@@ -74,8 +74,8 @@ use glrmon_core::filter::consistency::Consistency;
 use glrmon_core::isolation::{FisherStatistics, ambiguity};
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{
-    AlarmSettings, AlarmState, AlarmTransition, Detector, EpisodeEnd, SignalScaling, StepError,
-    StepOutput,
+    AlarmSettings, AlarmState, AlarmTransition, Detector, EpisodeEnd, ResidualIsolation,
+    SignalScaling, StepError, StepOutput,
 };
 use glrmon_wire::{
     Alarm, AlarmEnd, EpisodeEstimate, ErrorCode, ErrorRecord, IsolationResult, IsolationUpdate,
@@ -181,6 +181,10 @@ pub struct Monitor {
     out: StepOutput,
     /// The isolation update the current episode's alarm announced.
     pending: Option<PendingUpdate>,
+    /// The crossing k of the episode going on, whose alarm updates name.
+    episode_alarm: Option<u64>,
+    /// [`Detector::isolation_revision`] when last published.
+    isolation_revision: u64,
     reported_onset: u64,
     /// The onset the detector follows for the episode going on (the last reported r̂
     /// it could follow), whose estimate the `stat` records carry.
@@ -256,6 +260,8 @@ impl Monitor {
             fault_names,
             out,
             pending: None,
+            episode_alarm: None,
+            isolation_revision: 0,
             reported_onset: 0,
             episode_onset: None,
             counters: MonitorCounters::default(),
@@ -810,6 +816,22 @@ impl Monitor {
             self.pending = None;
             self.emit_update(p, k, t, glr, onset, records);
         }
+        // A kind that isolates by its own tests (exclusion) publishes an update at each
+        // change of its verdict during the episode.
+        let revision = self.detector.isolation_revision();
+        if revision != self.isolation_revision {
+            self.isolation_revision = revision;
+            if let (Some(alarm_k), Some(glr), Some(onset), None) =
+                (self.episode_alarm, self.out.glr, self.out.onset, alarm)
+                && self.detector.residual_isolation().is_some()
+            {
+                let p = PendingUpdate {
+                    alarm_k,
+                    update_k: k,
+                };
+                self.emit_update(p, k, t, glr, onset, records);
+            }
+        }
         alarm
     }
 
@@ -827,6 +849,7 @@ impl Monitor {
         self.detector.follow(None);
         self.episode_onset = None;
         self.pending = None;
+        self.episode_alarm = None;
         records.push(Record::AlarmEnd(AlarmEnd {
             channel: self.channel.clone(),
             k,
@@ -845,6 +868,8 @@ impl Monitor {
             return None;
         };
         self.counters.alarms += 1;
+        self.episode_alarm = Some(k);
+        self.isolation_revision = self.detector.isolation_revision();
         self.reported_onset = onset;
         self.follow_fault(onset);
         let delay = u64::from(self.settings.tuning.isolation_delay);
@@ -940,6 +965,9 @@ impl Monitor {
     /// with each other when the group alone explains them as well: O(w·m³) more, at
     /// alarms and updates only.
     fn isolate(&self, onset: u64) -> Vec<IsolationResult> {
+        if let Some(tests) = self.detector.residual_isolation() {
+            return self.isolate_by_exclusion(&tests);
+        }
         let Some(fisher) = self.detector.fisher_statistics(onset) else {
             return Vec::new();
         };
@@ -954,6 +982,7 @@ impl Monitor {
                 Some((
                     gi,
                     IsolationResult {
+                        excluded: None,
                         fault: g.name.clone(),
                         minmax: minmax.value,
                         sensitivity: sensitivity.value,
@@ -968,6 +997,39 @@ impl Monitor {
             self.mark_ambiguous(&fisher, &mut tested);
         }
         tested.into_iter().map(|(_, r)| r).collect()
+    }
+
+    /// Isolation by the detector's own exclusion tests (the kernel method, Li, Boem,
+    /// Pin & Parisini, Prop. 4.2), per group: the group's residual and threshold are
+    /// those of its member closest to exclusion (smallest residual/threshold), it is
+    /// excluded when all its members are, and isolated when every fault outside it is
+    /// excluded and one inside is not.
+    fn isolate_by_exclusion(&self, tests: &[ResidualIsolation]) -> Vec<IsolationResult> {
+        let excluded = |i: usize| tests.get(i).is_some_and(|t| t.excluded);
+        self.groups
+            .iter()
+            .filter_map(|g| {
+                let best = g
+                    .faults
+                    .iter()
+                    .filter_map(|&i| tests.get(i))
+                    .min_by(|a, b| {
+                        (a.statistic / a.threshold).total_cmp(&(b.statistic / b.threshold))
+                    })?;
+                let all_excluded = g.faults.iter().all(|&i| excluded(i));
+                let others_excluded =
+                    (0..tests.len()).all(|i| g.faults.contains(&i) || excluded(i));
+                Some(IsolationResult {
+                    excluded: Some(all_excluded),
+                    fault: g.name.clone(),
+                    minmax: best.statistic,
+                    sensitivity: best.statistic,
+                    threshold: best.threshold,
+                    isolated: others_excluded && !all_excluded,
+                    ambiguous_with: Vec::new(),
+                })
+            })
+            .collect()
     }
 
     /// The threshold of isolation test `name` with `dof` degrees of freedom: its
@@ -1063,6 +1125,7 @@ impl Monitor {
             self.end_episode(k, t, started, peak, records);
         }
         self.pending = None;
+        self.episode_alarm = None;
         self.episode_onset = None;
         self.counters.restarts += 1;
         if let Some(c) = &mut self.consistency {
@@ -1132,6 +1195,115 @@ mod tests {
                 max_reorder: 16,
             },
         )
+    }
+
+    /// The kernel method's exclusion reaches the records: on the noise-free example of
+    /// Li, Boem, Pin & Parisini (fault φ₂ from 5 s) one alarm at the detection, then an
+    /// `isolation` update at the sample φ₁ is excluded, naming φ₂ isolated.
+    #[test]
+    fn kernel_exclusion_is_published_as_an_isolation_update() {
+        use glrmon_core::{Candidate, CandidateFn, KernelDetector, KernelModel, KernelSettings};
+        use glrmon_sim::kernel_example as example;
+        use nalgebra::DMatrix;
+
+        #[derive(Debug)]
+        struct Phi(usize);
+        impl CandidateFn for Phi {
+            fn evaluate(&mut self, _t: f64, x: &[f64], _u: &[f64], out: &mut [f64]) {
+                out.copy_from_slice(&example::candidate(self.0, x));
+            }
+        }
+        let model = KernelModel {
+            a: DMatrix::from_fn(5, 5, |i, j| example::A[i][j]),
+            b: DMatrix::from_column_slice(5, 1, &example::B),
+            c: DMatrix::from_fn(4, 5, |i, j| if i == j { 1.0 } else { 0.0 }),
+            e: DMatrix::from_fn(5, 3, |i, j| example::E[i][j]),
+        };
+        let candidates = (1..=2)
+            .map(|i| Candidate {
+                name: format!("phi{i}"),
+                lipschitz: example::lipschitz(i),
+                function: Box::new(Phi(i)),
+            })
+            .collect();
+        let settings = KernelSettings {
+            floor: 1e-3,
+            ..KernelSettings::paper_example(1e-3)
+        };
+        let detector = KernelDetector::new(&model, 0, settings, candidates).unwrap();
+        let mut monitor = Monitor::new(
+            "plane",
+            Box::new(detector),
+            MonitorSettings {
+                tuning: Tuning {
+                    alarm: AlarmSettings::with_threshold(1.0),
+                    episode_end: EpisodeEnd::BelowThreshold,
+                    isolation_delay: 0,
+                    isolation_alpha: 0.01,
+                    isolation_onsets: 1,
+                    isolation_thresholds: vec![],
+                },
+                groups: vec![],
+                max_gap: 10,
+                max_reorder: 16,
+            },
+        );
+        let data = example::simulate(&example::ExampleRun {
+            samples: 7000,
+            ..example::ExampleRun::paper(0)
+        });
+        let mut records = Vec::new();
+        for k in 0..data.u.len() {
+            monitor.on_sample(
+                &Sample {
+                    k: Some(k as u64),
+                    t: Some(k as f64 * 1e-3),
+                    u: vec![data.u[k]],
+                    y: data.y[4 * k..4 * k + 4].to_vec(),
+                    p: vec![],
+                },
+                &mut records,
+            );
+        }
+        let alarms = alarms(&records);
+        assert_eq!(alarms.len(), 1, "{alarms:?}");
+        let alarm = alarms[0];
+        assert!((5000..5050).contains(&alarm.k), "alarm at {}", alarm.k);
+        assert!(
+            alarm
+                .isolation
+                .iter()
+                .all(|r| r.excluded == Some(false) && !r.isolated)
+        );
+        let updates: Vec<&IsolationUpdate> = records
+            .iter()
+            .filter_map(|r| match r {
+                Record::Isolation(u) => Some(u),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(updates.len(), 1, "{updates:?}");
+        let update = updates[0];
+        assert_eq!(update.alarm_k, alarm.k);
+        assert!(
+            update.k > alarm.k && update.k < 5500,
+            "update at {}",
+            update.k
+        );
+        let by_name = |n: &str| update.isolation.iter().find(|r| r.fault == n).unwrap();
+        assert_eq!(by_name("phi1").excluded, Some(true));
+        assert!(by_name("phi1").minmax > by_name("phi1").threshold);
+        assert!(by_name("phi2").isolated && by_name("phi2").excluded == Some(false));
+        // The stat records carry [r_FD, σ_FD, r_FI,1, σ_FI,1, r_FI,2, σ_FI,2, x̂…].
+        let last = records
+            .iter()
+            .rev()
+            .find_map(|r| match r {
+                Record::Stat(s) => Some(s),
+                _ => None,
+            })
+            .unwrap();
+        assert_eq!(last.residual.len(), 11);
     }
 
     fn sample(x: &glrmon_sim::SimSample) -> Sample {

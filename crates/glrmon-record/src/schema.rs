@@ -340,6 +340,7 @@ mod tests {
     /// Records of every type, each `Option` field both `Some` and `None` somewhere.
     fn records() -> Vec<Record> {
         let isolation = vec![IsolationResult {
+            excluded: None,
             fault: "leak".into(),
             minmax: 30.0,
             sensitivity: 10.0,

@@ -327,6 +327,7 @@ mod tests {
             onset: k - 3,
             magnitude: vec![1.5],
             isolation: vec![glrmon_wire::IsolationResult {
+                excluded: None,
                 fault: "leak".into(),
                 minmax: 30.0,
                 sensitivity: 10.0,

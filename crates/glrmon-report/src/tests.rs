@@ -55,6 +55,7 @@ fn alarm() -> Record {
         magnitude: vec![4.1, 0.05],
         isolation: vec![
             IsolationResult {
+                excluded: None,
                 fault: "x0_jump".into(),
                 minmax: 31.25,
                 sensitivity: 35.0,
@@ -63,6 +64,7 @@ fn alarm() -> Record {
                 ambiguous_with: Vec::new(),
             },
             IsolationResult {
+                excluded: None,
                 fault: "<b>x1</b>".into(),
                 minmax: 0.75,
                 sensitivity: 4.5,
@@ -89,6 +91,7 @@ fn update() -> Record {
         magnitude: vec![4.0, 0.01],
         isolation: vec![
             IsolationResult {
+                excluded: None,
                 fault: "x0_jump".into(),
                 minmax: 48.5,
                 sensitivity: 50.0,
@@ -97,6 +100,7 @@ fn update() -> Record {
                 ambiguous_with: Vec::new(),
             },
             IsolationResult {
+                excluded: None,
                 fault: "<b>x1</b>".into(),
                 minmax: 0.5,
                 sensitivity: 3.25,

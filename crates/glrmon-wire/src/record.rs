@@ -106,6 +106,12 @@ pub struct IsolationResult {
     /// when the test is decisive, and in records of versions before it existed.
     #[serde(default)]
     pub ambiguous_with: Vec<String>,
+    /// For the kinds that isolate by exclusion (`kernel`): whether this fault's
+    /// residual (`minmax`) has exceeded its threshold at some sample since the
+    /// detection, which rules it out for the rest of the episode. Absent for the
+    /// kinds that test by minmax.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub excluded: Option<bool>,
 }
 
 /// An alarm: l_k crossed the threshold (`type: "alarm"`), published at the crossing.
@@ -860,6 +866,7 @@ mod tests {
             magnitude: vec![0.3, 5e-324],
             isolation: vec![
                 IsolationResult {
+                    excluded: None,
                     fault: "leak".into(),
                     minmax: 40.25,
                     sensitivity: 39.0,
@@ -868,6 +875,7 @@ mod tests {
                     ambiguous_with: Vec::new(),
                 },
                 IsolationResult {
+                    excluded: None,
                     fault: "bias".into(),
                     minmax: 0.125,
                     sensitivity: 1.0 / 3.0,
@@ -892,6 +900,7 @@ mod tests {
             onset: 100,
             magnitude: vec![0.5, -1e-300],
             isolation: vec![IsolationResult {
+                excluded: None,
                 fault: "leak".into(),
                 minmax: 60.5,
                 sensitivity: 61.0,
@@ -1228,6 +1237,7 @@ mod tests {
             (
                 Alarm {
                     isolation: vec![IsolationResult {
+                        excluded: None,
                         sensitivity: f64::INFINITY,
                         ..alarm().isolation[0].clone()
                     }],
@@ -1239,6 +1249,7 @@ mod tests {
             (
                 IsolationUpdate {
                     isolation: vec![IsolationResult {
+                        excluded: None,
                         minmax: f64::NAN,
                         ..isolation_update().isolation[0].clone()
                     }],
@@ -1661,6 +1672,7 @@ mod tests {
                         glr,
                         magnitude,
                         isolation: vec![IsolationResult {
+                            excluded: None,
                             fault: fault.clone(),
                             minmax,
                             sensitivity,
