@@ -302,6 +302,8 @@ fn settings(channel: &Channel) -> String {
                 kind.name(),
                 if kind.runs_kalman_filter() {
                     " (Page's onset; the GLR's magnitudes and isolation)"
+                } else if kind == DetectorKind::Kernel {
+                    " (isolation by exclusion among the candidate fault functions; no magnitude)"
                 } else {
                     " (detection only: no magnitude, no isolation)"
                 }
@@ -501,6 +503,11 @@ fn episode_end_text(channel: &Channel) -> String {
 fn threshold_text(channel: &Channel) -> String {
     match channel.threshold_source {
         ThresholdSource::Explicit => format!("{:.4} (explicit)", channel.alarm.threshold),
+        ThresholdSource::Bounded => format!(
+            "{:.4} (the bound no noise within the declared bounds crosses: no false alarm \
+             under them)",
+            channel.alarm.threshold
+        ),
         ThresholdSource::Siegmund { false_alarm } => format!(
             "{:.4} (Siegmund's approximation of the CUSUM's mean time to a false alarm: \
              {false_alarm:e} per sample)",
@@ -590,7 +597,8 @@ fn threshold_advice(channel: &Channel) -> Option<&'static str> {
             target: Target::Mtbfa(_),
             ..
         }
-        | ThresholdSource::Explicit => None,
+        | ThresholdSource::Explicit
+        | ThresholdSource::Bounded => None,
         ThresholdSource::Calibrated {
             target: Target::SampleFar(_),
             ..
@@ -614,6 +622,14 @@ fn isolability_section(
     s: &mut String,
     warnings: &mut Vec<String>,
 ) -> Result<(), ReportError> {
+    if channel.detector_kind == DetectorKind::Kernel {
+        let _ = writeln!(
+            s,
+            "  isolability: not computed (the `kernel` detector isolates by excluding \
+             candidate fault functions, each against its own threshold)"
+        );
+        return Ok(());
+    }
     if !channel.detector_kind.runs_kalman_filter() {
         // The GLR's window information is not what this kind runs on; its own design
         // was checked when the configuration was read (the `detector:` line above).

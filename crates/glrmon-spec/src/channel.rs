@@ -58,6 +58,10 @@ pub enum ThresholdSource {
         /// α.
         false_alarm: f64,
     },
+    /// 1, the bound of a statistic that no noise within its declared bounds can cross
+    /// (the `kernel` detector's r_FD/σ_FD): no false alarm under the noise bounds, and
+    /// no probability law to set it from.
+    Bounded,
     /// Found by `glrmon calibrate` on fault-free data.
     Calibrated {
         /// What it was calibrated for: a mean number of samples between false-alarm
@@ -137,6 +141,45 @@ pub struct RlsChannelSettings {
     pub rls: glrmon_core::RlsSettings,
     /// How the residual becomes the decision statistic.
     pub evaluation: glrmon_core::detector::Evaluation,
+}
+
+/// A candidate fault function of the `kernel` detector, compiled
+/// (`[[channels.kernel.candidates]]`).
+#[derive(Debug, Clone)]
+pub struct KernelCandidate {
+    /// Its name, the fault's.
+    pub name: String,
+    /// Its Lipschitz constant in x.
+    pub lipschitz: f64,
+    /// φ, one expression per fault channel.
+    pub f: Vec<Expr>,
+}
+
+/// The `kernel` detector's settings of a channel (`[channels.kernel]` with the
+/// continuous-time model).
+#[derive(Debug, Clone)]
+pub struct KernelChannelSettings {
+    /// A, B, C (the model's `H`) and E.
+    pub model: glrmon_core::KernelModel,
+    /// The method's settings, defaults filled in.
+    pub settings: glrmon_core::KernelSettings,
+    /// The candidate fault functions, in file order.
+    pub candidates: Vec<KernelCandidate>,
+}
+
+impl KernelChannelSettings {
+    /// The candidates as the detector takes them, each with its own evaluator.
+    #[must_use]
+    pub fn candidates(&self, inputs: usize) -> Vec<glrmon_core::Candidate> {
+        self.candidates
+            .iter()
+            .map(|c| glrmon_core::Candidate {
+                name: c.name.clone(),
+                lipschitz: c.lipschitz,
+                function: Box::new(crate::expr::ExprCandidate::new(c.f.clone(), inputs)),
+            })
+            .collect()
+    }
 }
 
 /// The observer detectors' settings of a channel (`[channels.observer]`).
@@ -320,6 +363,9 @@ pub struct Channel {
     /// The magnitudes the CUSUM is tuned for (`[channels.cusum]`), one per fault, for
     /// `detector = "cusum"`.
     pub cusum_magnitudes: Option<Vec<f64>>,
+    /// The kernel detector's model, settings and candidates (`[channels.kernel]`), for
+    /// `detector = "kernel"`.
+    pub kernel: Option<KernelChannelSettings>,
     /// Largest gap filled by predict-only steps.
     pub max_gap: u64,
     /// How many indices before the last processed one a sample is refused as late;

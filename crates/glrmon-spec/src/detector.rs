@@ -8,7 +8,7 @@
 
 use glrmon_core::detector::parity::{Disturbance, ParityDetector};
 use glrmon_core::detector::{FdfDetector, FdfGains, RlsDetector, UioDetector};
-use glrmon_core::{Chi2Detector, CusumDetector, Detector, GlrDetector, ModelError};
+use glrmon_core::{Chi2Detector, CusumDetector, Detector, GlrDetector, KernelDetector, ModelError};
 
 use crate::Channel;
 
@@ -31,11 +31,14 @@ pub enum DetectorKind {
     Uio,
     /// Parameter estimation: recursive least squares on the model's ARX form.
     Rls,
+    /// The kernel-based deadbeat detection and isolation of Li, Boem, Pin & Parisini
+    /// on a continuous-time model with bounded noises: r_FD/σ_FD against 1.
+    Kernel,
 }
 
 impl DetectorKind {
     /// Every kind, in declaration order (a kind's index is its discriminant).
-    pub const ALL: [Self; 7] = [
+    pub const ALL: [Self; 8] = [
         Self::Glr,
         Self::Chi2,
         Self::Cusum,
@@ -43,10 +46,13 @@ impl DetectorKind {
         Self::Fdf,
         Self::Uio,
         Self::Rls,
+        Self::Kernel,
     ];
 
     /// The names the configuration accepts, as [`DetectorKind::ALL`].
-    pub const NAMES: [&'static str; 7] = ["glr", "chi2", "cusum", "parity", "fdf", "uio", "rls"];
+    pub const NAMES: [&'static str; 8] = [
+        "glr", "chi2", "cusum", "parity", "fdf", "uio", "rls", "kernel",
+    ];
 
     /// The configuration's name of the kind.
     #[must_use]
@@ -64,11 +70,13 @@ impl DetectorKind {
     /// onset: m for the GLR (the number of faults: l_k(r) ~ χ²(rank C_k(r)) ≤ χ²(m),
     /// Zhang & Basseville 2014 §5), the dimension of the residual it tests for the
     /// others (`residual_dof`: the innovation's p − q for the χ² test, the parity
-    /// space's for `parity`).
+    /// space's for `parity`); 1 for `kernel`, whose statistic is one ratio r_FD/σ_FD
+    /// with no χ² law (its threshold is the bound 1, [`crate::ThresholdSource::Bounded`]).
     #[must_use]
     pub fn statistic_dof(self, faults: usize, residual_dof: usize) -> usize {
         match self {
             Self::Glr => faults.max(1),
+            Self::Kernel => 1,
             Self::Chi2 | Self::Cusum | Self::Parity | Self::Fdf | Self::Uio | Self::Rls => {
                 residual_dof.max(1)
             }
@@ -82,7 +90,7 @@ impl DetectorKind {
     pub fn runs_kalman_filter(self) -> bool {
         match self {
             Self::Glr | Self::Chi2 | Self::Cusum => true,
-            Self::Parity | Self::Fdf | Self::Uio | Self::Rls => false,
+            Self::Parity | Self::Fdf | Self::Uio | Self::Rls | Self::Kernel => false,
         }
     }
 
@@ -92,7 +100,13 @@ impl DetectorKind {
     pub fn maximises_over_onsets(self) -> bool {
         match self {
             Self::Glr => true,
-            Self::Chi2 | Self::Cusum | Self::Parity | Self::Fdf | Self::Uio | Self::Rls => false,
+            Self::Chi2
+            | Self::Cusum
+            | Self::Parity
+            | Self::Fdf
+            | Self::Uio
+            | Self::Rls
+            | Self::Kernel => false,
         }
     }
 }
@@ -158,6 +172,7 @@ impl Channel {
                     settings,
                 )?)
             }
+            DetectorKind::Kernel => Box::new(self.kernel_detector()?),
             DetectorKind::Uio => {
                 let observer = self.observer_settings()?;
                 let e = self.unknown_input.as_ref().ok_or(ModelError::Setting {
@@ -195,6 +210,24 @@ impl Channel {
                 what: "parity",
                 detail: "the channel has no parity settings".into(),
             })?,
+        )
+    }
+
+    /// The channel's kernel detector (`detector = "kernel"`), its candidates'
+    /// expressions compiled afresh.
+    ///
+    /// # Errors
+    /// As [`KernelDetector::new`]; a channel without kernel settings.
+    pub fn kernel_detector(&self) -> Result<KernelDetector, ModelError> {
+        let kernel = self.kernel.as_ref().ok_or(ModelError::Setting {
+            what: "kernel",
+            detail: "the channel has no kernel settings".into(),
+        })?;
+        KernelDetector::new(
+            &kernel.model,
+            self.dims.signals,
+            kernel.settings.clone(),
+            kernel.candidates(self.dims.inputs),
         )
     }
 
@@ -584,5 +617,221 @@ glr = {{ window = 30, detector = "{kind}" }}
             assert_eq!((det.kind(), det.memory()), (kind, memory));
             assert_eq!(det.faults().len(), 1);
         }
+    }
+}
+
+#[cfg(test)]
+mod kernel_tests {
+    use crate::ThresholdSource;
+
+    const EXAMPLE: &str = include_str!("../../../config/examples/kernel-paper.toml");
+
+    /// The paper's example with `from` replaced by `to` (which must occur).
+    fn edited(from: &str, to: &str) -> String {
+        assert!(EXAMPLE.contains(from), "{from}");
+        EXAMPLE.replacen(from, to, 1)
+    }
+
+    fn refused(text: &str) -> String {
+        crate::parse(text).unwrap_err().to_string()
+    }
+
+    /// config/examples/kernel-paper.toml: the kernel kind with threshold 1 (a bound,
+    /// not a χ² quantile), no Kalman filter, the candidates as the faults, and a
+    /// detector whose faults are phi1 and phi2.
+    #[test]
+    fn the_paper_example_builds_the_kernel_detector() {
+        let cfg = crate::parse(EXAMPLE).unwrap();
+        let c = &cfg.channels[0];
+        assert_eq!(c.detector_kind, crate::DetectorKind::Kernel);
+        assert_eq!(c.alarm.threshold, 1.0);
+        assert_eq!(c.threshold_source, ThresholdSource::Bounded);
+        assert_eq!(c.statistic_dof, 1);
+        assert!(c.consistency.is_none());
+        assert_eq!(c.fault_names, ["phi1", "phi2"]);
+        let k = c.kernel.as_ref().unwrap();
+        assert_eq!((k.model.e.nrows(), k.model.e.ncols()), (5, 3));
+        assert_eq!((k.model.c.nrows(), k.model.b.ncols()), (4, 1));
+        assert_eq!(k.model.a[(2, 1)], -6.2354);
+        let mut paper = glrmon_core::KernelSettings::paper_example(0.001);
+        paper.output_noise = 1.0;
+        assert!((k.settings.state_noise - 0.2 * 5.0_f64.sqrt()).abs() < 1e-15);
+        paper.state_noise = k.settings.state_noise;
+        assert_eq!(k.settings, paper);
+        let det = c.detector().unwrap();
+        assert_eq!(det.kind(), "kernel");
+        let names: Vec<&str> = det
+            .faults()
+            .faults()
+            .iter()
+            .map(|f| f.name.as_str())
+            .collect();
+        assert_eq!(names, ["phi1", "phi2"]);
+        let built = c.kernel_detector().unwrap();
+        assert_eq!(built.candidates()[1].lipschitz, 402.25_f64.sqrt());
+    }
+
+    /// Left out, the kernel settings take the paper's values for n⋆ = 2 (rates 1, 2,
+    /// ω̄ = 2.5, N = n⋆, ω = 1, θ_a = 0.7 × |det Γ(∞)| = 0.7, rearm 5 s); without
+    /// candidates the detector still runs, with one fault `f`.
+    #[test]
+    fn kernel_defaults_are_the_papers() {
+        let mut text = EXAMPLE.to_owned();
+        for line in [
+            "rates = [1.0, 2.0]\n",
+            "omega_bar = 2.5\n",
+            "order = 2\n",
+            "detection_rate = 1.0\n",
+            "activation = 0.7\n",
+            "rearm = 5.0\n",
+        ] {
+            assert!(text.contains(line), "{line}");
+            text = text.replacen(line, "", 1);
+        }
+        let cfg = crate::parse(&text).unwrap();
+        let s = &cfg.channels[0].kernel.as_ref().unwrap().settings;
+        assert_eq!(s.estimator_rates, [1.0, 2.0]);
+        assert_eq!(
+            (s.omega_bar, s.kernel_order, s.detection_rate),
+            (2.5, 2, 1.0)
+        );
+        assert!((s.activation - 0.7).abs() < 1e-12, "{}", s.activation);
+        assert_eq!(s.rearm, 5.0);
+        let cut = text.find("[[channels.kernel.candidates]]").unwrap();
+        let end = text.find("[channels.simulation]").unwrap();
+        let bare = format!("{}{}", &text[..cut], &text[end..]);
+        let cfg = crate::parse(&bare).unwrap();
+        assert_eq!(cfg.channels[0].fault_names, ["f"]);
+        let det = cfg.channels[0].detector().unwrap();
+        assert_eq!(det.faults().len(), 1);
+    }
+
+    /// Each mistake is refused with the path of its field.
+    #[test]
+    fn kernel_mistakes_name_their_field() {
+        let cases = [
+            (
+                edited("\"cos(x3)\", \"cos(0.5*x4)\"]", "\"cos(x3)\"]"),
+                vec![
+                    "kernel.candidates[0].f",
+                    "has 2 expressions, expected p⋆ = 3",
+                ],
+            ),
+            (
+                edited("\"cos(0.5*x4)\"", "\"cos(0.5*x5)\""),
+                vec![
+                    "kernel.candidates[0].f[2]",
+                    "candidate \"phi1\"",
+                    "\"x5\"",
+                    "5 states: x0..x4",
+                ],
+            ),
+            (
+                edited("\"x1 + x2\", \"cos", "\"x1[-1] + x2\", \"cos"),
+                vec!["kernel.candidates[0].f[0]", "lags not allowed"],
+            ),
+            (
+                edited("\"sin(0.5*x4)\"", "\"sin(0.5*p0)\""),
+                vec!["kernel.candidates[1].f[2]", "\"p0\""],
+            ),
+            (
+                edited("inputs = [\"10*sin", "inputs = [\"t + 10*sin"),
+                vec!["simulation.inputs[0]", "\"t\""],
+            ),
+            (
+                edited("E = [\n  [-0.0395", "Ex = [\n  [-0.0395"),
+                vec!["unknown field `Ex`"],
+            ),
+            (
+                edited("  [0.0, -0.2081, 0.0],\n]", "]"),
+                vec!["kernel.E", "has 4 rows, expected n = 5"],
+            ),
+            (
+                edited("output_noise = 1.0\nstate_noise = 0.4472135954999579\n", ""),
+                vec!["kernel.floor", "zero noise bounds"],
+            ),
+            (
+                edited("output_noise = 1.0", "output_noise = -1.0"),
+                vec!["kernel.output_noise", "non-negative"],
+            ),
+            (
+                edited("activation = 0.7", "activation = 1.5"),
+                vec!["kernel.activation", "not below the limit"],
+            ),
+            (
+                edited("rates = [1.0, 2.0]", "rates = [1.0]"),
+                vec!["kernel.rates", "n⋆ = 2"],
+            ),
+            (
+                edited("name = \"phi2\"", "name = \"phi1\""),
+                vec!["kernel.candidates[1].name", "duplicate"],
+            ),
+            (
+                edited(
+                    "detector = \"kernel\"",
+                    "detector = \"kernel\"\nfalse_alarm = 1e-4",
+                ),
+                vec!["glr.false_alarm", "no probability law"],
+            ),
+            (
+                edited(
+                    "[channels.glr]",
+                    "[[channels.faults]]\nname = \"b\"\nkind = \"sensor_bias\"\noutput = 0\n\n[channels.glr]",
+                ),
+                vec!["faults", "leave `[[channels.faults]]` out"],
+            ),
+        ];
+        for (text, needles) in cases {
+            let err = refused(&text);
+            for needle in needles {
+                assert!(err.contains(needle), "{needle}: {err}");
+            }
+        }
+        let err = refused(&EXAMPLE.replacen("E = [\n  [-0.0395", "# E = [\n#  [-0.0395", 1)
+            .replacen("  [0.0, 0.0031, 0.0],\n  [0.0, 1.8255, -0.5],\n  [-1.9042, -0.9494, -1.0],\n  [0.0, -0.2081, 0.0],\n]\noutput", "output", 1));
+        assert!(
+            err.contains("kernel.E") && err.contains("is required"),
+            "{err}"
+        );
+    }
+
+    /// The kernel kind needs the continuous-time model: a discrete-time one (`F`) is
+    /// refused at `model.F`; `[channels.kernel]` is refused for another kind, and the
+    /// kind without it.
+    #[test]
+    fn the_kernel_kind_needs_the_continuous_time_model_and_its_table() {
+        let discrete = r#"
+[[channels]]
+name = "plane"
+[channels.model]
+F = [[0.9, 0.0], [0.1, 0.8]]
+G = [[1.0], [0.0]]
+H = [[1.0, 0.0], [0.0, 1.0]]
+Q = 0.01
+R = 0.01
+[channels.glr]
+detector = "kernel"
+[channels.kernel]
+E = [[1.0], [0.0]]
+output_noise = 0.1
+"#;
+        let err = refused(discrete);
+        assert!(
+            err.contains("model.F") && err.contains("continuous-time model"),
+            "{err}"
+        );
+        let err = refused(&edited(
+            "[channels.glr]\ndetector = \"kernel\"",
+            "[[channels.faults]]\nname = \"b\"\nkind = \"sensor_bias\"\noutput = 0\n\n\
+             [channels.glr]\ndetector = \"glr\"",
+        ));
+        assert!(
+            err.contains("kernel") && err.contains("applies to `glr.detector = \"kernel\"`"),
+            "{err}"
+        );
+        let cut = EXAMPLE.find("\n[channels.kernel]\n").unwrap();
+        let end = EXAMPLE.find("\n[channels.simulation]\n").unwrap();
+        let err = refused(&format!("{}{}", &EXAMPLE[..cut], &EXAMPLE[end..]));
+        assert!(err.contains("needs `[channels.kernel]`"), "{err}");
     }
 }

@@ -164,8 +164,9 @@ pub fn set_calibrated(
 /// then set to the same false-alarm probability per sample, `false_alarm` if given,
 /// else the configured one (10⁻⁴ when none is given), since a threshold set for one kind's
 /// statistic (`threshold`, `[channels.glr.calibrated]`) means nothing for another's;
-/// `[channels.parity]`, `[channels.observer]`, `[channels.rls]` and `[channels.cusum]`
-/// are removed for kinds they do not apply to, and a residual kind's `evaluation` is
+/// `[channels.parity]`, `[channels.observer]`, `[channels.rls]`, `[channels.cusum]` and
+/// `[channels.kernel]` are removed for kinds they do not apply to (the `kernel` kind,
+/// whose threshold is the bound 1, gets no `false_alarm`), and a residual kind's `evaluation` is
 /// its χ² test (a windowed energy has no law to set a threshold from); the CUSUM's
 /// magnitudes are
 /// `cusum_magnitudes` where the channel has no `[channels.cusum]`. Returns the edited
@@ -222,6 +223,9 @@ pub fn set_detector(
         );
         table.insert("cusum", toml_edit::Item::Table(cusum));
     }
+    if kind != DetectorKind::Kernel {
+        table.remove("kernel");
+    }
     if !matches!(kind, DetectorKind::Fdf | DetectorKind::Uio) {
         table.remove("observer");
     } else if kind == DetectorKind::Uio
@@ -252,7 +256,10 @@ pub fn set_detector(
     for key in ["threshold", "calibrated", "threshold_mode"] {
         glr.remove(key);
     }
-    if let Some(p) = false_alarm {
+    if kind == DetectorKind::Kernel {
+        // Its threshold is the bound 1, not a false-alarm probability.
+        glr.remove("false_alarm");
+    } else if let Some(p) = false_alarm {
         glr.insert("false_alarm", toml_edit::value(p));
     } else if explicit && !glr.contains_key("false_alarm") {
         glr.insert("false_alarm", toml_edit::value(1e-4));

@@ -41,8 +41,9 @@ mod validate;
 pub mod write;
 
 pub use crate::channel::{
-    Channel, Columns, Controller, DEFAULT_DIAGNOSIS_ALPHA, DiagnosisSettings, ObserverSettings,
-    ResidualKind, RlsChannelSettings, SimulationPlan, ThresholdSource,
+    Channel, Columns, Controller, DEFAULT_DIAGNOSIS_ALPHA, DiagnosisSettings, KernelCandidate,
+    KernelChannelSettings, ObserverSettings, ResidualKind, RlsChannelSettings, SimulationPlan,
+    ThresholdSource,
 };
 pub use crate::config::{ChannelChoiceError, Config, RELOADABLE_GLR_KEYS};
 pub use crate::covariance::PSD_TOLERANCE;

@@ -11,7 +11,7 @@ use crate::limits;
 
 /// The sections of a file, in the order of the reference: (TOML header, schema
 /// definition, what it is for).
-const SECTIONS: [(&str, &str); 21] = [
+const SECTIONS: [(&str, &str); 23] = [
     ("[zenoh]", "ZenohSpec"),
     ("[daemon]", "DaemonSpec"),
     ("[recording]", "RecordingSpec"),
@@ -33,6 +33,8 @@ const SECTIONS: [(&str, &str); 21] = [
     ("[channels.parity]", "ParitySpec"),
     ("[channels.observer]", "ObserverSpec"),
     ("[channels.rls]", "RlsSpec"),
+    ("[channels.kernel]", "KernelSpec"),
+    ("[[channels.kernel.candidates]]", "KernelCandidateSpec"),
 ];
 
 /// The text of docs/CONFIG.md.
@@ -397,6 +399,8 @@ name = "tank"
 [channels.parity]       #   optional, detector = "parity": order, evaluation
 [channels.observer]     #   optional, detector = "fdf" or "uio": gains, evaluation
 [channels.rls]          #   optional, detector = "rls": forgetting, evaluation
+[channels.kernel]       #   with detector = "kernel": E, noise bounds, kernels
+[[channels.kernel.candidates]] # optional: candidate fault functions
 ```
 
 A channel's sub-tables may also be written inline, e.g.

@@ -294,7 +294,8 @@ pub struct ChannelSpec {
     pub columns: Option<ColumnsSpec>,
     /// `[[channels.faults]]`: the fault dictionary, one table per fault (at most 128
     /// after the `all_sensors`/`all_actuators` shortcuts). Default: none (a channel
-    /// without faults is refused after parsing).
+    /// without faults is refused after parsing, except a `kernel` one, whose faults are
+    /// its candidates and which takes none here).
     #[serde(default)]
     pub faults: Vec<FaultSpec>,
     /// `[channels.glr]`: GLR window, threshold, alarm and isolation settings.
@@ -325,6 +326,85 @@ pub struct ChannelSpec {
     /// `[channels.cusum]`: the CUSUM detector (`glr.detector = "cusum"`). Required
     /// with it.
     pub cusum: Option<CusumSpec>,
+    /// `[channels.kernel]`: the kernel deadbeat detector (`glr.detector = "kernel"`):
+    /// its fault channels E, noise bounds, kernels and candidate fault functions.
+    /// Required with it.
+    pub kernel: Option<KernelSpec>,
+}
+
+/// `[channels.kernel]`: the kernel-based deadbeat fault detection and isolation of Li,
+/// Boem, Pin & Parisini (fast-convergent FDI), for `glr.detector = "kernel"`: the
+/// continuous-time plant dx/dt = A x + B u + E f(t, x, u) + d_x, y = H x + d_y (the
+/// model's `A`, `B`, `H`, with the channel's `period`; `Q`/`Qc` and `R` are required
+/// by `[channels.model]` but unused) with noises bounded in Euclidean norm,
+/// ‖d_x‖ ≤ `state_noise`, ‖d_y‖ ≤ `output_noise`. A deadbeat estimate of the state,
+/// exact after a finite time and insensitive to the fault, feeds the fault's image
+/// through a bilateral kernel, r_FD, compared with the worst-case image σ_FD of the
+/// noise within its bounds: the statistic is r_FD/(σ_FD + `floor`) and its threshold
+/// 1 (no false alarm while the noises stay within their bounds, up to the sampling
+/// error `floor` covers). After a detection, each candidate fault function φᵢ is
+/// excluded once its isolation residual exceeds its threshold; the one left is
+/// isolated. Detection and isolation only: no magnitude, no onset search. The
+/// channel's faults are the candidates (`[[channels.faults]]` is not given); without
+/// candidates, one fault named `f`.
+#[derive(Debug, Clone, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct KernelSpec {
+    /// E: the fault channels, n×p⋆ (rows; p⋆ < n fault functions enter the state as
+    /// E f); H E must have full column rank (the method's Assumption 1). Required.
+    #[serde(rename = "E")]
+    pub e: Option<Vec<Vec<f64>>>,
+    /// d̄_y ≥ 0: the bound on the output noise's Euclidean norm, in output units.
+    /// Default 0. At least one of `output_noise`, `state_noise` and `floor` must be
+    /// positive.
+    pub output_noise: Option<f64>,
+    /// d̄_x ≥ 0: the bound on the state noise's Euclidean norm, in state units per
+    /// second. Default 0.
+    pub state_noise: Option<f64>,
+    /// An absolute floor (≥ 0) added to the detection and isolation thresholds, for the
+    /// sampling error the continuous-time bounds do not cover (and noise-free models,
+    /// whose bounds are 0). Default 0.
+    pub floor: Option<f64>,
+    /// ω_h, h = 1…n⋆: the deadbeat estimator's kernel rates, one per state of the
+    /// fault-free part (n⋆ = n − p⋆), distinct and positive, in 1/s. Default
+    /// 1, 2, …, n⋆ (the paper's choice for n⋆ = 2).
+    pub rates: Option<Vec<f64>>,
+    /// ω̄ > 0 of the estimator's kernels, in 1/s. Default 2.5 (the paper's).
+    pub omega_bar: Option<f64>,
+    /// N ≥ n⋆: the order of the estimator's kernels. Default n⋆.
+    pub order: Option<usize>,
+    /// ω > 0: the rate of the detection and isolation kernel, in 1/s; the statistic
+    /// forgets like e^{−ωt}. Default 1 (the paper's).
+    pub detection_rate: Option<f64>,
+    /// θ_a > 0: the estimate is used once |det Γ(t)| ≥ θ_a; |det Γ(t)| tends to a
+    /// limit set by the rates, which θ_a must stay below. Default 0.7 × the limit (the
+    /// paper's 0.7 for the rates 1, 2, whose limit is 1).
+    pub activation: Option<f64>,
+    /// Seconds (> 0) the statistic must stay at or below 1 before a new detection may
+    /// open a new isolation episode. Default 5 (the paper's).
+    pub rearm: Option<f64>,
+    /// `[[channels.kernel.candidates]]`: the candidate fault functions of the
+    /// isolation, one table each. Default: none (detection only, one fault `f`).
+    #[serde(default)]
+    pub candidates: Vec<KernelCandidateSpec>,
+}
+
+/// `[[channels.kernel.candidates]]`: a candidate fault function φ(t, x, u) ∈ ℝ^{p⋆},
+/// with its Lipschitz constant in x.
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct KernelCandidateSpec {
+    /// Unique name, the fault's name in alarms and isolation results (the rules of
+    /// fault names). Required.
+    pub name: String,
+    /// L ≥ 0: the Lipschitz constant of φ in x, ‖φ(t, x, u) − φ(t, x', u)‖ ≤
+    /// L‖x − x'‖, which scales the candidate's isolation threshold. Required.
+    pub lipschitz: f64,
+    /// φ: one expression per fault channel (p⋆, the columns of `E`) of the estimated
+    /// state `x0` … `x{n−1}` (0-based), the inputs `u<i>` and the time `t` in seconds
+    /// (k·`period`), with the functions and constants of fault columns (no lags, no
+    /// `k`, no `p<i>`), e.g. `["x1 + x2", "cos(x3)", "cos(0.5*x4)"]`. Required.
+    pub f: Vec<String>,
 }
 
 /// `[channels.cusum]`: Page's CUSUM on the Kalman innovation, the optimal sequential
@@ -686,11 +766,13 @@ pub struct GlrSpec {
     #[serde(default = "default_min_lag")]
     pub min_lag: usize,
     /// Explicit threshold λ on the GLR statistic l_k (eq. (35)). Default: none (set
-    /// from `false_alarm`).
+    /// from `false_alarm`; 1 for the `kernel` detector, whose statistic r_FD/σ_FD
+    /// has no probability law).
     pub threshold: Option<f64>,
     /// Target false-alarm probability per sample (default 10⁻⁴ when no threshold is
     /// given): λ is the χ²(m) upper quantile at α/(w − s) (Bonferroni over the window),
-    /// or at α with `threshold_mode = "chi2"`.
+    /// or at α with `threshold_mode = "chi2"`. Not for the `kernel` detector (no
+    /// probability law: its threshold 1 is a bound).
     pub false_alarm: Option<f64>,
     /// How `false_alarm` becomes λ: `bonferroni` (default; a conservative bound) or
     /// `chi2` (the per-onset quantile; optimistic: the maximum over the window exceeds
@@ -709,8 +791,10 @@ pub struct GlrSpec {
     /// `[channels.observer]`) or `rls` (parameter estimation, `[channels.rls]`): these
     /// four detect only (no magnitude, no isolation); `cusum` (Page's CUSUM for faults
     /// of known magnitude, `[channels.cusum]`) keeps the GLR's magnitudes and isolation;
-    /// alarms carry the first sample of the statistic's evidence as r̂.
-    #[schemars(extend("enum" = ["glr", "chi2", "cusum", "parity", "fdf", "uio", "rls"]))]
+    /// `kernel` (the kernel deadbeat detector of a continuous-time model,
+    /// `[channels.kernel]`: threshold 1, isolation among candidate fault functions, no
+    /// magnitude); alarms carry the first sample of the statistic's evidence as r̂.
+    #[schemars(extend("enum" = ["glr", "chi2", "cusum", "parity", "fdf", "uio", "rls", "kernel"]))]
     pub detector: Option<String>,
     /// Hysteresis h in [0, 1): an alarm episode ends below λ(1 − h). Default 0.1.
     #[serde(default = "default_hysteresis")]

@@ -140,7 +140,7 @@ input = 0
 # threshold = 20.0                   # explicit lambda; default: from false_alarm
 # false_alarm = 1e-4                 # per sample
 # threshold_mode = "bonferroni"      # bonferroni | chi2
-# detector = "glr"                   # glr | chi2 | cusum | parity | fdf | uio | rls
+# detector = "glr"                   # glr | chi2 | cusum | parity | fdf | uio | rls | kernel
 # hysteresis = 0.1
 # clear_samples = 1
 # episode_end = "fault_gone"         # fault_gone | below_threshold
@@ -189,6 +189,23 @@ input = 0
 # excitation = 1e-6
 # evaluation = "chi2"                # chi2 | energy
 # energy_window = 10
+#
+# [channels.kernel]                  # detector = "kernel" (model.A, B with period)
+# E = [[1.0], [0.0]]                 # fault channels (n x p*), required
+# output_noise = 0.05                # bound on |d_y|; default 0
+# state_noise = 0.0                  # bound on |d_x|; default 0
+# floor = 1e-3                       # added to the thresholds; default 0
+# rates = [1.0]                      # one per state of n - p*; default 1, 2, ...
+# omega_bar = 2.5
+# order = 1                          # N; default n - p*
+# detection_rate = 1.0               # omega
+# activation = 0.7                   # default: 0.7 x its limit for the rates
+# rearm = 5.0                        # seconds below 1 before a new episode
+#
+# [[channels.kernel.candidates]]     # candidate fault functions; faults = candidates
+# name = "stuck"
+# lipschitz = 1.0
+# f = ["x0"]                         # one per column of E, of x<i>, u<i>, t
 
 # [channels.simulation]              # glrmon simulate; expressions of k
 # inputs = ["sin(0.05*k)"]           # default: 0

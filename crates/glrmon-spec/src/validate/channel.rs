@@ -40,8 +40,16 @@ impl Validator {
             .as_ref()
             .and_then(|sc| self.scaling(prefix, sc, dims));
         let columns = self.columns(prefix, spec.columns.as_ref(), dims);
-        let (faults, fault_paths) =
-            self.faults(prefix, spec, dims, (&m.g, &m.j), scaling.as_ref(), &columns);
+        let (faults, fault_paths) = if kind == DetectorKind::Kernel {
+            self.kernel_faults(prefix, spec)
+        } else {
+            self.faults(prefix, spec, dims, (&m.g, &m.j), scaling.as_ref(), &columns)
+        };
+        let kernel = if kind == DetectorKind::Kernel {
+            self.kernel(prefix, spec, &m)
+        } else {
+            None
+        };
         if self.errors.len() > before {
             return None;
         }
@@ -94,16 +102,19 @@ impl Validator {
                 let (settings, dof) = self.rls(prefix, spec.rls.as_ref(), &lpv, cross.as_ref())?;
                 (rls, residual_dof) = (Some(settings), dof);
             }
+            DetectorKind::Kernel => residual_dof = 1,
             DetectorKind::Glr | DetectorKind::Chi2 | DetectorKind::Cusum => {}
         }
         for (table, given, kinds) in [
             ("parity", spec.parity.is_some(), "\"parity\""),
             ("observer", spec.observer.is_some(), "\"fdf\" or \"uio\""),
             ("rls", spec.rls.is_some(), "\"rls\""),
+            ("kernel", spec.kernel.is_some(), "\"kernel\""),
         ] {
             let applies = match table {
                 "parity" => kind == DetectorKind::Parity,
                 "rls" => kind == DetectorKind::Rls,
+                "kernel" => kind == DetectorKind::Kernel,
                 _ => matches!(kind, DetectorKind::Fdf | DetectorKind::Uio),
             };
             if given && !applies {
@@ -249,6 +260,7 @@ impl Validator {
             observer,
             rls,
             cusum_magnitudes,
+            kernel,
             isolation_thresholds: glr
                 .calibrated
                 .as_ref()
@@ -277,6 +289,12 @@ impl Validator {
     /// here rather than when the daemon starts; for `parity`, the χ² threshold set
     /// again if the detector's parity space differs from the one validated.
     fn residual_generator(&mut self, prefix: &str, channel: &mut Channel) {
+        if channel.detector_kind == DetectorKind::Kernel {
+            if let Err(err) = channel.kernel_detector() {
+                self.kernel_error(prefix, &err);
+            }
+            return;
+        }
         let built = if channel.detector_kind == DetectorKind::Parity {
             channel.parity_detector().map(|det| {
                 let dof = det.dof();

@@ -223,6 +223,26 @@ impl Validator {
                 "applies to `false_alarm`, not to an explicit `threshold`".into(),
             );
         }
+        if detector_kind == DetectorKind::Kernel {
+            for (key, given) in [
+                ("false_alarm", glr.false_alarm.is_some()),
+                ("threshold_mode", glr.threshold_mode.is_some()),
+            ] {
+                if given {
+                    self.error(
+                        gpath(key),
+                        "the `kernel` detector's statistic r_FD/σ_FD has no probability law \
+                         to set a threshold from: its threshold is 1, which no noise within \
+                         `kernel.output_noise` and `kernel.state_noise` can cross (leave \
+                         `false_alarm` out, or give `threshold`)"
+                            .into(),
+                    );
+                }
+            }
+            if glr.threshold.is_none() && glr.calibrated.is_none() {
+                return (1.0, ThresholdSource::Bounded);
+            }
+        }
         if let Some(t) = glr.threshold {
             if !positive(t) {
                 self.error(

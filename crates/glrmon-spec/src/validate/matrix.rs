@@ -91,7 +91,7 @@ impl Validator {
         }
     }
 
-    fn dense(&mut self, path: &str, rows: &[Vec<f64>]) -> Option<DMatrix<f64>> {
+    pub(super) fn dense(&mut self, path: &str, rows: &[Vec<f64>]) -> Option<DMatrix<f64>> {
         // An empty matrix (`[]`, `[[]]`) is never meant: every matrix of the model has
         // at least one row and one column, and an empty one (`H = []`) would otherwise
         // get through to nalgebra's products unchecked.

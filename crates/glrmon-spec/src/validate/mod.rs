@@ -10,6 +10,7 @@ mod deployment;
 mod diagnosis;
 mod faults;
 mod glr;
+mod kernel;
 mod matrix;
 mod model;
 mod parity;
