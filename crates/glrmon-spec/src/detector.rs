@@ -747,6 +747,23 @@ mod kernel_tests {
         assert_eq!(det.candidates()[which].name, "phi2", "at k = {k_i}");
     }
 
+    /// `glrmon evaluate --detector kernel` on a kernel channel: the edit gives the
+    /// kind no `false_alarm` (its threshold is the bound 1) and keeps its table.
+    #[test]
+    fn setting_the_kernel_kind_keeps_its_bound() {
+        let text = crate::edit::set_detector(
+            EXAMPLE,
+            "plane",
+            crate::DetectorKind::Kernel,
+            Some(1e-3),
+            None,
+        )
+        .unwrap();
+        assert!(!text.contains("false_alarm") && text.contains("[channels.kernel]"));
+        let cfg = crate::parse(&text).unwrap();
+        assert_eq!(cfg.channels[0].threshold_source, ThresholdSource::Bounded);
+    }
+
     /// Each mistake is refused with the path of its field.
     #[test]
     fn kernel_mistakes_name_their_field() {
