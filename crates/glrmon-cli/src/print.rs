@@ -39,6 +39,9 @@ const MAX_LISTED: usize = 5;
 /// the others with the largest minmax statistics, up to [`MAX_LISTED`] in all, and
 /// says how many it left out.
 fn isolation_fields(isolation: &[IsolationResult], faults: &[String], magnitude: &[f64]) -> String {
+    if isolation.iter().any(|t| t.excluded.is_some()) {
+        return exclusion_fields(isolation);
+    }
     let isolated: Vec<String> = isolation
         .iter()
         .filter(|i| i.isolated)
@@ -103,6 +106,41 @@ fn isolation_fields(isolation: &[IsolationResult], faults: &[String], magnitude:
         "isolated=[{}]{ambiguous} magnitude=[{mag}] minmax=[{minmax}]{more}",
         isolated.join(", ")
     )
+}
+
+/// `isolated=[…] excluded=[…] r_FI=[…]` of a kind that isolates by exclusion (the
+/// kernel method): each candidate's isolation residual over its threshold.
+fn exclusion_fields(isolation: &[IsolationResult]) -> String {
+    let names = |keep: fn(&IsolationResult) -> bool| {
+        isolation
+            .iter()
+            .filter(|t| keep(t))
+            .map(|t| Escaped(&t.fault).to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let isolated = names(|t| t.isolated);
+    let excluded = names(|t| t.excluded == Some(true));
+    let mut tests = String::new();
+    for (n, t) in isolation.iter().take(MAX_LISTED).enumerate() {
+        let sep = if n == 0 { "" } else { ", " };
+        let _ = write!(
+            tests,
+            "{sep}{} {}/{}",
+            Escaped(&t.fault),
+            self::magnitude(t.minmax),
+            self::magnitude(t.threshold)
+        );
+    }
+    let more = if isolation.len() > MAX_LISTED {
+        format!(
+            " (+{} more: --json lists all)",
+            isolation.len() - MAX_LISTED
+        )
+    } else {
+        String::new()
+    };
+    format!("isolated=[{isolated}] excluded=[{excluded}] r_FI=[{tests}]{more}")
 }
 
 fn alarm_line(a: &Alarm) -> String {
@@ -235,6 +273,28 @@ pub(crate) fn magnitude(v: f64) -> String {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn exclusion_tests_print_residuals_over_thresholds() {
+        use glrmon_wire::IsolationResult;
+        let test = |fault: &str, r: f64, s: f64, excluded: bool, isolated: bool| IsolationResult {
+            excluded: Some(excluded),
+            fault: fault.into(),
+            minmax: r,
+            sensitivity: r,
+            threshold: s,
+            isolated,
+            ambiguous_with: Vec::new(),
+        };
+        let tests = [
+            test("phi1", 0.7697, 0.7689, true, false),
+            test("phi2", 1.223e-4, 2.981, false, true),
+        ];
+        assert_eq!(
+            super::isolation_fields(&tests, &["phi1".into(), "phi2".into()], &[0.0, 0.0]),
+            "isolated=[phi2] excluded=[phi1] r_FI=[phi1 0.7697/0.7689, phi2 1.223e-4/2.981]"
+        );
+    }
+
     #[test]
     fn magnitudes_keep_four_significant_digits() {
         assert_eq!(super::magnitude(1.0), "1.000");

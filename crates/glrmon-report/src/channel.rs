@@ -38,6 +38,8 @@ pub(crate) struct ChannelState {
     pub(crate) threshold: ColumnId,
     pub(crate) innovation: Vec<ColumnId>,
     pub(crate) magnitude: Vec<ColumnId>,
+    /// The kind's own residual (`stat.residual`), first [`MAX_COMPONENTS`] values.
+    pub(crate) residual: Vec<ColumnId>,
     /// The episode's θ̂ (`stat.episode.magnitude`), a gap outside episodes.
     pub(crate) episode_magnitude: Vec<ColumnId>,
     /// Largest ε_k / θ̂ length seen, including components beyond [`MAX_COMPONENTS`].
@@ -78,6 +80,7 @@ impl ChannelState {
             threshold,
             innovation: Vec::new(),
             magnitude: Vec::new(),
+            residual: Vec::new(),
             episode_magnitude: Vec::new(),
             innovation_len: 0,
             magnitude_len: 0,
@@ -123,6 +126,7 @@ impl ChannelState {
             &s.innovation,
         );
         push_vector(&mut self.grid, &mut self.magnitude, slot, s.k, &s.magnitude);
+        push_vector(&mut self.grid, &mut self.residual, slot, s.k, &s.residual);
         let episode = s.episode.as_ref().map_or(&[][..], |e| &e.magnitude[..]);
         if !episode.is_empty() || !self.episode_magnitude.is_empty() {
             push_vector(

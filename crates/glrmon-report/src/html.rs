@@ -326,6 +326,7 @@ fn channel_section(
     if ch.stats > 0 {
         s.push_str(&innovation_figures(ch, &t_axis, fig_id));
         s.push_str(&glr_figure(ch, &t_axis, fig_id));
+        s.push_str(&residual_bound_figures(ch, &t_axis, fig_id));
         s.push_str(&onset_figure(ch, &t_axis, fig_id));
         s.push_str(&magnitude_figures(ch, &t_axis, fig_id));
     } else {
@@ -688,6 +689,54 @@ fn glr_figure(ch: &ChannelState, t_axis: &TimeAxis, fig_id: &mut usize) -> Strin
         caption.push_str(" No l<sub>k</sub> values (no onset was ever admissible).");
     }
     figure(&fig, fig_id, &caption)
+}
+
+/// Each residual the detector kind pairs with a threshold (the kernel method's r_FD
+/// with σ_FD, r_FI,i with σ_FI,i), drawn as Li, Boem, Pin & Parisini draw them in
+/// their Figs 2-6: the residual and its time-varying threshold.
+fn residual_bound_figures(ch: &ChannelState, t_axis: &TimeAxis, fig_id: &mut usize) -> String {
+    let Some(labels) = &ch.labels else {
+        return String::new();
+    };
+    let mut s = String::new();
+    for bound in &labels.residual_bounds {
+        let (Some(&r), Some(&th)) = (
+            ch.residual.get(bound.residual),
+            ch.residual.get(bound.threshold),
+        ) else {
+            continue;
+        };
+        let (lo, hi) = columns_range(ch, &[r, th]).unwrap_or((0.0, 1.0));
+        let lo = lo.min(0.0);
+        let mut fig = Figure::new(
+            &format!("The {} and its threshold", bound.name),
+            k_axis(ch),
+            Axis::linear(lo, if hi > lo { hi * 1.05 } else { lo + 1.0 }, "residual"),
+            220.0,
+        );
+        fig.set_class("residual-bound");
+        fig.set_secondary_x(t_axis);
+        decorate_alarms(&mut fig, ch);
+        fig.polyline(segments_f64(ch, r), PALETTE[0], 1.2, None);
+        fig.legend(&bound.name, PALETTE[0], Swatch::Line);
+        fig.raw("<g class=\"threshold\">");
+        fig.polyline(segments_f64(ch, th), RED, 1.6, Some("7 4"));
+        fig.raw("</g>");
+        fig.legend(
+            "threshold (worst case of the bounded noise)",
+            RED,
+            Swatch::Dashed,
+        );
+        let caption = format!(
+            "The {} against its threshold, the largest value noise within the configured \
+             bounds could give it (Li, Boem, Pin &amp; Parisini, (32), (37)): above it, a fault \
+             (detection) or a candidate ruled out (isolation). Isolation residuals are 0 \
+             outside an isolation episode.",
+            escape(&bound.name)
+        );
+        s.push_str(&figure(&fig, fig_id, &caption));
+    }
+    s
 }
 
 fn onset_figure(ch: &ChannelState, t_axis: &TimeAxis, fig_id: &mut usize) -> String {

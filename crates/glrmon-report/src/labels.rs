@@ -111,6 +111,19 @@ pub struct FaultLabel {
     pub unit: MagnitudeUnit,
 }
 
+/// A residual of the `stat` records drawn against its threshold, as the kernel
+/// method's papers draw r_FD with σ_FD and r_FI,i with σ_FI,i: positions in
+/// `stat.residual`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ResidualBound {
+    /// What the residual is, for the figure's title (`detection r_FD`).
+    pub name: String,
+    /// Index of the residual in `stat.residual`.
+    pub residual: usize,
+    /// Index of its threshold in `stat.residual`.
+    pub threshold: usize,
+}
+
 /// The names and units of a channel's outputs and faults, in the order of the records'
 /// `innovation` and `magnitude` vectors.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -122,6 +135,9 @@ pub struct ChannelLabels {
     /// Whether the channel has a `[channels.scaling]`: its model works in
     /// (raw − offset)/scale.
     pub scaled: bool,
+    /// The residuals the channel's detector kind pairs with thresholds in
+    /// `stat.residual` (empty for the kinds that do not).
+    pub residual_bounds: Vec<ResidualBound>,
 }
 
 impl ChannelLabels {
@@ -181,6 +197,7 @@ impl ChannelLabels {
             outputs,
             faults,
             scaled: channel.scaling.is_some(),
+            residual_bounds: residual_bounds(channel),
         }
     }
 
@@ -239,6 +256,28 @@ fn one_fault_unit(
         (Some("actuator_gain"), Some(_), _) => MagnitudeUnit::Fraction,
         _ => MagnitudeUnit::Model,
     }
+}
+
+/// The kernel kind's residual layout (docs/WIRE.md): [r_FD, σ_FD, r_FI,1, σ_FI,1, …].
+fn residual_bounds(channel: &Channel) -> Vec<ResidualBound> {
+    if channel.detector_kind != glrmon_spec::DetectorKind::Kernel {
+        return Vec::new();
+    }
+    let mut bounds = vec![ResidualBound {
+        name: "detection r_FD".to_owned(),
+        residual: 0,
+        threshold: 1,
+    }];
+    if let Some(kernel) = &channel.kernel {
+        for (i, candidate) in kernel.candidates.iter().enumerate() {
+            bounds.push(ResidualBound {
+                name: format!("isolation r_FI of {}", candidate.name),
+                residual: 2 + 2 * i,
+                threshold: 3 + 2 * i,
+            });
+        }
+    }
+    bounds
 }
 
 #[cfg(test)]

@@ -15,7 +15,7 @@ pub use evaluation::{
     ComparedKind, Comparison, DecisionError, Evaluation, FaultEvaluation, MinmaxEvaluation,
 };
 pub use histogram::Histogram;
-pub use labels::{ChannelLabels, FaultLabel, MagnitudeUnit, SignalLabel};
+pub use labels::{ChannelLabels, FaultLabel, MagnitudeUnit, ResidualBound, SignalLabel};
 pub use sink::ReportSink;
 
 use std::collections::BTreeMap;

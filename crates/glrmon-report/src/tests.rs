@@ -609,3 +609,50 @@ fn alarmed_channels_first_and_theta_only_after_an_alarm() {
     assert!(magnitude[0].contains("class=\"episode-magnitude\""));
     assert!(magnitude[0].contains("thick: the episode"));
 }
+
+#[test]
+fn residuals_paired_with_thresholds_are_drawn_with_them() {
+    // The kernel kind's layout [r_FD, σ_FD, r_FI,1, σ_FI,1]: one figure per pair, the
+    // residual and its dashed threshold; none for a channel without the labels.
+    let mut report = Report::new(ReportOptions::default());
+    report.label_channel(
+        "plane",
+        ChannelLabels {
+            residual_bounds: vec![
+                ResidualBound {
+                    name: "detection r_FD".into(),
+                    residual: 0,
+                    threshold: 1,
+                },
+                ResidualBound {
+                    name: "isolation r_FI of phi<1>".into(),
+                    residual: 2,
+                    threshold: 3,
+                },
+            ],
+            ..ChannelLabels::default()
+        },
+    );
+    for k in 0..300_u64 {
+        let r = if k < 200 {
+            0.01
+        } else {
+            0.02 * (k - 199) as f64
+        };
+        let Record::Stat(mut s) = stat("plane", k, Some(r / 0.74)) else {
+            unreachable!()
+        };
+        s.residual = vec![r, 0.74, 0.0, 0.5];
+        report.add(&Record::Stat(s));
+        report.add(&stat("other", k, Some(1.0)));
+    }
+    let html = render(&report);
+    let figures = figures_of_class(&html, "residual-bound");
+    assert_eq!(figures.len(), 2);
+    assert!(figures[0].contains("The detection r_FD and its threshold"));
+    assert!(figures[1].contains("phi&lt;1&gt;"), "names are escaped");
+    for f in &figures {
+        assert!(f.contains("class=\"threshold\""));
+        assert!(f.contains("stroke-dasharray"));
+    }
+}

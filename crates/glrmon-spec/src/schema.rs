@@ -823,7 +823,8 @@ pub struct GlrSpec {
     /// worth of them (a dip of one window's length happens in a long episode).
     pub gone_samples: Option<u32>,
     /// Samples between the alarm (raised at the crossing) and its isolation update; 0
-    /// sends none. Default: n (the number of states).
+    /// sends none. Default: n (the number of states); 0 for `detector = "kernel"`,
+    /// which sends an update at each exclusion of a candidate instead.
     pub isolation_delay: Option<u32>,
     /// Type-I probability of each isolation (minmax) test, in (0, 1). Default 0.01.
     #[serde(default = "default_isolation_alpha")]

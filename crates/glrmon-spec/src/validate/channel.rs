@@ -249,7 +249,14 @@ impl Validator {
             },
             threshold_source: detection.threshold_source,
             episode_end: detection.episode_end,
-            isolation_delay: glr.isolation_delay.unwrap_or(n as u32),
+            // The kernel kind publishes an update at each exclusion: no fixed delay.
+            isolation_delay: glr
+                .isolation_delay
+                .unwrap_or(if kind == DetectorKind::Kernel {
+                    0
+                } else {
+                    n as u32
+                }),
             isolation_alpha: glr.isolation_alpha,
             isolation_onsets: detection.isolation_onsets,
             detector_kind: detection.detector_kind,
