@@ -1199,9 +1199,18 @@ mod tests {
 
     /// The kernel method's exclusion reaches the records: on the noise-free example of
     /// Li, Boem, Pin & Parisini (fault φ₂ from 5 s) one alarm at the detection, then an
-    /// `isolation` update at the sample φ₁ is excluded, naming φ₂ isolated.
+    /// `isolation` update at the sample φ₁ is excluded, naming φ₂ isolated. At the
+    /// bound's threshold 1 and at a lower (calibrated) one, whose alarm comes earlier and
+    /// opens the isolation episode itself (`Detector::follow`).
     #[test]
     fn kernel_exclusion_is_published_as_an_isolation_update() {
+        let first = kernel_alarm_and_update(1.0);
+        let lower = kernel_alarm_and_update(0.5);
+        assert!(lower < first, "alarm at {lower} below 1, {first} at 1");
+    }
+
+    /// The alarm's k at `threshold`, after the checks of the test above.
+    fn kernel_alarm_and_update(threshold: f64) -> u64 {
         use glrmon_core::{Candidate, CandidateFn, KernelDetector, KernelModel, KernelSettings};
         use glrmon_sim::kernel_example as example;
         use nalgebra::DMatrix;
@@ -1236,7 +1245,7 @@ mod tests {
             Box::new(detector),
             MonitorSettings {
                 tuning: Tuning {
-                    alarm: AlarmSettings::with_threshold(1.0),
+                    alarm: AlarmSettings::with_threshold(threshold),
                     episode_end: EpisodeEnd::BelowThreshold,
                     isolation_delay: 0,
                     isolation_alpha: 0.01,
@@ -1304,6 +1313,7 @@ mod tests {
             })
             .unwrap();
         assert_eq!(last.residual.len(), 11);
+        alarm.k
     }
 
     fn sample(x: &glrmon_sim::SimSample) -> Sample {

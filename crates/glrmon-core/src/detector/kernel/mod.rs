@@ -88,7 +88,8 @@ pub struct KernelSettings {
     /// are 0).
     pub floor: f64,
     /// Seconds the statistic must stay at or below 1 before a new detection may
-    /// start a new isolation episode.
+    /// start a new isolation episode (when no monitor holds the episode through
+    /// [`Detector::follow`]: under a monitor, it ends with the alarm episode).
     pub rearm: f64,
 }
 
@@ -173,6 +174,8 @@ pub struct KernelDetector {
     verdict: KernelVerdict,
     quiet: u64,
     rearm_samples: u64,
+    /// The isolation episode is held open by the monitor's alarm episode.
+    followed: bool,
     revision: u64,
     isolation_tests: Vec<(f64, f64)>,
     next: Option<u64>,
@@ -385,6 +388,7 @@ impl KernelDetector {
             candidates,
             quiet: 0,
             rearm_samples,
+            followed: false,
             revision: 0,
             isolation_tests: vec![(0.0, 0.0); candidate_count],
             next: None,
@@ -433,6 +437,28 @@ impl KernelDetector {
     #[must_use]
     pub fn estimator(&self) -> &DeadbeatEstimator {
         &self.estimator
+    }
+}
+
+impl KernelDetector {
+    /// Opens an isolation episode detected at k: the isolation filters restart at the
+    /// next sample integrated (the paper's reset at T_D, (20)).
+    fn open_episode(&mut self, k: u64) {
+        self.verdict.detected_at = Some(k);
+        self.verdict.excluded_at.fill(None);
+        self.isolation_tests.fill((0.0, 0.0));
+        self.isolation.reset();
+        self.quiet = 0;
+        self.revision += 1;
+    }
+
+    fn close_episode(&mut self) {
+        self.verdict.detected_at = None;
+        self.verdict.excluded_at.fill(None);
+        self.isolation_tests.fill((0.0, 0.0));
+        self.quiet = 0;
+        self.followed = false;
+        self.revision += 1;
     }
 }
 
@@ -526,23 +552,17 @@ impl Detector for KernelDetector {
         out.residual[1] = sigma_fd;
 
         // Episodes: a detection resets the isolation filters (20); the episode ends
-        // after `rearm` seconds at or below the threshold.
+        // after `rearm` seconds at or below the threshold, or, when the monitor holds
+        // it (`follow`), at the end of the monitor's alarm episode.
         if statistic > 1.0 {
             self.quiet = 0;
             if self.verdict.detected_at.is_none() {
-                self.verdict.detected_at = Some(k);
-                self.verdict.excluded_at.fill(None);
-                self.isolation_tests.fill((0.0, 0.0));
-                self.isolation.reset();
-                self.revision += 1;
+                self.open_episode(k);
             }
-        } else if self.verdict.detected_at.is_some() {
+        } else if self.verdict.detected_at.is_some() && !self.followed {
             self.quiet += 1;
             if self.quiet >= self.rearm_samples {
-                self.verdict.detected_at = None;
-                self.verdict.excluded_at.fill(None);
-                self.quiet = 0;
-                self.revision += 1;
+                self.close_episode();
             }
         }
         let m = self.candidates.len();
@@ -590,6 +610,29 @@ impl Detector for KernelDetector {
         Ok(())
     }
 
+    /// The monitor's alarm episode drives the isolation episode: an alarm (at any
+    /// threshold, e.g. a calibrated one below 1) opens one if none is open, and the
+    /// alarm's end closes it. Returns false: the kind follows no onset's evidence,
+    /// and the monitor ends its episodes on the statistic.
+    fn follow(&mut self, onset: Option<u64>) -> bool {
+        match onset {
+            Some(_) => {
+                if self.verdict.detected_at.is_none()
+                    && let Some(k) = self.next.and_then(|n| n.checked_sub(1))
+                {
+                    self.open_episode(k);
+                }
+                self.followed = self.verdict.detected_at.is_some();
+            }
+            None => {
+                if self.followed {
+                    self.close_episode();
+                }
+            }
+        }
+        false
+    }
+
     fn predict_only(&mut self, k: u64) -> Result<(), StepError> {
         Err(StepError::GapNotBridged {
             k,
@@ -605,6 +648,7 @@ impl Detector for KernelDetector {
         self.verdict.excluded_at.fill(None);
         self.isolation_tests.fill((0.0, 0.0));
         self.quiet = 0;
+        self.followed = false;
         self.revision += 1;
         self.next = None;
         self.active_from = None;
