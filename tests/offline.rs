@@ -136,6 +136,13 @@ fn every_shipped_config_validates_with_an_isolability_report_or_says_why_not() {
         if detects_only {
             assert!(out.contains("isolability: not computed (the `"), "{out}");
             assert!(out.contains("detection only"), "{out}");
+        } else if out.contains("detector: kernel — ") {
+            // The kernel kind isolates by exclusion, without Fisher information.
+            assert!(
+                out.contains("isolability: not computed (the `kernel`"),
+                "{out}"
+            );
+            assert!(out.contains("excluding candidate fault functions"), "{out}");
         } else {
             assert!(out.contains("isolability over"), "{out}");
             assert!(out.contains("condition number"), "{out}");
@@ -1065,7 +1072,7 @@ fn evaluate_compares_detector_kinds_side_by_side() {
         String::from_utf8_lossy(&bad.stderr)
     );
     assert!(String::from_utf8_lossy(&bad.stderr).contains(
-        "--detector kalman: not a detector kind (kinds: glr, chi2, cusum, parity, fdf, uio, rls)"
+        "--detector kalman: not a detector kind (kinds: glr, chi2, cusum, parity, fdf, uio, rls, kernel)"
     ));
 }
 
