@@ -1279,3 +1279,80 @@ fn evaluate_shows_the_cusum_fastest_for_its_known_magnitude() {
     assert!(median("cusum") < median("glr"), "{text}");
     assert!((0.2..=3.0).contains(&far("cusum")), "{text}");
 }
+
+/// The kernel kind through the binary: `simulate` injects a candidate fault function
+/// of the state through E, `replay` alarms and isolates it by exclusion, `evaluate`
+/// runs it over seeds (Li, Boem, Pin & Parisini's example at a fiftieth of its noise).
+#[test]
+fn kernel_candidates_simulate_replay_and_evaluate() {
+    let dir = TempDir::new("kernel");
+    let cfg = config("examples/kernel-paper-low-noise.toml");
+    let csv = dir.file("phi2.csv");
+    let jsonl = dir.file("phi2.jsonl");
+    ok(&glrmon(&[
+        "simulate",
+        "--config",
+        &cfg,
+        "--samples",
+        "12000",
+        "--fault",
+        "phi2:1",
+        "--onset",
+        "5000",
+        "--output",
+        &csv,
+    ]));
+    let out = glrmon(&["replay", "--config", &cfg, &csv, "--output", &jsonl]);
+    let text = ok(&out) + &String::from_utf8_lossy(&out.stderr);
+    assert!(text.contains("1 alarm, 0 errors"), "{text}");
+    assert!(text.contains("isolated=[phi2] excluded=[phi1]"), "{text}");
+    let records = std::fs::read_to_string(&jsonl).unwrap();
+    let alarm = records
+        .lines()
+        .find(|l| l.contains("\"type\":\"alarm\""))
+        .expect("an alarm record");
+    let k: u64 = alarm
+        .split("\"k\":")
+        .nth(1)
+        .and_then(|s| s.split(',').next())
+        .and_then(|s| s.parse().ok())
+        .unwrap();
+    assert!((5000..6500).contains(&k), "alarm at {k}");
+    // No fault injected: no alarm.
+    ok(&glrmon(&[
+        "simulate",
+        "--config",
+        &cfg,
+        "--samples",
+        "8000",
+        "--output",
+        &csv,
+    ]));
+    let out = glrmon(&["replay", "--config", &cfg, &csv, "--output", &jsonl]);
+    let text = ok(&out) + &String::from_utf8_lossy(&out.stderr);
+    assert!(text.contains("0 alarms, 0 errors"), "{text}");
+    let out = ok(&glrmon(&[
+        "evaluate",
+        "--config",
+        &cfg,
+        "--fault",
+        "phi2:1",
+        "--runs",
+        "4",
+        "--onset",
+        "5000",
+        "--samples",
+        "12000",
+    ]));
+    assert!(
+        out.contains("phi2 (1.000)                100.0%      4"),
+        "{out}"
+    );
+    let row = out
+        .lines()
+        .rfind(|l| l.starts_with("phi2 "))
+        .expect("the isolation row of phi2");
+    let counts: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(counts[1..3], ["0", "4"], "{out}");
+    assert!(!out.contains("minmax isolation"), "{out}");
+}

@@ -384,6 +384,11 @@ fn minmax_outcomes(
     onset: u64,
     isolation: &[glrmon_wire::IsolationResult],
 ) -> Vec<MinmaxOutcome> {
+    // Exclusion tests (the kernel kind) are no minmax tests: a residual above its
+    // threshold rules its fault out instead of naming it.
+    if isolation.iter().any(|r| r.excluded.is_some()) {
+        return Vec::new();
+    }
     let fisher = mon.detector().fisher_statistics(onset);
     isolation
         .iter()
@@ -422,6 +427,10 @@ pub fn minmax_tests(
     fault: &str,
     runs: &[Run],
 ) -> Vec<MinmaxTest> {
+    // A kind that isolates by exclusion (kernel) has no minmax tests to tabulate.
+    if channel.detector_kind == glrmon_spec::DetectorKind::Kernel {
+        return Vec::new();
+    }
     let injected = channel.fault_names.iter().position(|f| f == fault);
     groups
         .iter()

@@ -183,9 +183,42 @@ pub fn faulty_simulator(
     if faults.is_empty() {
         return Ok(sim);
     }
+    if let Some(kernel) = &channel.kernel {
+        return inject_candidates(sim, channel, kernel, faults, onset);
+    }
     let (names, magnitudes): (Vec<String>, Vec<f64>) = faults.iter().cloned().unzip();
     let magnitude = fault_magnitudes(channel, &names, &magnitudes)?;
     inject(sim, channel, Injection { magnitude, onset })
+}
+
+/// The `kernel` kind's faults: each named candidate φᵢ(t, x, u), times its magnitude,
+/// through the fault channels E sampled by zero-order hold (Ψ = ∫₀ᵀe^{As}ds·E, the
+/// fault held over each period at its value at the sample).
+fn inject_candidates(
+    mut sim: Simulator,
+    channel: &Channel,
+    kernel: &glrmon_spec::KernelChannelSettings,
+    faults: &[(String, f64)],
+    onset: u64,
+) -> Result<Simulator, ChannelError> {
+    let period = kernel.settings.period;
+    let (_, psi) =
+        glrmon_core::model::continuous::zero_order_hold(&kernel.model.a, &kernel.model.e, period)
+            .map_err(|e| SimError::Dimension(format!("the fault channels E: {e}")))?;
+    let mut candidates = kernel.candidates(channel.dims.inputs);
+    for (name, magnitude) in faults {
+        let i = candidates
+            .iter()
+            .position(|c| &c.name == name)
+            .ok_or_else(|| ChannelError::UnknownFault {
+                channel: channel.name.clone(),
+                name: name.clone(),
+                faults: channel.fault_names.clone(),
+            })?;
+        let candidate = candidates.swap_remove(i);
+        sim = sim.with_state_fault(psi.clone(), candidate.function, *magnitude, onset, period)?;
+    }
+    Ok(sim)
 }
 
 #[cfg(test)]
@@ -382,5 +415,29 @@ kind = "all_sensors"
             (mean - 2.0).abs() < 4.0 * (4.0 / f64::from(n)).sqrt(),
             "mean NIS {mean}"
         );
+    }
+
+    /// A kernel channel's candidate is injected as a function of the simulated state:
+    /// the same noise until the onset, then the states part by Ψ·φ(x) (φ₂'s second
+    /// entry, 20e^{−|x₃|}, is far from zero near x₃ = 0).
+    #[test]
+    fn kernel_candidates_are_injected_as_functions_of_the_state() {
+        let cfg = glrmon_spec::parse(include_str!(
+            "../../../config/examples/kernel-paper-low-noise.toml"
+        ))
+        .unwrap();
+        let channel = &cfg.channels[0];
+        let mut clean = faulty_simulator(channel, 3, &[], 0).unwrap();
+        let mut faulty = faulty_simulator(channel, 3, &[("phi2".into(), 1.0)], 100).unwrap();
+        for k in 0..300 {
+            let (a, b) = (clean.next_sample(), faulty.next_sample());
+            if k <= 100 {
+                assert_eq!(a, b, "k = {k}");
+            } else {
+                assert_ne!(a.y, b.y, "k = {k}");
+            }
+        }
+        let err = faulty_simulator(channel, 3, &[("phi3".into(), 1.0)], 100).unwrap_err();
+        assert!(err.to_string().contains("no fault \"phi3\""), "{err}");
     }
 }

@@ -92,6 +92,16 @@ impl SimSample {
     }
 }
 
+/// A fault that is a function of the state ([`Simulator::with_state_fault`]).
+struct StateFault {
+    psi: DMatrix<f64>,
+    function: Box<dyn glrmon_core::CandidateFn>,
+    magnitude: f64,
+    onset: u64,
+    period: f64,
+    value: Vec<f64>,
+}
+
 /// A seeded plant simulator.
 pub struct Simulator {
     model: Box<dyn StateSpace>,
@@ -99,6 +109,8 @@ pub struct Simulator {
     injection: Option<Injection>,
     /// The first sample the injected fault no longer acts on, if it ends.
     fault_end: Option<u64>,
+    /// Faults that are functions of the state (the kernel method's candidates).
+    state_faults: Vec<StateFault>,
     controller: Option<PiController>,
     integral: f64,
     held_control: f64,
@@ -160,6 +172,7 @@ impl Simulator {
             faults: None,
             injection: None,
             fault_end: None,
+            state_faults: Vec::new(),
             controller: None,
             integral: 0.0,
             held_control: 0.0,
@@ -236,6 +249,41 @@ impl Simulator {
     pub fn with_fault_end(mut self, end: u64) -> Self {
         self.fault_end = Some(end);
         self
+    }
+
+    /// Injects a fault that is a function of the state, f_k = θ·φ(t_k, X_k, U_k) with
+    /// t_k = k·`period`, entering the state through `psi` (n × the length of φ) from
+    /// sample `onset` on: X_{k+1} += Ψ f_k (until [`Simulator::with_fault_end`]). For
+    /// a continuous-time fault channel E sampled by zero-order hold, Ψ = ∫₀ᵀe^{As}ds·E:
+    /// the fault held over each period at its value at the sample.
+    ///
+    /// # Errors
+    /// [`SimError::Dimension`] when `psi` does not have n rows.
+    pub fn with_state_fault(
+        mut self,
+        psi: DMatrix<f64>,
+        function: Box<dyn glrmon_core::CandidateFn>,
+        magnitude: f64,
+        onset: u64,
+        period: f64,
+    ) -> Result<Self, SimError> {
+        if psi.nrows() != self.dims.states {
+            return Err(SimError::Dimension(format!(
+                "the state fault's Ψ has {} rows, the model {} states",
+                psi.nrows(),
+                self.dims.states
+            )));
+        }
+        let value = vec![0.0; psi.ncols()];
+        self.state_faults.push(StateFault {
+            psi,
+            function,
+            magnitude,
+            onset,
+            period,
+            value,
+        });
+        Ok(self)
     }
 
     /// Injects `injection` of the faults in `faults` (a dictionary built like the
@@ -464,6 +512,21 @@ impl Simulator {
                 let factor = profile_factor(fault.onset, k, inj.onset, true);
                 if factor != 0.0 {
                     x += self.psi.column(j) * (factor * inj.magnitude[j]);
+                }
+            }
+        }
+        if self.fault_end.is_none_or(|e| k + 1 < e) {
+            for sf in &mut self.state_faults {
+                if k >= sf.onset {
+                    sf.function.evaluate(
+                        k as f64 * sf.period,
+                        self.x.as_slice(),
+                        &self.u_model,
+                        &mut sf.value,
+                    );
+                    for (j, v) in sf.value.iter().enumerate() {
+                        x += sf.psi.column(j) * (sf.magnitude * v);
+                    }
                 }
             }
         }
