@@ -577,11 +577,18 @@ impl Detector for KernelDetector {
                     &mut self.candidate_values[i * p..(i + 1) * p],
                 );
             }
-            if let Some(bad) = self.candidate_values.iter().position(|v| !v.is_finite()) {
-                let _ = bad;
-                return Err(StepError::Numerical {
-                    what: "a candidate fault function returned a non-finite value",
-                });
+            // A candidate that is not finite at the estimated state (a logarithm of a
+            // negative value, an overflow) cannot be the acting fault: it is excluded,
+            // and its image integrates zeros so that the others go on.
+            for i in 0..m {
+                let values = &mut self.candidate_values[i * p..(i + 1) * p];
+                if values.iter().any(|v| !v.is_finite()) {
+                    values.fill(0.0);
+                    if self.verdict.excluded_at[i].is_none() {
+                        self.verdict.excluded_at[i] = Some(k);
+                        self.revision += 1;
+                    }
+                }
             }
             self.isolation.push(
                 &self.design,

@@ -394,3 +394,59 @@ fn a_gap_restarts_and_the_restarted_detector_repeats_itself() {
     assert_eq!(first.residual, second.residual);
     assert_eq!(first.statistic, second.statistic);
 }
+
+#[derive(Debug)]
+struct NotFinite(std::sync::Arc<std::sync::atomic::AtomicBool>);
+
+impl CandidateFn for NotFinite {
+    fn evaluate(&mut self, _t: f64, x: &[f64], _u: &[f64], out: &mut [f64]) {
+        // ln of a negative value for part of the run.
+        let v = (x[1] - 0.5).ln();
+        if !v.is_finite() {
+            self.0.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+        out.fill(v);
+    }
+}
+
+#[test]
+fn a_candidate_that_is_not_finite_is_excluded_and_the_others_go_on() {
+    let data = example::simulate(&ExampleRun {
+        samples: 9000,
+        ..ExampleRun::paper(0)
+    });
+    let nan_seen = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let candidates = vec![
+        Candidate {
+            name: "log".into(),
+            lipschitz: 1.0,
+            function: Box::new(NotFinite(nan_seen.clone())),
+        },
+        Candidate {
+            name: "phi1".into(),
+            lipschitz: example::lipschitz(1),
+            function: Box::new(Phi(1)),
+        },
+        Candidate {
+            name: "phi2".into(),
+            lipschitz: example::lipschitz(2),
+            function: Box::new(Phi(2)),
+        },
+    ];
+    let mut det = KernelDetector::new(&model(), 0, noise_free(1e-3), candidates).unwrap();
+    let mut out = StepOutput::for_detector(&det);
+    for k in 0..data.u.len() {
+        let sample = Sample {
+            k: k as u64,
+            u: &data.u[k..=k],
+            y: &data.y[4 * k..4 * k + 4],
+            p: &[],
+        };
+        det.step(&sample, &mut out).unwrap();
+        assert!(out.residual.iter().all(|v| v.is_finite()), "k = {k}");
+    }
+    assert!(nan_seen.load(std::sync::atomic::Ordering::Relaxed));
+    let verdict = det.verdict();
+    assert!(verdict.excluded_at[0].is_some() && verdict.excluded_at[1].is_some());
+    assert_eq!(verdict.isolated(), Some(2));
+}
