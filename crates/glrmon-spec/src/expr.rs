@@ -275,7 +275,7 @@ impl fmt::Debug for Env<'_> {
 }
 
 /// The estimated state and the time a candidate fault function's expression reads
-/// (`x<i>`, `t`), beside its [`Env`]; [`Expr::eval`] gives it none (x<i> reads NaN,
+/// (`x<i>`, `t`), beside its [`Env`]; [`Expr::eval`] gives it none (`x<i>` reads NaN,
 /// `t` 0).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct StateEnv<'a> {

@@ -8,7 +8,7 @@
 //! B_c u. Multiplying by the kernels K_h(t, τ) = e^{−ω_h(t−τ)}(1 − e^{−ω̄τ})^N (6)
 //! (h = 1…n⋆; printed in t, but (9) and (26) need τ) and integrating by parts, the
 //! terms at τ = 0 vanish (K_h^{(i)}(t, 0) = 0 for i < N) and those at τ = t leave (7):
-//! Γ(t) z(t) = ν(t), with Γ[h][j] = (−1)^{n⋆−j} K_h^{(n⋆−j)}(t, t) and
+//! Γ(t) z(t) = ν(t), with Γ_{hj} = (−1)^{n⋆−j} K_h^{(n⋆−j)}(t, t) and
 //! ν_h = (−1)^{n⋆+1} ξ_{η,n⋆} + Σᵢ aᵢ(−1)ⁱ ξ_{η,i} + Σ_j (−1)^{n⋆−j}[A_{c21}ξ_{ζ₁,n⋆−j}
 //! \+ B_c ξ_{u,n⋆−j}]_j (8), ξ_{s,i} = ∫₀ᵗ K_h^{(i)}(t, τ) s(τ) dτ. With
 //! K_h^{(i)}(t, τ) = e^{−ω_h(t−τ)} Σ_q C(N,q)(−1)^q λ_q^i e^{−qω̄τ}, λ_q = ω_h − qω̄,

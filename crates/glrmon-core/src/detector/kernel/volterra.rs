@@ -1,5 +1,5 @@
 //! Volterra images on sampled data: the integrals
-//! I_{r,d}[s](t) = ∫₀ᵗ e^{−r(t−τ)} e^{−dτ} s(τ) dτ
+//! I_{r,d}(s)(t) = ∫₀ᵗ e^{−r(t−τ)} e^{−dτ} s(τ) dτ
 //! from which every kernel image of the method is a fixed combination, integrated
 //! exactly over each sample period under a first-order hold on s.
 //!
@@ -47,7 +47,7 @@ pub fn step_moments(r: f64, d: f64, dt: f64) -> (f64, f64) {
     }
 }
 
-/// The image integrals I_{r,d}[s] of a set of signals for a set of rate pairs, all
+/// The image integrals I_{r,d}(s) of a set of signals for a set of rate pairs, all
 /// sharing one time origin: pair j of signal i lives at `state[j·m + i]`.
 ///
 /// Signals at index `bound_from` and beyond are noise bounds, not measurements: they
@@ -147,7 +147,7 @@ impl ImageBank {
         self.steps += 1;
     }
 
-    /// I_{r_j, d_j}[s_i] at the last sample.
+    /// I_{r_j, d_j}(s_i) at the last sample.
     #[must_use]
     pub fn image(&self, pair: usize, signal: usize) -> f64 {
         self.state[pair * self.signals + signal]
