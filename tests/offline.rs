@@ -1355,4 +1355,37 @@ fn kernel_candidates_simulate_replay_and_evaluate() {
     let counts: Vec<&str> = row.split_whitespace().collect();
     assert_eq!(counts[1..3], ["0", "4"], "{out}");
     assert!(!out.contains("minmax isolation"), "{out}");
+    // Side by side with the GLR on the sampled model, whose dictionary is E's columns.
+    let out = ok(&glrmon(&[
+        "evaluate",
+        "--config",
+        &cfg,
+        "--detector",
+        "kernel,glr",
+        "--fault",
+        "phi2:1",
+        "--runs",
+        "4",
+        "--onset",
+        "5000",
+        "--samples",
+        "12000",
+    ]));
+    let row = |kind: &str| {
+        out.lines()
+            .find(|l| l.starts_with(kind) && l.contains("phi2 (1.000)"))
+            .unwrap_or_else(|| panic!("no {kind} row: {out}"))
+            .split_whitespace()
+            .map(str::to_owned)
+            .collect::<Vec<_>>()
+    };
+    let (kernel, glr) = (row("kernel "), row("glr "));
+    assert_eq!(
+        (kernel[3].as_str(), glr[3].as_str()),
+        ("100.0%", "100.0%"),
+        "{out}"
+    );
+    assert_eq!(kernel.last().map(String::as_str), Some("100.0%"), "{out}");
+    let delay = |r: &[String]| r[4].parse::<u64>().unwrap();
+    assert!(delay(&glr) < delay(&kernel), "{out}");
 }

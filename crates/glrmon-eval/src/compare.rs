@@ -16,7 +16,8 @@ pub struct KindEvaluation {
     pub describe: String,
     /// Its threshold at the common false-alarm probability.
     pub threshold: f64,
-    /// Whether its alarms name the faults (the kinds with minmax isolation).
+    /// Whether its alarms name the faults (the kinds with minmax isolation, and the
+    /// kernel kind with its exclusion).
     pub isolates: bool,
     /// The outcome columns of `faults`' confusion rows.
     pub columns: Vec<String>,
@@ -123,7 +124,7 @@ pub fn compare(
             kind,
             describe: ch.detector()?.describe(),
             threshold: ch.alarm.threshold,
-            isolates: kind.runs_kalman_filter(),
+            isolates: kind.runs_kalman_filter() || kind == DetectorKind::Kernel,
             columns,
             faults,
         });

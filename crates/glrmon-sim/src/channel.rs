@@ -183,10 +183,33 @@ pub fn faulty_simulator(
     if faults.is_empty() {
         return Ok(sim);
     }
-    if let Some(kernel) = &channel.kernel {
-        return inject_candidates(sim, channel, kernel, faults, onset);
+    // A kernel section's candidates are functions of the state; the other names are
+    // the dictionary's.
+    let is_candidate = |name: &str| {
+        channel
+            .kernel
+            .as_ref()
+            .is_some_and(|k| k.candidates.iter().any(|c| c.name == name))
+    };
+    let mut candidates = Vec::new();
+    let mut dictionary = Vec::new();
+    for fault in faults {
+        if is_candidate(&fault.0) {
+            candidates.push(fault.clone());
+        } else {
+            dictionary.push(fault.clone());
+        }
     }
-    let (names, magnitudes): (Vec<String>, Vec<f64>) = faults.iter().cloned().unzip();
+    let mut sim = sim;
+    if let Some(kernel) = &channel.kernel
+        && !candidates.is_empty()
+    {
+        sim = inject_candidates(sim, channel, kernel, &candidates, onset)?;
+    }
+    if dictionary.is_empty() {
+        return Ok(sim);
+    }
+    let (names, magnitudes): (Vec<String>, Vec<f64>) = dictionary.into_iter().unzip();
     let magnitude = fault_magnitudes(channel, &names, &magnitudes)?;
     inject(sim, channel, Injection { magnitude, onset })
 }

@@ -878,15 +878,38 @@ output_noise = 0.1
             err.contains("model.F") && err.contains("continuous-time model"),
             "{err}"
         );
-        let err = refused(&edited(
+        // With another kind the table describes the plant: its dictionary is given by
+        // `[[channels.faults]]`, else by the columns of E sampled by zero-order hold.
+        let cfg = crate::parse(&edited(
             "[channels.glr]\ndetector = \"kernel\"",
             "[[channels.faults]]\nname = \"b\"\nkind = \"sensor_bias\"\noutput = 0\n\n\
              [channels.glr]\ndetector = \"glr\"",
-        ));
-        assert!(
-            err.contains("kernel") && err.contains("applies to `glr.detector = \"kernel\"`"),
-            "{err}"
-        );
+        ))
+        .unwrap();
+        assert_eq!(cfg.channels[0].fault_names, ["b"]);
+        assert!(cfg.channels[0].kernel.is_some());
+        let cfg = crate::parse(&edited(
+            "[channels.glr]\ndetector = \"kernel\"",
+            "[channels.glr]\ndetector = \"glr\"",
+        ))
+        .unwrap();
+        let ch = &cfg.channels[0];
+        assert_eq!(ch.fault_names, ["E0", "E1", "E2"]);
+        let kernel = ch.kernel.as_ref().unwrap();
+        let (_, psi) = glrmon_core::model::continuous::zero_order_hold(
+            &kernel.model.a,
+            &kernel.model.e,
+            kernel.settings.period,
+        )
+        .unwrap();
+        let dictionary = ch.dictionary().unwrap();
+        for (j, fault) in dictionary.faults().iter().enumerate() {
+            let glrmon_core::Column::Constant(c) = &fault.state else {
+                panic!("{fault:?}")
+            };
+            assert!((c - psi.column(j)).amax() < 1e-15);
+        }
+        assert_eq!(ch.detector().unwrap().kind(), "glr");
         let cut = EXAMPLE.find("\n[channels.kernel]\n").unwrap();
         let end = EXAMPLE.find("\n[channels.simulation]\n").unwrap();
         let err = refused(&format!("{}{}", &EXAMPLE[..cut], &EXAMPLE[end..]));

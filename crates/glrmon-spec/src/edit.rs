@@ -164,9 +164,10 @@ pub fn set_calibrated(
 /// then set to the same false-alarm probability per sample, `false_alarm` if given,
 /// else the configured one (10⁻⁴ when none is given), since a threshold set for one kind's
 /// statistic (`threshold`, `[channels.glr.calibrated]`) means nothing for another's;
-/// `[channels.parity]`, `[channels.observer]`, `[channels.rls]`, `[channels.cusum]` and
-/// `[channels.kernel]` are removed for kinds they do not apply to (the `kernel` kind,
-/// whose threshold is the bound 1, gets no `false_alarm`), and a residual kind's `evaluation` is
+/// `[channels.parity]`, `[channels.observer]`, `[channels.rls]` and `[channels.cusum]`
+/// are removed for kinds they do not apply to; `[channels.kernel]` stays, since it
+/// describes the plant for every kind (the `kernel` kind, whose threshold is the bound
+/// 1, gets no `false_alarm` and drops `[[channels.faults]]`), and a residual kind's `evaluation` is
 /// its χ² test (a windowed energy has no law to set a threshold from); the CUSUM's
 /// magnitudes are
 /// `cusum_magnitudes` where the channel has no `[channels.cusum]`. Returns the edited
@@ -223,8 +224,10 @@ pub fn set_detector(
         );
         table.insert("cusum", toml_edit::Item::Table(cusum));
     }
-    if kind != DetectorKind::Kernel {
-        table.remove("kernel");
+    // `[channels.kernel]` describes the plant for every kind (its fault channels give
+    // the others' dictionary); the kernel kind takes its faults from it alone.
+    if kind == DetectorKind::Kernel && table.contains_key("kernel") {
+        table.remove("faults");
     }
     if !matches!(kind, DetectorKind::Fdf | DetectorKind::Uio) {
         table.remove("observer");

@@ -328,7 +328,11 @@ pub struct ChannelSpec {
     pub cusum: Option<CusumSpec>,
     /// `[channels.kernel]`: the kernel deadbeat detector (`glr.detector = "kernel"`):
     /// its fault channels E, noise bounds, kernels and candidate fault functions.
-    /// Required with it.
+    /// Required with it. With another detector it describes the same plant, so that
+    /// the kinds compare on it (`glrmon evaluate --detector kernel,glr`): without
+    /// `[[channels.faults]]` the dictionary is one step fault per column of E (`E0`,
+    /// `E1`, …, sampled by zero-order hold), and `simulate` and `evaluate` inject the
+    /// candidates by name.
     pub kernel: Option<KernelSpec>,
 }
 

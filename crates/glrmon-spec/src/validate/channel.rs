@@ -40,15 +40,20 @@ impl Validator {
             .as_ref()
             .and_then(|sc| self.scaling(prefix, sc, dims));
         let columns = self.columns(prefix, spec.columns.as_ref(), dims);
-        let (faults, fault_paths) = if kind == DetectorKind::Kernel {
-            self.kernel_faults(prefix, spec)
-        } else {
-            self.faults(prefix, spec, dims, (&m.g, &m.j), scaling.as_ref(), &columns)
-        };
-        let kernel = if kind == DetectorKind::Kernel {
+        // With another kind, `[channels.kernel]` describes the same plant: its fault
+        // channels give the dictionary when `[[channels.faults]]` is left out, and its
+        // candidates are what the simulator injects (the kinds side by side).
+        let kernel = if kind == DetectorKind::Kernel || spec.kernel.is_some() {
             self.kernel(prefix, spec, &m)
         } else {
             None
+        };
+        let (faults, fault_paths) = if kind == DetectorKind::Kernel {
+            self.kernel_faults(prefix, spec)
+        } else if let (true, Some(k)) = (spec.faults.is_empty(), &kernel) {
+            self.fault_channels(prefix, k)
+        } else {
+            self.faults(prefix, spec, dims, (&m.g, &m.j), scaling.as_ref(), &columns)
         };
         if self.errors.len() > before {
             return None;
@@ -109,12 +114,10 @@ impl Validator {
             ("parity", spec.parity.is_some(), "\"parity\""),
             ("observer", spec.observer.is_some(), "\"fdf\" or \"uio\""),
             ("rls", spec.rls.is_some(), "\"rls\""),
-            ("kernel", spec.kernel.is_some(), "\"kernel\""),
         ] {
             let applies = match table {
                 "parity" => kind == DetectorKind::Parity,
                 "rls" => kind == DetectorKind::Rls,
-                "kernel" => kind == DetectorKind::Kernel,
                 _ => matches!(kind, DetectorKind::Fdf | DetectorKind::Uio),
             };
             if given && !applies {

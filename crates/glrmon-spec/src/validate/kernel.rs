@@ -71,6 +71,40 @@ impl Validator {
             .unzip()
     }
 
+    /// The dictionary another kind takes from `[channels.kernel]`: one step fault per
+    /// fault channel, `E0`, `E1`, …, entering the state through the column of E sampled
+    /// by zero-order hold, Ψ_j = ∫₀ᵀe^{As}ds·E_j (the fault held over each period).
+    pub(super) fn fault_channels(
+        &mut self,
+        prefix: &str,
+        kernel: &KernelChannelSettings,
+    ) -> (Vec<FaultPlan>, Vec<String>) {
+        let model = &kernel.model;
+        match glrmon_core::model::continuous::zero_order_hold(
+            &model.a,
+            &model.e,
+            kernel.settings.period,
+        ) {
+            Ok((_, psi)) => (0..psi.ncols())
+                .map(|j| {
+                    (
+                        FaultPlan {
+                            name: format!("E{j}"),
+                            onset: Onset::Step,
+                            state: ColumnPlan::Constant(psi.column(j).into_owned()),
+                            output: ColumnPlan::Zero,
+                        },
+                        join(prefix, "kernel.E"),
+                    )
+                })
+                .unzip(),
+            Err(e) => {
+                self.error(join(prefix, "kernel.E"), format!("cannot be sampled: {e}"));
+                (Vec::new(), Vec::new())
+            }
+        }
+    }
+
     /// The detector's model (A, B of the continuous-time state equation, H, E) and
     /// settings, defaults filled in; `None` after an error. The design itself (H E's
     /// rank, the assumptions) is checked when the detector is built.
