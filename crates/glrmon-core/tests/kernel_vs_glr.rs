@@ -8,54 +8,28 @@
 use glrmon_core::model::continuous::zero_order_hold;
 use glrmon_core::threshold::chi2_upper_quantile;
 use glrmon_core::{
-    Candidate, CandidateFn, Column, Detector, Fault, FaultDictionary, GlrDetector, KernelDetector,
-    KernelModel, KernelSettings, Lpv, Onset, Sample, StepOutput, WindowSettings,
+    Column, Detector, Fault, FaultDictionary, GlrDetector, KernelDetector, KernelModel,
+    KernelSettings, Lpv, Onset, StepOutput, WindowSettings,
 };
 use glrmon_sim::kernel_example::{self as example, ExampleData, ExampleRun};
 use nalgebra::{DMatrix, DVector};
 
 const PERIOD: f64 = 1e-3;
 
-#[derive(Debug)]
-struct Phi(usize);
-
-impl CandidateFn for Phi {
-    fn evaluate(&mut self, _t: f64, x: &[f64], _u: &[f64], out: &mut [f64]) {
-        out.copy_from_slice(&example::candidate(self.0, x));
-    }
-}
-
-fn matrices() -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
-    (
-        DMatrix::from_fn(5, 5, |i, j| example::A[i][j]),
-        DMatrix::from_column_slice(5, 1, &example::B),
-        DMatrix::from_fn(4, 5, |i, j| if i == j { 1.0 } else { 0.0 }),
-        DMatrix::from_fn(5, 3, |i, j| example::E[i][j]),
-    )
-}
-
 fn kernel(scale: f64) -> KernelDetector {
-    let (a, b, c, e) = matrices();
-    let candidates = (1..=2)
-        .map(|i| Candidate {
-            name: format!("phi{i}"),
-            lipschitz: example::lipschitz(i),
-            function: Box::new(Phi(i)),
-        })
-        .collect();
-    let settings = KernelSettings {
+    example::detector(KernelSettings {
         output_noise: scale,
         state_noise: 0.2 * 5.0_f64.sqrt() * scale,
         ..KernelSettings::paper_example(PERIOD)
-    };
-    KernelDetector::new(&KernelModel { a, b, c, e }, 0, settings, candidates).unwrap()
+    })
+    .unwrap()
 }
 
 /// The GLR on the sampled model: F, G and the fault columns Ψ_j = ∫₀^Δ e^{As}ds E_j
 /// by zero-order hold, Q of the state noise held over each period (component
 /// variance 0.04/3·scale²), R = 0.25/3·scale²·I, window w.
 fn glr(scale: f64, window: usize) -> GlrDetector {
-    let (a, b, c, e) = matrices();
+    let KernelModel { a, b, c, e } = example::model();
     let (f, g) = zero_order_hold(&a, &b, PERIOD).unwrap();
     let (_, psi) = zero_order_hold(&a, &e, PERIOD).unwrap();
     let (_, held) = zero_order_hold(&a, &DMatrix::identity(5, 5), PERIOD).unwrap();
@@ -102,14 +76,8 @@ fn first_crossing(
     let mut out = StepOutput::for_detector(det);
     let mut crossing = None;
     let mut largest: f64 = 0.0;
-    for k in 0..data.u.len() {
-        let sample = Sample {
-            k: k as u64,
-            u: &data.u[k..=k],
-            y: &data.y[4 * k..4 * k + 4],
-            p: &[],
-        };
-        det.step(&sample, &mut out).unwrap();
+    for k in 0..data.len() {
+        det.step(&data.sample(k), &mut out).unwrap();
         let Some(l) = out.glr else { continue };
         if k < until {
             largest = largest.max(l);

@@ -97,37 +97,14 @@ fn step_performs_zero_heap_allocations_after_warmup() {
 /// φ₁ excluded) inside the measured span.
 #[test]
 fn kernel_step_performs_zero_heap_allocations_through_detection_and_isolation() {
-    use glrmon_core::{
-        Candidate, CandidateFn, Detector, KernelDetector, KernelModel, KernelSettings,
-    };
+    use glrmon_core::{Detector, KernelSettings};
     use glrmon_sim::kernel_example as example;
-    use nalgebra::DMatrix;
 
-    #[derive(Debug)]
-    struct Phi(usize);
-    impl CandidateFn for Phi {
-        fn evaluate(&mut self, _t: f64, x: &[f64], _u: &[f64], out: &mut [f64]) {
-            out.copy_from_slice(&example::candidate(self.0, x));
-        }
-    }
-    let model = KernelModel {
-        a: DMatrix::from_fn(5, 5, |i, j| example::A[i][j]),
-        b: DMatrix::from_column_slice(5, 1, &example::B),
-        c: DMatrix::from_fn(4, 5, |i, j| if i == j { 1.0 } else { 0.0 }),
-        e: DMatrix::from_fn(5, 3, |i, j| example::E[i][j]),
-    };
-    let candidates = (1..=2)
-        .map(|i| Candidate {
-            name: format!("phi{i}"),
-            lipschitz: example::lipschitz(i),
-            function: Box::new(Phi(i)),
-        })
-        .collect();
     let settings = KernelSettings {
         floor: 1e-3,
         ..KernelSettings::paper_example(1e-3)
     };
-    let mut det = KernelDetector::new(&model, 0, settings, candidates).unwrap();
+    let mut det = example::detector(settings).unwrap();
     let data = example::simulate(&example::ExampleRun {
         samples: 12_000,
         ..example::ExampleRun::paper(0)
@@ -135,20 +112,11 @@ fn kernel_step_performs_zero_heap_allocations_through_detection_and_isolation() 
     let mut out = StepOutput::for_detector(&det);
     let warmup = 2_000;
     let mut before = 0;
-    for k in 0..data.u.len() {
+    for k in 0..data.len() {
         if k == warmup {
             before = allocations();
         }
-        det.step(
-            &Sample {
-                k: k as u64,
-                u: &data.u[k..=k],
-                y: &data.y[4 * k..4 * k + 4],
-                p: &[],
-            },
-            &mut out,
-        )
-        .unwrap();
+        det.step(&data.sample(k), &mut out).unwrap();
     }
     let after = allocations();
     assert_eq!(after - before, 0, "allocations over 10⁴ steps");

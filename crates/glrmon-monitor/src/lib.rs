@@ -1211,35 +1211,14 @@ mod tests {
 
     /// The alarm's k at `threshold`, after the checks of the test above.
     fn kernel_alarm_and_update(threshold: f64) -> u64 {
-        use glrmon_core::{Candidate, CandidateFn, KernelDetector, KernelModel, KernelSettings};
+        use glrmon_core::KernelSettings;
         use glrmon_sim::kernel_example as example;
-        use nalgebra::DMatrix;
 
-        #[derive(Debug)]
-        struct Phi(usize);
-        impl CandidateFn for Phi {
-            fn evaluate(&mut self, _t: f64, x: &[f64], _u: &[f64], out: &mut [f64]) {
-                out.copy_from_slice(&example::candidate(self.0, x));
-            }
-        }
-        let model = KernelModel {
-            a: DMatrix::from_fn(5, 5, |i, j| example::A[i][j]),
-            b: DMatrix::from_column_slice(5, 1, &example::B),
-            c: DMatrix::from_fn(4, 5, |i, j| if i == j { 1.0 } else { 0.0 }),
-            e: DMatrix::from_fn(5, 3, |i, j| example::E[i][j]),
-        };
-        let candidates = (1..=2)
-            .map(|i| Candidate {
-                name: format!("phi{i}"),
-                lipschitz: example::lipschitz(i),
-                function: Box::new(Phi(i)),
-            })
-            .collect();
         let settings = KernelSettings {
             floor: 1e-3,
             ..KernelSettings::paper_example(1e-3)
         };
-        let detector = KernelDetector::new(&model, 0, settings, candidates).unwrap();
+        let detector = example::detector(settings).unwrap();
         let mut monitor = Monitor::new(
             "plane",
             Box::new(detector),

@@ -9,7 +9,13 @@
 //! sample period, the fault evaluated at the true state; the process noise is held
 //! over each period and the output noise drawn per sample, each component uniform in
 //! ±its amplitude. Plain `f64` buffers: the simulation shares nothing with the
-//! detector it is used to test.
+//! detector it is used to test. [`detector`] builds that detector from the same
+//! constants, for the tests, examples and benchmarks outside glrmon-core.
+
+use glrmon_core::{
+    Candidate, CandidateFn, KernelDetector, KernelModel, KernelSettings, ModelError, Sample,
+};
+use nalgebra::DMatrix;
 
 use crate::Rng;
 
@@ -60,6 +66,43 @@ pub fn lipschitz(i: usize) -> f64 {
     }
 }
 
+/// Candidate 1 or 2 of the paper as a detector's candidate function.
+#[derive(Debug, Clone, Copy)]
+pub struct PaperCandidate(pub usize);
+
+impl CandidateFn for PaperCandidate {
+    fn evaluate(&mut self, _t: f64, x: &[f64], _u: &[f64], out: &mut [f64]) {
+        out.copy_from_slice(&candidate(self.0, x));
+    }
+}
+
+/// The continuous-time model (A, B, C = [I₄ 0], E) for the kernel detector.
+#[must_use]
+pub fn model() -> KernelModel {
+    KernelModel {
+        a: DMatrix::from_fn(5, 5, |i, j| A[i][j]),
+        b: DMatrix::from_column_slice(5, 1, &B),
+        c: DMatrix::from_fn(OUTPUTS, 5, |i, j| if i == j { 1.0 } else { 0.0 }),
+        e: DMatrix::from_fn(5, 3, |i, j| E[i][j]),
+    }
+}
+
+/// The kernel detector of the example with `settings` and the candidates φ₁, φ₂
+/// (named `phi1`, `phi2`, with their Lipschitz constants).
+///
+/// # Errors
+/// As [`KernelDetector::new`] (a setting out of range).
+pub fn detector(settings: KernelSettings) -> Result<KernelDetector, ModelError> {
+    let candidates = (1..=2)
+        .map(|i| Candidate {
+            name: format!("phi{i}"),
+            lipschitz: lipschitz(i),
+            function: Box::new(PaperCandidate(i)),
+        })
+        .collect();
+    KernelDetector::new(&model(), 0, settings, candidates)
+}
+
 /// What to simulate.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ExampleRun {
@@ -106,6 +149,31 @@ pub struct ExampleData {
     pub y: Vec<f64>,
     /// x_k, 5 per sample.
     pub x: Vec<f64>,
+}
+
+impl ExampleData {
+    /// Number of samples.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.u.len()
+    }
+
+    /// Whether there are none.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.u.is_empty()
+    }
+
+    /// Sample k as a detector takes it.
+    #[must_use]
+    pub fn sample(&self, k: usize) -> Sample<'_> {
+        Sample {
+            k: k as u64,
+            u: &self.u[k..=k],
+            y: &self.y[OUTPUTS * k..OUTPUTS * (k + 1)],
+            p: &[],
+        }
+    }
 }
 
 fn derivative(t: f64, x: &[f64; 5], noise: &[f64; 5], fault: Option<(usize, f64)>) -> [f64; 5] {

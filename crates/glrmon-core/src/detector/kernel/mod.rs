@@ -651,12 +651,7 @@ impl Detector for KernelDetector {
         self.estimator.reset();
         self.detection.reset();
         self.isolation.reset();
-        self.verdict.detected_at = None;
-        self.verdict.excluded_at.fill(None);
-        self.isolation_tests.fill((0.0, 0.0));
-        self.quiet = 0;
-        self.followed = false;
-        self.revision += 1;
+        self.close_episode();
         self.next = None;
         self.active_from = None;
         self.state.fill(0.0);
