@@ -34,7 +34,7 @@ mod sink;
 mod sinks;
 mod status;
 
-pub use decode::{JsonDecoder, PayloadDecoder, decoder};
+pub use decode::{CdrDecoder, JsonDecoder, PayloadDecoder, RawDecoder, SparkplugDecoder, decoder};
 pub use fanout::{DeliveryPlan, Fanout};
 pub use pipeline::{ChannelPipeline, Emit, PipelineError};
 pub use sink::{ChannelIndex, InputItem, InputOutput, Interest, Output, Sink, SinkError};
@@ -412,7 +412,7 @@ impl ChannelSetup {
     pub fn from_channel(channel: &glrmon_spec::Channel) -> Result<Self, glrmon_core::ModelError> {
         Ok(Self {
             monitor: Monitor::from_channel(channel)?,
-            decoder: decode::decoder_for(channel),
+            decoder: decode::decoder(channel),
         })
     }
 }

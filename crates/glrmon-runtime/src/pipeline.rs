@@ -29,6 +29,23 @@ const INPUT_JSON_CAPACITY: usize = 128;
 /// Longest refused payload kept, as text, in its [`IntakeEvent::Rejected`].
 const MAX_KEPT_PAYLOAD: usize = 64 * 1024;
 
+/// A refused payload as text for the post-mortem: as it is when it is UTF-8, else
+/// (a binary format) `0x` and its bytes in hexadecimal, so that nothing is lost.
+fn kept_text(payload: &[u8]) -> String {
+    use std::fmt::Write;
+    match std::str::from_utf8(payload) {
+        Ok(text) => text.to_owned(),
+        Err(_) => {
+            let mut hex = String::with_capacity(2 + 2 * payload.len());
+            hex.push_str("0x");
+            for b in payload {
+                let _ = write!(hex, "{b:02x}");
+            }
+            hex
+        }
+    }
+}
+
 /// Where a pipeline hands its inputs and records, in order: each input before the
 /// records it produced.
 pub trait Emit {
@@ -214,8 +231,7 @@ impl ChannelPipeline {
                 }
             }
             Err(e) => {
-                let kept = (payload.len() <= MAX_KEPT_PAYLOAD)
-                    .then(|| String::from_utf8_lossy(payload).into_owned());
+                let kept = (payload.len() <= MAX_KEPT_PAYLOAD).then(|| kept_text(payload));
                 keep_first(
                     &mut first,
                     self.rejected(e.code(), e.to_string(), None, kept, log_time_ns, emit),

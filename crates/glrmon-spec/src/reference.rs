@@ -17,6 +17,8 @@ const SECTIONS: [(&str, &str); 23] = [
     ("[recording]", "RecordingSpec"),
     ("[recording.capture]", "CaptureSpec"),
     ("[[channels]]", "ChannelSpec"),
+    ("[channels.cdr]", "CdrSpec"),
+    ("[channels.raw]", "RawSpec"),
     ("[channels.model]", "ModelSpec"),
     ("[channels.scaling]", "ScalingSpec"),
     ("[channels.columns]", "ColumnsSpec"),
@@ -387,6 +389,8 @@ expressions, limits) is checked by `glrmon validate`.
 name = "tank"
 [channels.model]        #   required: F, H, Q, R (G, J, E, Fd, S, x0, P0); or A, B, Qc
 [channels.scaling]      #   optional: natural units
+[channels.cdr]          #   with payload = "cdr": the ROS 2 message type
+[channels.raw]          #   with payload = "raw": the f64 record layout
 [channels.columns]      #   optional: signal names (CSV columns) and units
 [[channels.faults]]     #   the fault dictionary, one table per fault
 [channels.glr]          #   optional: window, threshold, alarms, isolation

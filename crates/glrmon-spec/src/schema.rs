@@ -272,9 +272,17 @@ pub struct ChannelSpec {
     pub key: Option<String>,
     /// How the payloads on `key` are encoded: `json` (a sample object
     /// `{"k": …, "t": …, "u": […], "y": […], "p": […]}` or an array of them; the
-    /// format docs/WIRE.md describes). Default `json`.
-    #[schemars(extend("enum" = ["json"]))]
+    /// format docs/WIRE.md describes), `cdr` (a ROS 2 message, `[channels.cdr]`),
+    /// `sparkplug` (a Sparkplug B payload whose metrics are named as the channel's
+    /// columns) or `raw` (little-endian f64 records, `[channels.raw]`). Default `json`.
+    #[schemars(extend("enum" = ["json", "cdr", "sparkplug", "raw"]))]
     pub payload: Option<String>,
+    /// `[channels.cdr]`: the ROS 2 message type of a `payload = "cdr"` channel.
+    /// Default: `std_msgs/msg/Float64MultiArray`.
+    pub cdr: Option<CdrSpec>,
+    /// `[channels.raw]`: the record layout of a `payload = "raw"` channel. Required
+    /// with it.
+    pub raw: Option<RawSpec>,
     /// Sample period in seconds (finite, positive): turns sample counts into times in
     /// reports, and discretises a continuous-time model (`model.A`), for which it is
     /// required. Default: none.
@@ -634,6 +642,31 @@ pub struct ColumnsSpec {
     pub y_units: Option<Vec<String>>,
     /// Units of the scheduling signals (q labels). Default: none.
     pub p_units: Option<Vec<String>>,
+}
+
+/// `[channels.cdr]`: which ROS 2 message a `cdr` channel receives (docs/WIRE.md).
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CdrSpec {
+    /// The message type: `std_msgs/msg/Float64MultiArray` (`data` holds the inputs,
+    /// then the outputs, then the scheduling signals, from `layout.data_offset` on; the
+    /// time is the transport's) or `glrmon_msgs/msg/Sample` (`int64 k`, −1 for none;
+    /// `float64 t`, NaN for none; `float64[] u`, `y`, `p`). Default
+    /// `std_msgs/msg/Float64MultiArray`.
+    #[schemars(extend("enum" = ["std_msgs/msg/Float64MultiArray", "glrmon_msgs/msg/Sample"]))]
+    pub message: Option<String>,
+}
+
+/// `[channels.raw]`: the record of a `raw` channel, each field an 8-byte little-endian
+/// f64; a payload holds one or more whole records, one sample each.
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RawSpec {
+    /// The fields in byte order: `k` (the sample index, an integer value), `t` (the
+    /// time in seconds), the channel's column names (`[channels.columns]`, else `u0`,
+    /// `y0`, `p0`, …: every signal exactly once) and `_` for 8 bytes not read, e.g.
+    /// `["t", "u0", "y0", "y1"]`. Required.
+    pub layout: Vec<String>,
 }
 
 /// A matrix: scalar × identity, dense rows, or LPV table.

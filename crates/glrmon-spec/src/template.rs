@@ -72,7 +72,9 @@ const TEMPLATE: &str = r#"# glrmon configuration. Reference of every key: docs/C
 [[channels]]
 name = "@NAME@"
 # key = "@KEY@"                      # Zenoh key of the samples
-# payload = "json"                   # how the samples are encoded (docs/WIRE.md)
+# payload = "json"                   # json, cdr, sparkplug or raw (docs/WIRE.md)
+# cdr = { message = "std_msgs/msg/Float64MultiArray" }  # with payload = "cdr"
+# raw = { layout = ["t", "u0", "y0", "y1"] }              # with payload = "raw": f64 LE
 # period = 0.1                       # seconds; required with A (continuous time)
 # signals = 0                        # scheduling signals p0...; default: highest used + 1
 

@@ -38,8 +38,9 @@ pub enum IntakeEvent {
         code: ErrorCode,
         /// The error message reported.
         message: String,
-        /// The payload as text (invalid UTF-8 replaced), when it was small enough to
-        /// keep: what the publisher actually sent, for the post-mortem.
+        /// The payload as text when it is UTF-8 (JSON), else `0x` and its bytes in
+        /// hexadecimal (the binary formats), when it was small enough to keep: what the
+        /// publisher actually sent, for the post-mortem.
         payload: Option<String>,
     },
 }

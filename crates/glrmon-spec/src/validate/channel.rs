@@ -9,7 +9,7 @@ use super::model::Matrices;
 use super::{Validator, join};
 use crate::names::validate_name;
 use crate::schema::{self, ChannelSpec, ConsistencySpec, GlrSpec};
-use crate::{Channel, DetectorKind, PayloadFormat, ThresholdSource, limits, locate};
+use crate::{Channel, DetectorKind, ThresholdSource, limits};
 use glrmon_core::detector::Evaluation;
 use glrmon_core::threshold::chi2_upper_quantile;
 
@@ -180,7 +180,7 @@ impl Validator {
             None
         };
         let warm_up = self.warm_up(prefix, glr);
-        let payload = self.payload(prefix, spec.payload.as_deref());
+        let payload = self.payload(prefix, spec, &columns);
         if self.errors.len() > before {
             return None;
         }
@@ -454,20 +454,6 @@ impl Validator {
                 );
                 0
             }
-        }
-    }
-
-    /// `payload`: how the channel's samples are encoded.
-    fn payload(&mut self, prefix: &str, name: Option<&str>) -> PayloadFormat {
-        match name {
-            None => PayloadFormat::default(),
-            Some(name) => PayloadFormat::from_name(name).unwrap_or_else(|| {
-                self.error(
-                    join(prefix, "payload"),
-                    locate::not_one_of(name, &PayloadFormat::NAMES),
-                );
-                PayloadFormat::default()
-            }),
         }
     }
 }

@@ -14,6 +14,7 @@ mod kernel;
 mod matrix;
 mod model;
 mod parity;
+mod payload;
 mod signals;
 mod simulation;
 

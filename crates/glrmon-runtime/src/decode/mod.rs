@@ -1,12 +1,19 @@
 //! Payload decoders: a channel's raw payloads → samples, inside its pipeline.
 //!
 //! Each channel's [`ChannelPipeline`](crate::ChannelPipeline) owns the decoder its
-//! configuration names (`[[channels]] payload`), built by [`decoder`] (or, for a
-//! configured channel, `decoder_for`, which gives a JSON channel whose signals have
-//! names the decoder that also reads them by name); the daemon's workers hand it the
-//! payloads as received. A new format is a type implementing [`PayloadDecoder`] in a
-//! module of its own here, one arm of [`decoder`] and one variant of
-//! `glrmon_spec::PayloadFormat`.
+//! configuration names (`[[channels]] payload`), built by [`decoder`]; the daemon's
+//! workers hand it the payloads as received. A new format is a type implementing
+//! [`PayloadDecoder`] in a module of its own here, one arm of [`decoder`] and one
+//! variant of `glrmon_spec::PayloadFormat`. The binary formats decode without
+//! allocating once a channel's first payload has sized the sample's vectors.
+
+mod cdr;
+mod raw;
+mod sparkplug;
+
+pub use cdr::CdrDecoder;
+pub use raw::RawDecoder;
+pub use sparkplug::SparkplugDecoder;
 
 use glrmon_spec::{Channel, PayloadFormat};
 use glrmon_wire::{
@@ -87,25 +94,45 @@ impl PayloadDecoder for NamedJsonDecoder {
     }
 }
 
-/// The decoder of a payload format: the one factory the runtime builds decoders with.
+/// The decoder of a configured channel: the one factory the runtime builds decoders
+/// with. A JSON channel that names its signals (`columns.named`) also reads values by
+/// name.
 #[must_use]
-pub fn decoder(format: PayloadFormat) -> Box<dyn PayloadDecoder> {
-    match format {
+pub fn decoder(channel: &Channel) -> Box<dyn PayloadDecoder> {
+    let c = &channel.columns;
+    let d = channel.dims;
+    match &channel.payload {
+        PayloadFormat::Json if c.named => {
+            Box::new(NamedJsonDecoder::new(SignalNames::new(&c.u, &c.y, &c.p)))
+        }
         PayloadFormat::Json => Box::new(JsonDecoder),
+        PayloadFormat::Cdr(message) => {
+            Box::new(CdrDecoder::new(*message, d.inputs, d.outputs, d.signals))
+        }
+        PayloadFormat::Sparkplug => Box::new(SparkplugDecoder::new(c)),
+        PayloadFormat::Raw(layout) => Box::new(RawDecoder::new(layout.clone(), c)),
     }
 }
 
-/// The decoder of a configured channel: [`decoder`] of its `payload` format, reading
-/// values by name too when the channel names its signals (`columns.named`).
-#[must_use]
-pub(crate) fn decoder_for(channel: &Channel) -> Box<dyn PayloadDecoder> {
-    match channel.payload {
-        PayloadFormat::Json if channel.columns.named => {
-            let c = &channel.columns;
-            Box::new(NamedJsonDecoder::new(SignalNames::new(&c.u, &c.y, &c.p)))
-        }
-        format => decoder(format),
+/// `out` as one sample, its buffers kept and emptied.
+pub(crate) fn single(out: &mut Vec<Sample>) -> &mut Sample {
+    out.truncate(1);
+    slot(out, 0)
+}
+
+/// The `i`-th sample of `out` (pushed if `out` is shorter, `i ≤ out.len()`), its
+/// buffers kept and emptied.
+pub(crate) fn slot(out: &mut Vec<Sample>, i: usize) -> &mut Sample {
+    if out.len() == i {
+        out.push(Sample::default());
     }
+    let s = &mut out[i];
+    s.k = None;
+    s.t = None;
+    s.u.clear();
+    s.y.clear();
+    s.p.clear();
+    s
 }
 
 #[cfg(test)]
@@ -148,7 +175,7 @@ faults = [{{ name = "level_bias", kind = "sensor_bias", output = 0 }}]
     /// a numbered one reads positional arrays only, as before.
     #[test]
     fn a_named_channels_decoder_reads_values_by_name() {
-        let mut named = decoder_for(&channel(true));
+        let mut named = decoder(&channel(true));
         assert_eq!(named.format(), "json");
         let want = Sample {
             k: None,
@@ -184,7 +211,7 @@ faults = [{{ name = "level_bias", kind = "sensor_bias", output = 0 }}]
             (ErrorCode::UnknownField, Some("FIC103"))
         );
 
-        let mut numbered = decoder_for(&channel(false));
+        let mut numbered = decoder(&channel(false));
         assert_eq!(
             decode(
                 numbered.as_mut(),
