@@ -4,12 +4,12 @@ CARGO ?= cargo
 
 .DEFAULT_GOAL := help
 
-.PHONY: help deps deps-zenohd build install uninstall check-install test fmt fmt-check lint unit doc check-deps check-config fuzz-build fuzz fuzz-all msrv demo bench bench-e2e bench-replay tank-table reproduce
+.PHONY: help deps deps-zenohd deps-python build install uninstall check-install test fmt fmt-check lint unit doc check-deps check-config fuzz-build fuzz fuzz-all msrv demo bench bench-e2e bench-replay tank-table reproduce
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z0-9_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-11s %s\n", $$1, $$2}'
 
-deps: deps-zenohd ## the toolchain (rustfmt, clippy) and zenohd for the router-mesh test
+deps: deps-zenohd deps-python ## the toolchain (rustfmt, clippy), zenohd for the router-mesh test, the Python libraries of the binary-format tests
 	@command -v $(CARGO) >/dev/null || { echo "cargo not found: install Rust (rustup)"; exit 1; }
 	@$(CARGO) fmt --version >/dev/null 2>&1 || rustup component add rustfmt
 	@$(CARGO) clippy --version >/dev/null 2>&1 || rustup component add clippy
@@ -20,6 +20,16 @@ deps-zenohd: ## zenohd (the Zenoh router) from crates.io, built once (about 15 m
 	@if $(ZENOHD) --version 2>/dev/null | grep -q "v$(ZENOHD_VERSION)"; then echo "zenohd $(ZENOHD_VERSION): $(ZENOHD)"; \
 	else echo "zenohd $(ZENOHD_VERSION) (the Zenoh router the router-mesh test runs) is not installed: building it from crates.io once, about 15 min on 2 cores; it is kept in $(ZENOHD)"; \
 	$(CARGO) install zenohd --version $(ZENOHD_VERSION) --locked; fi
+
+# The official libraries (mcap, mcap-ros2-support, Google's protobuf) that write the
+# binary payloads and foreign recordings the integration tests read, in a virtual
+# environment beside the build: nothing is installed outside the checkout.
+PYENV := $(or $(CARGO_TARGET_DIR),target)/pyenv
+deps-python: $(PYENV)/installed ## the Python libraries the binary-format tests encode with, in target/pyenv (tests/python/requirements.txt)
+$(PYENV)/installed: tests/python/requirements.txt
+	python3 -m venv $(PYENV)
+	$(PYENV)/bin/pip install -q --disable-pip-version-check -r tests/python/requirements.txt
+	@touch $@
 
 build: deps ## build everything (release)
 	$(CARGO) build --release --workspace
@@ -70,7 +80,7 @@ check-config: ## glrmon validate every file in config/
 config-doc: ## regenerate docs/CONFIG.md (the configuration reference) from the configuration types
 	$(CARGO) run -q -p glrmon-spec --example config_reference > docs/CONFIG.md
 
-fuzz-build: ## build the fuzz targets (fuzz/: sample, monitor, record, status, config, expression, CSV and MCAP decoders) and run each on its regression inputs (fuzz/regressions/)
+fuzz-build: ## build the fuzz targets (fuzz/: sample, binary (CDR, Sparkplug B, raw), monitor, record, status, config, expression, CSV and MCAP decoders) and run each on its regression inputs (fuzz/regressions/)
 	$(CARGO) build --manifest-path fuzz/Cargo.toml --target-dir target
 	@for t in $(FUZZ_TARGETS); do \
 		if [ -d fuzz/regressions/$$t ]; then \
@@ -79,7 +89,7 @@ fuzz-build: ## build the fuzz targets (fuzz/: sample, monitor, record, status, c
 		fi; \
 	done
 
-FUZZ_TARGETS := samples monitor records status config expressions csv mcap
+FUZZ_TARGETS := samples binary monitor records status config expressions csv mcap
 FUZZ_TARGET ?= samples
 FUZZ_SECONDS ?= 60
 fuzz: ## run one fuzz target with cargo-fuzz (nightly), from its corpus and regression inputs: make fuzz FUZZ_TARGET=config FUZZ_SECONDS=600

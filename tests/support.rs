@@ -144,3 +144,29 @@ pub(crate) fn spawn_logged(cmd: &mut Command) -> (Child, Arc<Mutex<String>>) {
     });
     (child, stderr)
 }
+
+/// The Python of target/pyenv, where `make deps-python` installs the official libraries
+/// (mcap, mcap-ros2-support, protobuf) that the binary-format tests encode with.
+pub(crate) fn python() -> Command {
+    let target = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf();
+    let python = target.join("pyenv/bin/python");
+    assert!(
+        python.exists(),
+        "{} is missing: run `make deps-python` (the official encoders these tests compare with)",
+        python.display()
+    );
+    let mut cmd = Command::new(python);
+    cmd.current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../../tests/python"));
+    cmd
+}
+
+/// The bytes of a hexadecimal string.
+pub(crate) fn unhex(hex: &str) -> Vec<u8> {
+    (0..hex.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&hex[i..i + 2], 16).unwrap())
+        .collect()
+}

@@ -11,7 +11,7 @@ use crate::limits;
 
 /// The sections of a file, in the order of the reference: (TOML header, schema
 /// definition, what it is for).
-const SECTIONS: [(&str, &str); 23] = [
+const SECTIONS: [(&str, &str); 25] = [
     ("[zenoh]", "ZenohSpec"),
     ("[daemon]", "DaemonSpec"),
     ("[recording]", "RecordingSpec"),
