@@ -45,8 +45,7 @@ const CHANNELS: [(&str, &str, &str); 5] = [
 /// The DC motor of config/examples/dc-motor.toml, its signals named as a plant names
 /// them, once per format, listening on `endpoint`.
 fn config(dir: &Path, endpoint: &str) -> PathBuf {
-    let example =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/examples/dc-motor.toml");
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/examples/dc-motor.toml");
     let motor = std::fs::read_to_string(example).unwrap().replace(
         "[channels.glr]",
         "[channels.columns]\nu = [\"V101\"]\ny = [\"SI201\", \"II202\"]\n\n[channels.glr]",
@@ -151,7 +150,10 @@ fn official_encoders_payloads_decode_to_the_csvs_samples() {
                 // The index and time travel in the glrmon message only; Sparkplug
                 // carries milliseconds since the epoch.
                 2 => (want.k, want.t),
-                3 => (None, Some((1_700_000_000_000 + 10 * i as u64) as f64 / 1000.0)),
+                3 => (
+                    None,
+                    Some((1_700_000_000_000 + 10 * i as u64) as f64 / 1000.0),
+                ),
                 _ => (None, None),
             };
             assert_eq!((got.k, got.t), (k, t), "{} at {i}", CHANNELS[c].0);
@@ -229,7 +231,10 @@ fn exchange(
                     .unwrap();
                 let t = Instant::now();
                 while !p.matching_status().await.unwrap().matching() {
-                    assert!(t.elapsed() < Duration::from_secs(10), "no subscriber of {key}");
+                    assert!(
+                        t.elapsed() < Duration::from_secs(10),
+                        "no subscriber of {key}"
+                    );
                     tokio::time::sleep(Duration::from_millis(10)).await;
                 }
                 publishers.insert(*key, p);
@@ -293,7 +298,10 @@ fn every_format_raises_the_alarm_of_the_json_channel() {
             // transport's); the channel is the one compared.
             a.t = None;
             let name = std::mem::take(&mut a.channel);
-            assert!(by_channel.insert(name.clone(), a).is_none(), "two alarms on {name}");
+            assert!(
+                by_channel.insert(name.clone(), a).is_none(),
+                "two alarms on {name}"
+            );
         }
     }
     let json = &by_channel["dc_json"];
@@ -327,8 +335,8 @@ fn hostile_binary_payloads_are_errors_naming_channel_and_field() {
         (
             "spBv1.0/plant/DDATA/edge1/dc_motor",
             vec![
-                0x12, 0x11, 0x0a, 0x04, b'V', b'1', b'0', b'1', 0x20, 0x0a, 0x69, 0, 0, 0, 0, 0,
-                0, 0xf0, 0x3f,
+                0x12, 0x11, 0x0a, 0x04, b'V', b'1', b'0', b'1', 0x20, 0x0a, 0x69, 0, 0, 0, 0, 0, 0,
+                0xf0, 0x3f,
             ],
         ),
     ];
@@ -343,8 +351,14 @@ fn hostile_binary_payloads_are_errors_naming_channel_and_field() {
         .collect();
     messages.sort();
     let want = [
-        ("missing_field", "channel \"dc_spark\": field SI201 is missing"),
-        ("non_finite", "channel \"dc_raw\": field V101 is not a finite number"),
+        (
+            "missing_field",
+            "channel \"dc_spark\": field SI201 is missing",
+        ),
+        (
+            "non_finite",
+            "channel \"dc_raw\": field V101 is not a finite number",
+        ),
         (
             "wrong_dimension",
             "channel \"dc_cdr\": field data has 2 values, model expects 3",

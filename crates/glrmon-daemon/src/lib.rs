@@ -114,7 +114,9 @@ pub fn select_channels(
             reason: e.to_string(),
         })?;
         cfg.channels.retain(|c| {
-            zenoh::key_expr::KeyExpr::new(c.key.as_str()).is_ok_and(|k| k.intersects(&keys))
+            c.input_keys().iter().any(|key| {
+                zenoh::key_expr::KeyExpr::new(key.as_str()).is_ok_and(|k| k.intersects(&keys))
+            })
         });
         tracing::info!(keyexpr = %expr, channels = cfg.channels.len(), of = configured, "Monitoring the channels whose key intersects the selection.");
         if cfg.channels.is_empty() {
@@ -308,7 +310,11 @@ impl DaemonBuilder {
             }
             _ => None,
         };
-        let keys: Vec<String> = config.channels.iter().map(|c| c.key.clone()).collect();
+        let keys: Vec<Vec<String>> = config
+            .channels
+            .iter()
+            .map(glrmon_spec::Channel::input_keys)
+            .collect();
         let source = ZenohSource::declare(session, &keys, &runtime.intake()).await?;
         let presence = match &network {
             Some(network) => {

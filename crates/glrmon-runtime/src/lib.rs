@@ -34,7 +34,10 @@ mod sink;
 mod sinks;
 mod status;
 
-pub use decode::{CdrDecoder, JsonDecoder, PayloadDecoder, RawDecoder, SparkplugDecoder, decoder};
+pub use decode::{
+    Arrival, CdrDecoder, JsonDecoder, PayloadDecoder, RawDecoder, SparkplugDecoder, TagDecoder,
+    decoder,
+};
 pub use fanout::{DeliveryPlan, Fanout};
 pub use pipeline::{ChannelPipeline, Emit, PipelineError};
 pub use sink::{ChannelIndex, InputItem, InputOutput, Interest, Output, Sink, SinkError};
@@ -61,6 +64,10 @@ pub struct Payload {
     /// The transport's source timestamp (seconds since the Unix epoch), used as the
     /// samples' `t` where they carry none.
     pub source_time: Option<f64>,
+    /// Which of the channel's input keys it arrived on (`glrmon_spec::Channel::
+    /// input_keys`): 0 for a channel of whole samples on one key, the signal's tag for
+    /// a channel assembled from tags.
+    pub tag: usize,
 }
 
 /// Callbacks for events the operator should hear about (the binary logs them).
@@ -711,6 +718,7 @@ fn worker(
                 }
                 let _ = pipeline.payload(
                     &payload.bytes,
+                    payload.tag,
                     payload.source_time,
                     &cx.limits,
                     log_time_ns,

@@ -18,7 +18,7 @@ use glrmon_wire::{
 };
 
 use crate::ChannelStats;
-use crate::decode::{JsonDecoder, PayloadDecoder};
+use crate::decode::{Arrival, JsonDecoder, PayloadDecoder};
 use crate::fanout::{DeliveryPlan, Fanout};
 use crate::sink::{ChannelIndex, InputItem, InputOutput, Output, SinkError};
 
@@ -201,25 +201,34 @@ impl ChannelPipeline {
         self.decoder.as_ref()
     }
 
-    /// One payload as received: decoded within `limits`, then each of its samples
-    /// as by [`ChannelPipeline::sample`], with `source_time` (the transport's
+    /// One payload as received on the channel's input key number `tag` (0 unless the
+    /// channel is assembled from tags): decoded within `limits`, then each of its
+    /// samples as by [`ChannelPipeline::sample`], with `source_time` (the transport's
     /// timestamp) as the time of those that carry none. A payload that cannot be
-    /// decoded is [`ChannelPipeline::rejected`] whole, with its text if short enough.
+    /// decoded is [`ChannelPipeline::rejected`] whole, with its text if short enough;
+    /// what the decoder noticed about the stream (a tag gone silent) follows the
+    /// samples as an `error` record.
     ///
     /// # Errors
     /// As [`ChannelPipeline::sample`]; the first error, after every sample had its turn.
     pub fn payload(
         &mut self,
         payload: &[u8],
+        tag: usize,
         source_time: Option<f64>,
         limits: &DecodeLimits,
         log_time_ns: u64,
         emit: &mut dyn Emit,
     ) -> Result<(), PipelineError> {
         let mut samples = std::mem::take(&mut self.samples);
-        let decoded = self
-            .decoder
-            .decode(&self.name, payload, limits, &mut samples);
+        #[allow(clippy::cast_precision_loss)]
+        let arrival = Arrival {
+            source_time,
+            received: log_time_ns as f64 / 1e9,
+        };
+        let decoded =
+            self.decoder
+                .decode_tag(&self.name, tag, arrival, payload, limits, &mut samples);
         let mut first = None;
         match decoded {
             Ok(()) => {
@@ -237,6 +246,19 @@ impl ChannelPipeline {
                     self.rejected(e.code(), e.to_string(), None, kept, log_time_ns, emit),
                 );
             }
+        }
+        if let Some(notice) = self.decoder.take_notice() {
+            keep_first(
+                &mut first,
+                self.rejected(
+                    notice.code(),
+                    notice.to_string(),
+                    None,
+                    None,
+                    log_time_ns,
+                    emit,
+                ),
+            );
         }
         self.samples = samples;
         first.map_or(Ok(()), Err)

@@ -74,6 +74,7 @@ fn runtime_gives_the_same_records_as_direct_monitoring() {
                     bytes: d[k].clone(),
                     received: Instant::now(),
                     source_time: None,
+                    tag: 0,
                 },
             );
             assert_eq!(offer, Offer::Accepted);
@@ -136,6 +137,7 @@ fn full_queue_drops_are_counted_and_become_gaps() {
                     bytes: json.into_bytes(),
                     received: Instant::now(),
                     source_time: None,
+                    tag: 0,
                 },
             ) {
                 Offer::Dropped => dropped += 1,
@@ -188,12 +190,14 @@ fn oversized_payloads_and_unknown_channels_are_refused() {
         bytes: vec![b' '; 101],
         received: Instant::now(),
         source_time: None,
+        tag: 0,
     };
     assert_eq!(intake.offer(0, big), Offer::TooLarge);
     let p = Payload {
         bytes: b"{}".to_vec(),
         received: Instant::now(),
         source_time: None,
+        tag: 0,
     };
     assert_eq!(intake.offer(99, p), Offer::UnknownChannel);
     let stats = rt.stats();
@@ -203,6 +207,7 @@ fn oversized_payloads_and_unknown_channels_are_refused() {
         bytes: b"{}".to_vec(),
         received: Instant::now(),
         source_time: None,
+        tag: 0,
     };
     assert_eq!(intake.offer(0, p), Offer::Closed);
 }
@@ -255,6 +260,7 @@ fn intake_memory_is_bounded_in_bytes() {
                 bytes: vec![b'x'; 1 << 20],
                 received: Instant::now(),
                 source_time: None,
+                tag: 0,
             },
         );
         match offer {

@@ -104,6 +104,7 @@ glr = { window = 20, threshold = 30.0 }
                 bytes,
                 received: Instant::now(),
                 source_time: None,
+                tag: 0,
             },
         );
     }

@@ -11,7 +11,7 @@ use glrmon_core::{
 use nalgebra::{DMatrix, DVector};
 
 use crate::expr::{Expr, ExprColumn};
-use crate::{DetectorKind, PayloadFormat};
+use crate::{DetectorKind, PayloadFormat, Tags};
 
 /// How a fault column is computed.
 #[derive(Debug, Clone)]
@@ -300,6 +300,9 @@ pub struct Channel {
     pub key: String,
     /// How its payloads are encoded.
     pub payload: PayloadFormat,
+    /// The keys of its signals when it is assembled from tags (`[channels.tags]`);
+    /// then `key` is not subscribed to.
+    pub tags: Option<Tags>,
     /// Sample period in seconds, if given.
     pub period: Option<f64>,
     /// Dimensions.
@@ -386,6 +389,16 @@ pub struct Channel {
 }
 
 impl Channel {
+    /// The key expressions the channel's input arrives on: its `key`, or each tag's
+    /// key in the sample's order (a payload's tag is its index here).
+    #[must_use]
+    pub fn input_keys(&self) -> Vec<String> {
+        match &self.tags {
+            Some(tags) => tags.tags.iter().map(|t| t.key.clone()).collect(),
+            None => vec![self.key.clone()],
+        }
+    }
+
     /// A fresh fault dictionary (expression columns keep per-channel history, so each
     /// detector or simulator gets its own).
     ///

@@ -53,5 +53,7 @@ pub use crate::json_schema::json_schema;
 pub use crate::load::{load, parse};
 pub use crate::locate::did_you_mean;
 pub use crate::names::{MAX_INSTANCE_LEN, check_endpoint, validate_instance};
-pub use crate::payload::{CdrMessage, PayloadFormat, RawField, RawLayout};
+pub use crate::payload::{
+    CdrMessage, Formation, PayloadFormat, RawField, RawLayout, Tag, TagTime, Tags,
+};
 pub use crate::shard::{Shard, shard_hash};

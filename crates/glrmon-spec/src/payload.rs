@@ -105,6 +105,58 @@ impl RawLayout {
     }
 }
 
+/// A channel assembled from tags (`[channels.tags]`): each signal on a key of its own.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tags {
+    /// When a sample is formed.
+    pub formation: Formation,
+    /// Periods (or triggers) a silent signal keeps its last value; beyond, samples are
+    /// gaps.
+    pub hold: u32,
+    /// The time of a tag's value, where the tag has no `time_field`.
+    pub time: TagTime,
+    /// One per signal, in the sample's order: the inputs, the outputs, the scheduling
+    /// signals.
+    pub tags: Vec<Tag>,
+}
+
+/// When a tag channel forms a sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Formation {
+    /// At every multiple of this period (seconds).
+    Period(f64),
+    /// At each value of the signal at this index of [`Tags::tags`].
+    Trigger(usize),
+}
+
+/// Which clock times a tag's value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TagTime {
+    /// The publication's Zenoh timestamp (its arrival when it has none).
+    #[default]
+    Zenoh,
+    /// Its arrival at glrmon.
+    Arrival,
+}
+
+impl TagTime {
+    /// The names the configuration accepts.
+    pub const NAMES: [&'static str; 2] = ["zenoh", "arrival"];
+}
+
+/// One signal of a tag channel.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Tag {
+    /// The signal's column name (`u0`, or its `[channels.columns]` name).
+    pub signal: String,
+    /// The key expression it arrives on.
+    pub key: String,
+    /// The path of its value in a JSON object; empty: the payload is the number.
+    pub field: Vec<String>,
+    /// The path of its time (seconds since the Unix epoch) in the JSON object.
+    pub time_field: Option<Vec<String>>,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

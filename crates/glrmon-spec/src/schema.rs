@@ -283,6 +283,10 @@ pub struct ChannelSpec {
     /// `[channels.raw]`: the record layout of a `payload = "raw"` channel. Required
     /// with it.
     pub raw: Option<RawSpec>,
+    /// `[channels.tags]`: the channel assembled from one key per signal (a tag per key,
+    /// as MQTT and OPC UA gateways publish), instead of whole samples on `key`.
+    /// Default: none.
+    pub tags: Option<TagsSpec>,
     /// Sample period in seconds (finite, positive): turns sample counts into times in
     /// reports, and discretises a continuous-time model (`model.A`), for which it is
     /// required. Default: none.
@@ -667,6 +671,60 @@ pub struct RawSpec {
     /// `y0`, `p0`, …: every signal exactly once) and `_` for 8 bytes not read, e.g.
     /// `["t", "u0", "y0", "y1"]`. Required.
     pub layout: Vec<String>,
+}
+
+/// `[channels.tags]`: a channel whose signals arrive each on a key of its own, as a
+/// bare JSON number (`12.5`, `true`) or a field of a JSON object; samples are formed on
+/// a fixed `period` or at each value of a `trigger` signal (docs/WIRE.md).
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TagsSpec {
+    /// Sample period in seconds (finite, positive): a sample at every multiple of it,
+    /// each signal at its last value at or before that time. One of `period` and
+    /// `trigger` is required.
+    pub period: Option<f64>,
+    /// The signal (a column name) whose every value forms a sample, with the other
+    /// signals at their latest values. One of `period` and `trigger` is required.
+    pub trigger: Option<String>,
+    /// How long a signal that sent nothing keeps its last value: `hold` periods (or
+    /// triggers); beyond, samples are gaps until it sends again (1 to 1000000).
+    /// Default 3.
+    pub hold: Option<u32>,
+    /// The time of a tag's value: `zenoh` (the Zenoh timestamp of the publication,
+    /// else its arrival) or `arrival` (when glrmon received it: for publishers whose
+    /// clocks disagree). A tag with `time_field` reads its time from the payload.
+    /// Default `zenoh`.
+    #[schemars(extend("enum" = ["zenoh", "arrival"]))]
+    pub time: Option<String>,
+    /// Each signal's key: `y0 = "plant/dc/current"`, or `y1 = { key = "plant/dc/speed",
+    /// field = "value", time_field = "ts" }` to read a field of a JSON object (a path
+    /// `data.speed`) and the time in seconds since the Unix epoch from another. Every
+    /// signal of the channel (by its column name) has one. Required.
+    pub keys: std::collections::BTreeMap<String, TagKeySpec>,
+}
+
+/// Where one signal of a tag channel arrives.
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
+#[serde(untagged)]
+pub enum TagKeySpec {
+    /// The key expression; the payload is a bare JSON number or boolean.
+    Key(String),
+    /// A key expression and the fields of its JSON payload.
+    Fields(TagFieldsSpec),
+}
+
+/// A signal's key expression and the fields of its JSON payload.
+#[derive(Debug, Clone, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TagFieldsSpec {
+    /// The Zenoh key expression the signal arrives on (outside `glrmon/**`). Required.
+    pub key: String,
+    /// The path of the value in a JSON object, fields joined by `.` (`value`,
+    /// `data.speed`). Default: the payload is the bare number.
+    pub field: Option<String>,
+    /// The path of the value's time (seconds since the Unix epoch, a number) in the
+    /// JSON object. Default: the time `time` says.
+    pub time_field: Option<String>,
 }
 
 /// A matrix: scalar × identity, dense rows, or LPV table.

@@ -232,6 +232,30 @@ pub enum DecodeErrorKind {
     /// (JSON itself has no NaN or Infinity literals; those are `InvalidJson`.)
     #[error("is not a finite number")]
     NonFinite,
+    /// A tag's value is timed at or before one it already gave (a channel assembled
+    /// from tags): it is not used. Code `out_of_order`.
+    #[error("is timed at {} s, not after its previous value at {} s", seconds(*t_ns), seconds(*previous_ns))]
+    NotAfter {
+        /// The value's time, in nanoseconds (of the tag's clock).
+        t_ns: i64,
+        /// The time of the tag's latest value, in nanoseconds.
+        previous_ns: i64,
+    },
+    /// A tag sent nothing for longer than it may be held (a channel assembled from
+    /// tags): samples are gaps until it sends again. Reported once, when it goes
+    /// stale, on the stream; no payload is refused. Code `gap`.
+    #[error(
+        "(key {}) sent no value for more than {hold} {unit}: samples are gaps until it sends again",
+        Escaped(key)
+    )]
+    Stale {
+        /// The tag's key expression.
+        key: String,
+        /// How long a value is held.
+        hold: u32,
+        /// `periods` or `triggers`.
+        unit: &'static str,
+    },
     /// The payload, the batch or a vector is longer than its configured limit.
     #[error("has {got} {}, more than the limit of {limit}", what.unit())]
     TooLarge {
@@ -257,8 +281,16 @@ impl DecodeErrorKind {
             DecodeErrorKind::WrongDimension { .. } => ErrorCode::WrongDimension,
             DecodeErrorKind::NonFinite => ErrorCode::NonFinite,
             DecodeErrorKind::TooLarge { .. } => ErrorCode::TooLarge,
+            DecodeErrorKind::NotAfter { .. } => ErrorCode::OutOfOrder,
+            DecodeErrorKind::Stale { .. } => ErrorCode::Gap,
         }
     }
+}
+
+/// Nanoseconds as seconds, for messages.
+#[allow(clippy::cast_precision_loss)]
+fn seconds(ns: i64) -> f64 {
+    ns as f64 / 1e9
 }
 
 /// A rejected payload, sample or record: which channel, which field, and why.

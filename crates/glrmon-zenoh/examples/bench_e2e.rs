@@ -115,7 +115,11 @@ async fn main() {
     };
     let (sinks, recorder_stats) = sinks(&daemon, &cfg);
     let runtime = Runtime::start(monitors, sinks, &settings, Arc::new(Quiet));
-    let keys: Vec<String> = cfg.channels.iter().map(|c| c.key.clone()).collect();
+    let keys: Vec<Vec<String>> = cfg
+        .channels
+        .iter()
+        .map(glrmon_spec::Channel::input_keys)
+        .collect();
     let _source = ZenohSource::declare(&daemon, &keys, &runtime.intake())
         .await
         .expect("source");
@@ -139,7 +143,7 @@ async fn main() {
         })
         .await
         .expect("alarm subscriber");
-    let publishers = publishers(&plant, &keys).await;
+    let publishers = publishers(&plant, &keys.concat()).await;
     // Publish round-robin over channels, one batch at a time.
     let mut sent_at: HashMap<(usize, u64), Instant> = HashMap::new();
     let start = Instant::now();

@@ -456,40 +456,45 @@ pub struct ZenohSource {
 }
 
 impl ZenohSource {
-    /// Subscribes to each channel's key expression (`keys[i]` for channel index i). The
-    /// callbacks never block: a full queue drops (counted by the runtime).
+    /// Subscribes to each channel's input keys (`keys[i]` for channel index i: its
+    /// `key`, or its tags' keys, `glrmon_spec::Channel::input_keys`); a payload
+    /// carries the index of the key it arrived on as its `tag`. The callbacks never
+    /// block: a full queue drops (counted by the runtime).
     ///
     /// # Errors
     /// [`ZenohError::Session`] when a declaration fails.
     pub async fn declare(
         session: &Session,
-        keys: &[String],
+        keys: &[Vec<String>],
         intake: &Intake,
     ) -> Result<Self, ZenohError> {
         let mut subscribers = Vec::new();
-        for (index, key) in keys.iter().enumerate() {
-            let intake = intake.clone();
-            let sub = session
-                .declare_subscriber(key.as_str())
-                .callback(move |sample| {
-                    let source_time = sample.timestamp().map(|t| {
-                        let st = t.get_time().to_system_time();
-                        st.duration_since(std::time::UNIX_EPOCH)
-                            .map_or(0.0, |d| d.as_secs_f64())
-                    });
-                    let bytes = sample.payload().to_bytes().into_owned();
-                    let _ = intake.offer(
-                        index,
-                        Payload {
-                            bytes,
-                            received: Instant::now(),
-                            source_time,
-                        },
-                    );
-                })
-                .await
-                .map_err(session_err("declare subscriber"))?;
-            subscribers.push(sub);
+        for (index, channel_keys) in keys.iter().enumerate() {
+            for (tag, key) in channel_keys.iter().enumerate() {
+                let intake = intake.clone();
+                let sub = session
+                    .declare_subscriber(key.as_str())
+                    .callback(move |sample| {
+                        let source_time = sample.timestamp().map(|t| {
+                            let st = t.get_time().to_system_time();
+                            st.duration_since(std::time::UNIX_EPOCH)
+                                .map_or(0.0, |d| d.as_secs_f64())
+                        });
+                        let bytes = sample.payload().to_bytes().into_owned();
+                        let _ = intake.offer(
+                            index,
+                            Payload {
+                                bytes,
+                                received: Instant::now(),
+                                source_time,
+                                tag,
+                            },
+                        );
+                    })
+                    .await
+                    .map_err(session_err("declare subscriber"))?;
+                subscribers.push(sub);
+            }
         }
         Ok(Self { subscribers })
     }

@@ -121,13 +121,17 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         &latency,
     )
     .await?;
-    let keys: Vec<String> = cfg.channels.iter().map(|c| c.key.clone()).collect();
+    let keys: Vec<Vec<String>> = cfg
+        .channels
+        .iter()
+        .map(glrmon_spec::Channel::input_keys)
+        .collect();
     let mut plants = plants(&cfg, &session, args.seed).await?;
     println!(
         "glrmon demo: in-process Zenoh peer session {}, {} channels ({}), {samples} samples each at {}",
         session.zid(),
         plants.len(),
-        keys.join(", "),
+        keys.concat().join(", "),
         if args.rate > 0.0 {
             format!("{rate_hz} Hz")
         } else {

@@ -10,10 +10,12 @@
 mod cdr;
 mod raw;
 mod sparkplug;
+mod tags;
 
 pub use cdr::CdrDecoder;
 pub use raw::RawDecoder;
 pub use sparkplug::SparkplugDecoder;
+pub use tags::TagDecoder;
 
 use glrmon_spec::{Channel, PayloadFormat};
 use glrmon_wire::{
@@ -38,6 +40,42 @@ pub trait PayloadDecoder: Send + std::fmt::Debug {
         limits: &DecodeLimits,
         out: &mut Vec<Sample>,
     ) -> Result<(), DecodeError>;
+
+    /// Decodes the payload of the channel's tag number `tag` (its input key, in the
+    /// order of `glrmon_spec::Channel::input_keys`), which arrived as `arrival` says.
+    /// A decoder of whole samples on one key reads it as [`PayloadDecoder::decode`];
+    /// a channel assembled from tags forms its samples here.
+    ///
+    /// # Errors
+    /// As [`PayloadDecoder::decode`].
+    fn decode_tag(
+        &mut self,
+        channel: &str,
+        tag: usize,
+        arrival: Arrival,
+        payload: &[u8],
+        limits: &DecodeLimits,
+        out: &mut Vec<Sample>,
+    ) -> Result<(), DecodeError> {
+        let _ = (tag, arrival);
+        self.decode(channel, payload, limits, out)
+    }
+
+    /// Something the last payload revealed about the stream without refusing it (a tag
+    /// gone silent), reported as an `error` record after the payload's samples.
+    fn take_notice(&mut self) -> Option<DecodeError> {
+        None
+    }
+}
+
+/// When a payload arrived: the transport's timestamp, if it has one, and glrmon's
+/// receipt, in seconds since the Unix epoch.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Arrival {
+    /// The publication's timestamp (Zenoh's), if any.
+    pub source_time: Option<f64>,
+    /// When glrmon received it.
+    pub received: f64,
 }
 
 /// The JSON sample format of docs/WIRE.md: one object or an array of them.
@@ -101,6 +139,14 @@ impl PayloadDecoder for NamedJsonDecoder {
 pub fn decoder(channel: &Channel) -> Box<dyn PayloadDecoder> {
     let c = &channel.columns;
     let d = channel.dims;
+    if let Some(tags) = &channel.tags {
+        return Box::new(TagDecoder::new(
+            tags.clone(),
+            d.inputs,
+            d.outputs,
+            d.signals,
+        ));
+    }
     match &channel.payload {
         PayloadFormat::Json if c.named => {
             Box::new(NamedJsonDecoder::new(SignalNames::new(&c.u, &c.y, &c.p)))

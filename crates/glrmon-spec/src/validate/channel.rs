@@ -181,6 +181,21 @@ impl Validator {
         };
         let warm_up = self.warm_up(prefix, glr);
         let payload = self.payload(prefix, spec, &columns);
+        let tags = spec.tags.as_ref().and_then(|t| {
+            if spec.key.is_some() {
+                self.error(
+                    join(prefix, "key"),
+                    "is not read: the channel's signals arrive on `[channels.tags] keys`".into(),
+                );
+            }
+            if spec.payload.as_deref().is_some_and(|p| p != "json") {
+                self.error(
+                    join(prefix, "payload"),
+                    "is not read: the tags of `[channels.tags]` are JSON numbers or objects".into(),
+                );
+            }
+            self.tags(prefix, t, &columns)
+        });
         if self.errors.len() > before {
             return None;
         }
@@ -221,6 +236,7 @@ impl Validator {
         let mut channel = Channel {
             name: spec.name.clone(),
             payload,
+            tags,
             key: spec
                 .key
                 .clone()

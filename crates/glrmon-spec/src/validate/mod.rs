@@ -17,6 +17,7 @@ mod parity;
 mod payload;
 mod signals;
 mod simulation;
+mod tags;
 
 use crate::locate::{self, did_you_mean};
 use crate::schema::{ChannelSpec, ConfigFile};
