@@ -8,7 +8,7 @@ use glrmon_core::StepError;
 use glrmon_core::isolation::information::{InformationError, warmup_samples, window_information};
 use glrmon_core::isolation::isolability::{DEFAULT_CORRELATION_LIMIT, isolability};
 use glrmon_core::threshold::calibration::Target;
-use glrmon_spec::{Channel, DetectorKind, ThresholdSource};
+use glrmon_spec::{Channel, DetectorKind, Formation, ThresholdSource};
 use nalgebra::DMatrix;
 
 /// Widest matrix printed on one line.
@@ -243,11 +243,37 @@ pub fn channel_report(channel: &Channel) -> Result<ChannelReport, ReportError> {
 fn settings(channel: &Channel) -> String {
     let d = channel.dims;
     let mut s = String::new();
+    let input = match &channel.tags {
+        None => format!("key {}, {}", channel.key, channel.payload.name()),
+        Some(tags) => {
+            let formed = match tags.formation {
+                Formation::Period(p) => format!("every {p} s"),
+                Formation::Trigger(i) => format!("at each {}", tags.tags[i].signal),
+            };
+            let keys: Vec<String> = tags
+                .tags
+                .iter()
+                .map(|t| {
+                    let field = if t.field.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" .{}", t.field.join("."))
+                    };
+                    format!("{} ← {}{field}", t.signal, t.key)
+                })
+                .collect();
+            format!("tags {}, {formed}, held {} ", keys.join(", "), tags.hold)
+                + if matches!(tags.formation, Formation::Period(_)) {
+                    "periods"
+                } else {
+                    "triggers"
+                }
+        }
+    };
     let _ = writeln!(
         s,
-        "channel \"{}\" (key {}): n = {} states, l = {} inputs, p = {} outputs, q = {} signals, m = {} faults",
+        "channel \"{}\" ({input}): n = {} states, l = {} inputs, p = {} outputs, q = {} signals, m = {} faults",
         channel.name,
-        channel.key,
         d.states,
         d.inputs,
         d.outputs,

@@ -11,7 +11,7 @@ use crate::limits;
 
 /// The sections of a file, in the order of the reference: (TOML header, schema
 /// definition, what it is for).
-const SECTIONS: [(&str, &str); 25] = [
+const SECTIONS: [(&str, &str); 27] = [
     ("[zenoh]", "ZenohSpec"),
     ("[daemon]", "DaemonSpec"),
     ("[recording]", "RecordingSpec"),
@@ -19,6 +19,8 @@ const SECTIONS: [(&str, &str); 25] = [
     ("[[channels]]", "ChannelSpec"),
     ("[channels.cdr]", "CdrSpec"),
     ("[channels.raw]", "RawSpec"),
+    ("[channels.tags]", "TagsSpec"),
+    ("[channels.tags.keys.<signal>]", "TagFieldsSpec"),
     ("[channels.model]", "ModelSpec"),
     ("[channels.scaling]", "ScalingSpec"),
     ("[channels.columns]", "ColumnsSpec"),
@@ -391,6 +393,8 @@ name = "tank"
 [channels.scaling]      #   optional: natural units
 [channels.cdr]          #   with payload = "cdr": the ROS 2 message type
 [channels.raw]          #   with payload = "raw": the f64 record layout
+[channels.tags]         #   instead of key: one key per signal, samples formed
+[channels.tags.keys]    #     each signal's key (and JSON field)
 [channels.columns]      #   optional: signal names (CSV columns) and units
 [[channels.faults]]     #   the fault dictionary, one table per fault
 [channels.glr]          #   optional: window, threshold, alarms, isolation

@@ -75,6 +75,8 @@ name = "@NAME@"
 # payload = "json"                   # json, cdr, sparkplug or raw (docs/WIRE.md)
 # cdr = { message = "std_msgs/msg/Float64MultiArray" }  # with payload = "cdr"
 # raw = { layout = ["t", "u0", "y0", "y1"] }              # with payload = "raw": f64 LE
+# tags = { period = 0.1, hold = 3, time = "zenoh", keys = { u0 = "plant/u", y0 = { key = "plant/y", field = "value", time_field = "ts" } } }
+#                                    # instead of key: one key per signal (docs/WIRE.md)
 # period = 0.1                       # seconds; required with A (continuous time)
 # signals = 0                        # scheduling signals p0...; default: highest used + 1
 

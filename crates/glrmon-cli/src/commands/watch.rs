@@ -1,5 +1,7 @@
 //! `glrmon watch [KEYEXPR] [--json]`: alarms (at the crossing), their isolation
-//! updates, alarm ends, diagnoses and consistency changes, one line each.
+//! updates, alarm ends, diagnoses and consistency changes, one line each; with `--raw`
+//! (or a key outside `glrmon/**`, such as a plant's tags) every publication as it
+//! arrives: its time, key, encoding and payload.
 //!
 //! Any Zenoh peer can publish under the watched key, so nothing received reaches the
 //! terminal raw: lines, key expressions and decode errors are escaped
@@ -27,6 +29,11 @@ pub(crate) struct WatchArgs {
     /// Exit after this many printed records.
     #[arg(long)]
     count: Option<u64>,
+    /// Print every publication as it arrives (Zenoh timestamp, key, encoding, payload as
+    /// text or, when binary, hexadecimal), to see what a plant publishes before
+    /// configuring it: the default for a key outside glrmon/**.
+    #[arg(long)]
+    raw: bool,
     #[command(flatten)]
     zenoh: ZenohArgs,
 }
@@ -44,6 +51,7 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
         .declare_subscriber(args.key.as_str())
         .await
         .map_err(|e| anyhow::anyhow!("subscribing to {}: {e}", args.key))?;
+    let raw = args.raw || !glrmon_spec::keys::intersects(&args.key, "glrmon/**");
     let mut printed = 0u64;
     loop {
         let sample = tokio::select! {
@@ -51,6 +59,14 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
             _ = tokio::signal::ctrl_c() => break,
         };
         let bytes = sample.payload().to_bytes();
+        if raw {
+            println!("{}", raw_line(&sample, &bytes));
+            printed += 1;
+            if args.count.is_some_and(|c| printed >= c) {
+                break;
+            }
+            continue;
+        }
         let record = match decode_record(&bytes) {
             Ok(r) => r,
             Err(e) => {
@@ -76,4 +92,40 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
     }
     let _ = session.close().await;
     Ok(())
+}
+
+/// One publication as it arrived: `<time> <key> [<encoding>] <payload>`, the time its
+/// Zenoh timestamp (UTC) or `-`, the payload as (escaped) text when it is UTF-8, else
+/// `0x` and its bytes in hexadecimal (at most 256 shown).
+fn raw_line(sample: &zenoh::sample::Sample, bytes: &[u8]) -> String {
+    use std::fmt::Write as _;
+    let time = sample.timestamp().map_or_else(
+        || "-".to_owned(),
+        |t| {
+            let since = t
+                .get_time()
+                .to_system_time()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap_or_default();
+            glrmon_report::clock::format_time(since.as_secs_f64(), glrmon_report::clock::Zone::Utc)
+        },
+    );
+    let payload = match std::str::from_utf8(bytes) {
+        Ok(text) => Escaped(text).to_string(),
+        Err(_) => {
+            let mut hex = String::from("0x");
+            for b in bytes.iter().take(256) {
+                let _ = write!(hex, "{b:02x}");
+            }
+            if bytes.len() > 256 {
+                let _ = write!(hex, "… ({} bytes)", bytes.len());
+            }
+            hex
+        }
+    };
+    format!(
+        "{time} {} [{}] {payload}",
+        Escaped(sample.key_expr().as_str()),
+        Escaped(&sample.encoding().to_string())
+    )
 }

@@ -66,7 +66,7 @@ impl PayloadDecoder for RawDecoder {
             return fail(out, None, DecodeErrorKind::TooLarge { what, limit, got });
         }
         let size = self.layout.record_bytes();
-        if payload.is_empty() || payload.len() % size != 0 {
+        if payload.is_empty() || !payload.len().is_multiple_of(size) {
             return fail(
                 out,
                 None,

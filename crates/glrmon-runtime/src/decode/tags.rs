@@ -786,4 +786,62 @@ mod tests {
         );
         assert_eq!(got, [(0, 10.0, vec![], vec![1.0])]);
     }
+
+    #[test]
+    /// Values of three tags timed with jitter inside each period form, at every
+    /// instant, the values of the period before, exactly.
+    fn jittered_tags_form_the_periods_values() {
+        let tags = ["u0", "y0", "y1"]
+            .iter()
+            .map(|s| Tag {
+                signal: (*s).into(),
+                key: format!("k/{s}"),
+                field: vec!["value".into()],
+                time_field: Some(vec!["time".into()]),
+            })
+            .collect();
+        let spec = Tags {
+            formation: Formation::Period(0.01),
+            hold: 3,
+            time: TagTime::Zenoh,
+            tags,
+        };
+        let mut d = TagDecoder::new(spec, 1, 2, 0);
+        let mut x: u64 = 0x9e37_79b9_7f4a_7c15;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let mut out = Vec::new();
+        let mut got = Vec::new();
+        for j in 0..50u32 {
+            for i in 0..3 {
+                let f = 0.05 + 0.4 * (next() % 1000) as f64 / 1000.0;
+                let t = 1_800_000_000.0 + (f64::from(j) + f) * 0.01;
+                let p = format!(
+                    r#"{{"time":{t:?},"quality":"good","value":{}}}"#,
+                    1000 * i + j
+                );
+                d.decode_tag(
+                    "c",
+                    i as usize,
+                    Arrival::default(),
+                    p.as_bytes(),
+                    &DecodeLimits::default(),
+                    &mut out,
+                )
+                .unwrap();
+                got.extend(out.iter().map(|s| (s.k.unwrap(), s.u[0], s.y[0], s.y[1])));
+            }
+        }
+        for (k, u, y0, y1) in got {
+            assert_eq!(
+                (u, y0, y1),
+                (k as f64, 1000.0 + k as f64, 2000.0 + k as f64),
+                "{k}"
+            );
+        }
+    }
 }

@@ -87,7 +87,7 @@ impl Validator {
                 "_" => Some(RawField::Skip),
                 name => signals
                     .iter()
-                    .find_map(|(list, make)| list.iter().position(|c| c == name).map(|j| make(j))),
+                    .find_map(|(list, make)| list.iter().position(|c| c == name).map(make)),
             };
             let Some(field) = field else {
                 self.error(format!("{path}[{i}]"), locate::not_one_of(name, &names));

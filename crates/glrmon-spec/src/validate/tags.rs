@@ -156,3 +156,117 @@ impl Validator {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::{Formation, TagTime};
+
+    fn channel(tags: &str) -> Result<crate::Channel, String> {
+        let (top, tags) = match tags.strip_prefix("key = \"plant/motor\"\n") {
+            Some(rest) => ("key = \"plant/motor\"", rest),
+            None => ("", tags),
+        };
+        let text = format!(
+            r#"
+[[channels]]
+name = "motor"
+{top}
+model = {{ F = [[0.9, 0.0], [0.0, 0.9]], G = [[1.0], [0.5]], H = [[1.0, 0.0], [0.0, 1.0]], Q = 0.01, R = 0.04 }}
+faults = [{{ name = "bias", kind = "sensor_bias", output = 0 }}]
+[channels.columns]
+u = ["volts"]
+y = ["amps", "speed"]
+{tags}"#
+        );
+        crate::parse(&text)
+            .map(|mut c| c.channels.remove(0))
+            .map_err(|e| e.to_string())
+    }
+
+    const KEYS: &str = "[channels.tags.keys]\nvolts = \"plant/dc/voltage\"\namps = \"plant/dc/current\"\nspeed = { key = \"plant/dc/json\", field = \"data.speed\", time_field = \"ts\" }\n";
+
+    #[test]
+    fn tags_are_read_in_the_samples_order() {
+        let c = channel(&format!("[channels.tags]\nperiod = 0.01\n{KEYS}")).unwrap();
+        let tags = c.tags.unwrap();
+        assert_eq!(
+            (tags.formation, tags.hold, tags.time),
+            (Formation::Period(0.01), 3, TagTime::Zenoh)
+        );
+        let keys: Vec<(&str, &str, String)> = tags
+            .tags
+            .iter()
+            .map(|t| (t.signal.as_str(), t.key.as_str(), t.field.join(".")))
+            .collect();
+        assert_eq!(
+            keys,
+            [
+                ("volts", "plant/dc/voltage", String::new()),
+                ("amps", "plant/dc/current", String::new()),
+                ("speed", "plant/dc/json", "data.speed".to_owned()),
+            ]
+        );
+        assert_eq!(
+            tags.tags[2].time_field.as_deref(),
+            Some(&["ts".to_owned()][..])
+        );
+        let c = channel(&format!(
+            "[channels.tags]\ntrigger = \"speed\"\ntime = \"arrival\"\nhold = 5\n{KEYS}"
+        ))
+        .unwrap();
+        let tags = c.tags.as_ref().unwrap();
+        assert_eq!(
+            (tags.formation, tags.hold, tags.time),
+            (Formation::Trigger(2), 5, TagTime::Arrival)
+        );
+        assert_eq!(
+            c.input_keys(),
+            ["plant/dc/voltage", "plant/dc/current", "plant/dc/json"]
+        );
+    }
+
+    #[test]
+    fn a_wrong_tags_table_names_its_field() {
+        for (tags, want) in [
+            (format!("[channels.tags]\n{KEYS}"), "tags needs `period`"),
+            (format!("[channels.tags]\nperiod = 0.01\ntrigger = \"amps\"\n{KEYS}"), "tags.trigger forms samples"),
+            (format!("[channels.tags]\nperiod = -1.0\n{KEYS}"), "tags.period: -1 is not a finite, positive"),
+            (format!("[channels.tags]\ntrigger = \"torque\"\n{KEYS}"), "tags.trigger: \"torque\" is not one of volts, amps, speed"),
+            (format!("[channels.tags]\nperiod = 0.01\nhold = 0\n{KEYS}"), "tags.hold: 0 is not between 1 and 1000000"),
+            (format!("[channels.tags]\nperiod = 0.01\ntime = \"gps\"\n{KEYS}"), "tags.time: \"gps\" is not one of zenoh, arrival"),
+            (
+                "[channels.tags]\nperiod = 0.01\n[channels.tags.keys]\nvolts = \"plant/dc/voltage\"\namps = \"plant/dc/current\"\n".to_owned(),
+                "tags.keys has no key for speed",
+            ),
+            (
+                format!("[channels.tags]\nperiod = 0.01\n{KEYS}torque = \"plant/dc/torque\"\n"),
+                "tags.keys.torque is not a signal of the channel; its signals are volts, amps, speed",
+            ),
+            (
+                "[channels.tags]\nperiod = 0.01\n[channels.tags.keys]\nvolts = \"plant/dc/voltage\"\namps = \"glrmon/dc/current\"\nspeed = \"plant/dc/speed\"\n".to_owned(),
+                "tags.keys.amps.key: \"glrmon/dc/current\" intersects glrmon's own key space",
+            ),
+            (
+                "[channels.tags]\nperiod = 0.01\n[channels.tags.keys]\nvolts = \"plant/dc/voltage\"\namps = \"plant/dc/voltage\"\nspeed = { key = \"plant/dc/speed\", field = \"a..b\" }\n".to_owned(),
+                "tags.keys.amps reads the same key and field as volts",
+            ),
+            (
+                "[channels.tags]\nperiod = 0.01\n[channels.tags.keys]\nvolts = \"plant/dc/voltage\"\namps = \"plant/dc/current\"\nspeed = { key = \"plant/dc/speed\", field = \"a..b\" }\n".to_owned(),
+                "tags.keys.speed.field: \"a..b\" is not a field path",
+            ),
+            (
+                format!("key = \"plant/motor\"\n[channels.tags]\nperiod = 0.01\n{KEYS}"),
+                "key is not read: the channel's signals arrive on `[channels.tags] keys`",
+            ),
+        ] {
+            let err = channel(&tags).unwrap_err();
+            // The path, then the reason (after `: `, or a space before a verb).
+            let (path, reason) = want.split_once(' ').unwrap();
+            let path = path.trim_end_matches(':');
+            assert!(
+                err.contains(&format!("{path}: {reason}")) || err.contains(&format!("{path} {reason}")),
+                "{tags}\n→ {err}"
+            );
+        }
+    }
+}
