@@ -80,7 +80,7 @@ check-config: ## glrmon validate every file in config/
 config-doc: ## regenerate docs/CONFIG.md (the configuration reference) from the configuration types
 	$(CARGO) run -q -p glrmon-spec --example config_reference > docs/CONFIG.md
 
-fuzz-build: ## build the fuzz targets (fuzz/: sample, binary (CDR, Sparkplug B, raw), monitor, record, status, config, expression, CSV and MCAP decoders) and run each on its regression inputs (fuzz/regressions/)
+fuzz-build: ## build the fuzz targets (fuzz/: sample, binary (CDR, Sparkplug B, raw), tags, monitor, record, status, config, expression, CSV and MCAP decoders) and run each on its regression inputs (fuzz/regressions/)
 	$(CARGO) build --manifest-path fuzz/Cargo.toml --target-dir target
 	@for t in $(FUZZ_TARGETS); do \
 		if [ -d fuzz/regressions/$$t ]; then \
@@ -89,7 +89,7 @@ fuzz-build: ## build the fuzz targets (fuzz/: sample, binary (CDR, Sparkplug B, 
 		fi; \
 	done
 
-FUZZ_TARGETS := samples binary monitor records status config expressions csv mcap
+FUZZ_TARGETS := samples binary tags monitor records status config expressions csv mcap
 FUZZ_TARGET ?= samples
 FUZZ_SECONDS ?= 60
 fuzz: ## run one fuzz target with cargo-fuzz (nightly), from its corpus and regression inputs: make fuzz FUZZ_TARGET=config FUZZ_SECONDS=600

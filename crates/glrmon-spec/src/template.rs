@@ -76,7 +76,8 @@ name = "@NAME@"
 # cdr = { message = "std_msgs/msg/Float64MultiArray" }  # with payload = "cdr"
 # raw = { layout = ["t", "u0", "y0", "y1"] }              # with payload = "raw": f64 LE
 # tags = { period = 0.1, hold = 3, time = "zenoh", keys = { u0 = "plant/u", y0 = { key = "plant/y", field = "value", time_field = "ts" } } }
-#                                    # instead of key: one key per signal (docs/WIRE.md)
+#                                    # instead of key: one key per signal (docs/WIRE.md);
+#                                    # trigger = "y0" instead of period: a sample per y0
 # period = 0.1                       # seconds; required with A (continuous time)
 # signals = 0                        # scheduling signals p0...; default: highest used + 1
 
