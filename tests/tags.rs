@@ -415,3 +415,55 @@ fn the_shipped_tags_example_forms_a_sample_every_period_in_real_time() {
         "{errors:#?}"
     );
 }
+
+#[test]
+fn simulate_publishes_a_tag_channel_as_its_plant_would() {
+    let scratch = Scratch::new("tags-simulate");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let keys = "[channels.tags.keys]\nu0 = \"plant/dc/voltage\"\ny0 = \"plant/dc/current\"\ny1 = \"plant/dc/speed\"\n";
+    let config = config(&scratch.0, &endpoint, keys);
+    let _daemon = Daemon::start(&config, 2);
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let records = rt.block_on(async {
+        let watcher = client(&endpoint).await;
+        let results = watcher
+            .declare_subscriber("glrmon/dc_motor/*")
+            .await
+            .unwrap();
+        let output = tokio::task::spawn_blocking({
+            let (config, endpoint) = (config.clone(), endpoint.clone());
+            move || {
+                run_ok(
+                    glrmon()
+                        .args(["simulate", "--config"])
+                        .arg(&config)
+                        .args(["--channel", "dc_motor", "--samples", "250", "--seed", "5"])
+                        .args(["--fault", "actuator_bias:0.5", "--onset", "120"])
+                        .args(["--publish", "--connect", &endpoint]),
+                )
+            }
+        })
+        .await
+        .unwrap();
+        let said = String::from_utf8_lossy(&output.stderr).into_owned();
+        assert!(
+            said.contains("published on plant/dc/voltage, plant/dc/current, plant/dc/speed"),
+            "{said}"
+        );
+        collect(&results, |r| {
+            r.iter().any(|r| matches!(r, Record::Alarm(_)))
+        })
+        .await
+    });
+    let alarm = records
+        .iter()
+        .find_map(|r| match r {
+            Record::Alarm(a) => Some(a),
+            _ => None,
+        })
+        .unwrap();
+    assert!(
+        (116..=126).contains(&alarm.onset) && alarm.k < 170,
+        "{alarm:?}"
+    );
+}

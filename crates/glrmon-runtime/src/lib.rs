@@ -30,6 +30,7 @@
 mod decode;
 mod fanout;
 mod pipeline;
+mod publish;
 mod sink;
 mod sinks;
 mod status;
@@ -40,6 +41,7 @@ pub use decode::{
 };
 pub use fanout::{DeliveryPlan, Fanout};
 pub use pipeline::{ChannelPipeline, Emit, PipelineError};
+pub use publish::{Publication, PublishError, publications};
 pub use sink::{ChannelIndex, InputItem, InputOutput, Interest, Output, Sink, SinkError};
 pub use sinks::{FnSink, JsonLinesSink, MemorySink};
 pub use status::channel_statuses;

@@ -52,11 +52,13 @@ pub(crate) struct SimulateArgs {
     /// Output file: CSV, or an MCAP recording of the samples (with the configuration) when the name ends in .mcap.
     #[arg(long, required_unless_present = "publish")]
     output: Option<PathBuf>,
-    /// Publish the samples on the channel's key expression instead of (or as well as)
-    /// writing a file.
+    /// Publish the samples as the channel's plant would, on its key expression in its
+    /// payload format (or one tag per key for a channel assembled from tags), instead
+    /// of (or as well as) writing a file.
     #[arg(long)]
     publish: bool,
-    /// Samples per second when publishing (0: as fast as possible).
+    /// Samples per second when publishing (0: as fast as possible; for a channel
+    /// assembled from tags on a period, one per period).
     #[arg(long, default_value_t = 100.0)]
     rate: f64,
     #[command(flatten)]
@@ -187,7 +189,7 @@ pub(crate) fn run(args: &SimulateArgs) -> anyhow::Result<()> {
             .as_ref()
             .map_or_else(String::new, |p| format!(" written to {}", p.display())),
         if args.publish {
-            format!(" published on {}", channel.key)
+            format!(" published on {}", channel.input_keys().join(", "))
         } else {
             String::new()
         }
@@ -247,8 +249,12 @@ fn read_signals(path: &std::path::Path, q: usize, samples: u64) -> anyhow::Resul
     Ok(rows)
 }
 
-/// Publishes the samples on the channel's key, once a subscriber matches (so that the
-/// first samples are not lost), paced at `--rate`.
+/// Publishes the samples on the channel's input keys as its plant would
+/// ([`glrmon_runtime::publications`]: whole samples in its payload format, or one tag
+/// per key), once a subscriber matches each key (so that the first samples are not
+/// lost), paced at `--rate`. A channel assembled from tags on a period is published in
+/// the middle of each period of the Zenoh clock, so that a sample's tags are never
+/// split between two periods.
 async fn publish(
     channel: &Channel,
     samples: &[glrmon_wire::Sample],
@@ -256,41 +262,63 @@ async fn publish(
 ) -> anyhow::Result<()> {
     use zenoh::Wait as _;
     let session = glrmon_zenoh::open(&args.zenoh.client_settings()).await?;
-    let publisher = session
-        .declare_publisher(channel.key.clone())
-        .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
-        .congestion_control(zenoh::qos::CongestionControl::Block)
-        .await
-        .map_err(|e| anyhow::anyhow!("declaring a publisher on {}: {e}", channel.key))?;
-    let start = std::time::Instant::now();
-    while !publisher
-        .matching_status()
-        .await
-        .is_ok_and(|m| m.matching())
-    {
-        if start.elapsed() > std::time::Duration::from_secs(10) {
-            anyhow::bail!(
-                "no subscriber on {} after 10 s: is `glrmon run` reachable?",
-                channel.key
-            );
-        }
-        tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+    let mut publishers = Vec::new();
+    let mut out = Vec::new();
+    if let Some(first) = samples.first() {
+        glrmon_runtime::publications(channel, first, &mut out)?;
     }
-    let mut interval = (args.rate > 0.0)
-        .then(|| tokio::time::interval(std::time::Duration::from_secs_f64(1.0 / args.rate)));
-    let mut buf = Vec::new();
+    for (key, encoding) in channel
+        .input_keys()
+        .into_iter()
+        .zip(out.iter().map(|p| p.encoding))
+    {
+        let publisher = session
+            .declare_publisher(key.clone())
+            .encoding(zenoh::bytes::Encoding::from(encoding))
+            .congestion_control(zenoh::qos::CongestionControl::Block)
+            .await
+            .map_err(|e| anyhow::anyhow!("declaring a publisher on {key}: {e}"))?;
+        let start = std::time::Instant::now();
+        while !publisher
+            .matching_status()
+            .await
+            .is_ok_and(|m| m.matching())
+        {
+            if start.elapsed() > std::time::Duration::from_secs(10) {
+                anyhow::bail!("no subscriber on {key} after 10 s: is `glrmon run` reachable?");
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+        }
+        publishers.push(publisher);
+    }
+    if let Some(glrmon_spec::Formation::Period(p)) = channel.tags.as_ref().map(|t| t.formation) {
+        let since = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap_or_default()
+            .as_secs_f64();
+        let to_middle = (p * 1.5 - since.rem_euclid(p)).rem_euclid(p);
+        tokio::time::sleep(std::time::Duration::from_secs_f64(to_middle)).await;
+    }
+    let rate = match channel.tags.as_ref().map(|t| t.formation) {
+        Some(glrmon_spec::Formation::Period(p)) if args.rate == 0.0 => 1.0 / p,
+        _ => args.rate,
+    };
+    let mut interval =
+        (rate > 0.0).then(|| tokio::time::interval(std::time::Duration::from_secs_f64(1.0 / rate)));
     for s in samples {
         if let Some(i) = &mut interval {
             i.tick().await;
         }
-        buf.clear();
-        glrmon_wire::encode_sample(&channel.name, s, &mut buf)?;
-        publisher
-            .put(buf.clone())
-            .wait()
-            .map_err(|e| anyhow::anyhow!("publishing: {e}"))?;
+        out.clear();
+        glrmon_runtime::publications(channel, s, &mut out)?;
+        for p in out.drain(..) {
+            publishers[p.key]
+                .put(p.bytes)
+                .wait()
+                .map_err(|e| anyhow::anyhow!("publishing: {e}"))?;
+        }
     }
-    drop(publisher);
+    drop(publishers);
     let _ = session.close().await;
     Ok(())
 }
