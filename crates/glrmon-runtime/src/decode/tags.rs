@@ -20,7 +20,7 @@ use glrmon_spec::{Formation, TagTime, Tags};
 use glrmon_wire::{DecodeError, DecodeErrorKind, DecodeLimits, Sample, SizeLimit};
 use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, Visitor};
 
-use super::{Arrival, PayloadDecoder, slot};
+use super::{Arrival, PayloadDecoder};
 
 /// Values a tag keeps that are timed after the last formed sample: beyond, the oldest
 /// is folded into the held value.
@@ -89,6 +89,8 @@ pub struct TagDecoder {
     triggers: u64,
     /// The values of the sample being formed.
     values: Vec<f64>,
+    /// Samples whose buffers the next formed samples reuse.
+    spare: Vec<Sample>,
     notice: Option<DecodeError>,
 }
 
@@ -112,6 +114,7 @@ impl TagDecoder {
             watermark: f64::NEG_INFINITY,
             triggers: 0,
             values: vec![0.0; n],
+            spare: Vec::new(),
             notice: None,
         }
     }
@@ -121,13 +124,18 @@ impl TagDecoder {
             return;
         }
         let [l, m, _] = self.dims;
-        let i = out.len();
-        let s = slot(out, i);
+        let mut s = self.spare.pop().unwrap_or_default();
         s.k = Some(k);
         s.t = Some(t);
-        s.u.extend_from_slice(&self.values[..l]);
-        s.y.extend_from_slice(&self.values[l..l + m]);
-        s.p.extend_from_slice(&self.values[l + m..]);
+        for (v, values) in [
+            (&mut s.u, &self.values[..l]),
+            (&mut s.y, &self.values[l..l + m]),
+            (&mut s.p, &self.values[l + m..]),
+        ] {
+            v.clear();
+            v.extend_from_slice(values);
+        }
+        out.push(s);
     }
 
     /// Reports tag `i` stale once, until it sends again.
@@ -295,7 +303,8 @@ impl PayloadDecoder for TagDecoder {
         limits: &DecodeLimits,
         out: &mut Vec<Sample>,
     ) -> Result<(), DecodeError> {
-        out.clear();
+        // Most payloads form no sample: the samples' buffers wait here, not freed.
+        self.spare.append(out);
         let Some(spec) = self.spec.tags.get(tag) else {
             return Err(DecodeError::new(
                 channel,
