@@ -62,6 +62,11 @@ pub enum InputErrorKind {
         /// The recorded configuration's channels.
         known: Vec<String>,
     },
+    /// A recording glrmon did not write that cannot be read as the configuration's
+    /// `[channels.topics]` say (a damaged file, a topic the mapping names that is not
+    /// in it). Invalid input.
+    #[error("{0}")]
+    Foreign(String),
 }
 
 impl InputError {
@@ -106,7 +111,8 @@ impl InputError {
             | InputErrorKind::RecordedConfig(_)
             | InputErrorKind::Damaged(_)
             | InputErrorKind::Table(_)
-            | InputErrorKind::UnknownChannel { .. } => true,
+            | InputErrorKind::UnknownChannel { .. }
+            | InputErrorKind::Foreign(_) => true,
             InputErrorKind::OpenCsv(_) | InputErrorKind::Read(_) => false,
         }
     }

@@ -2,6 +2,7 @@
 
 mod csv;
 mod error;
+mod foreign;
 mod format;
 mod mcap;
 mod play;
@@ -15,6 +16,7 @@ pub use csv::{
     write_row,
 };
 pub use error::{InputError, InputErrorKind};
+pub use foreign::{ForeignReplayed, replay_foreign_mcap, topics_decoder};
 pub use format::{InputFormat, OutputFormat, embedded_config};
 pub use mcap::{McapInput, RecordedInput};
 pub use play::{Playback, PlayedSample, due};

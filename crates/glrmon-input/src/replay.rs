@@ -28,6 +28,9 @@ pub enum ReplayError {
     /// A record could not be encoded or a sink failed.
     #[error(transparent)]
     Pipeline(#[from] PipelineError),
+    /// The input cannot be read as the configuration says (a foreign recording).
+    #[error(transparent)]
+    Input(InputError),
 }
 
 /// What a CSV replay went through.

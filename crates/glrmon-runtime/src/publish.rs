@@ -81,19 +81,23 @@ pub fn publications(
         reason,
     };
     if let Some(tags) = &channel.tags {
-        for (i, (tag, v)) in tags.tags.iter().zip(&values).enumerate() {
-            let bytes = if tag.field.is_empty() {
-                format!("{v:?}").into_bytes()
-            } else {
-                let mut object = serde_json::Map::new();
-                insert(&mut object, &tag.field, serde_json::json!(v));
-                if let (Some(path), Some(t)) = (&tag.time_field, sample.t) {
-                    insert(&mut object, path, serde_json::json!(t));
+        for (key, (_, group)) in tags.keys().into_iter().enumerate() {
+            let bytes = match group.as_slice() {
+                [i] if tags.tags[*i].field.is_empty() => format!("{:?}", values[*i]).into_bytes(),
+                _ => {
+                    let mut object = serde_json::Map::new();
+                    for &i in &group {
+                        let tag = &tags.tags[i];
+                        insert(&mut object, &tag.field, serde_json::json!(values[i]));
+                        if let (Some(path), Some(t)) = (&tag.time_field, sample.t) {
+                            insert(&mut object, path, serde_json::json!(t));
+                        }
+                    }
+                    serde_json::to_vec(&object).map_err(|e| fail("tag", e.to_string()))?
                 }
-                serde_json::to_vec(&object).map_err(|e| fail("tag", e.to_string()))?
             };
             out.push(Publication {
-                key: i,
+                key,
                 bytes,
                 encoding: "application/json",
             });

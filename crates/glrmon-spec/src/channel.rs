@@ -303,6 +303,9 @@ pub struct Channel {
     /// The keys of its signals when it is assembled from tags (`[channels.tags]`);
     /// then `key` is not subscribed to.
     pub tags: Option<Tags>,
+    /// How a foreign recording's topics give its signals (`[channels.topics]`): keys
+    /// are topic names.
+    pub topics: Option<Tags>,
     /// Sample period in seconds, if given.
     pub period: Option<f64>,
     /// Dimensions.
@@ -389,12 +392,12 @@ pub struct Channel {
 }
 
 impl Channel {
-    /// The key expressions the channel's input arrives on: its `key`, or each tag's
-    /// key in the sample's order (a payload's tag is its index here).
+    /// The key expressions the channel's input arrives on: its `key`, or its tags'
+    /// distinct keys ([`Tags::keys`]; a payload's tag number is its key's index here).
     #[must_use]
     pub fn input_keys(&self) -> Vec<String> {
         match &self.tags {
-            Some(tags) => tags.tags.iter().map(|t| t.key.clone()).collect(),
+            Some(tags) => tags.keys().into_iter().map(|(k, _)| k.to_owned()).collect(),
             None => vec![self.key.clone()],
         }
     }

@@ -120,6 +120,23 @@ pub struct Tags {
     pub tags: Vec<Tag>,
 }
 
+impl Tags {
+    /// The distinct keys, in the order of their first tag, each with the indices of
+    /// the tags it carries (several when they read different fields of one payload): a
+    /// payload's tag number is its key's index here.
+    #[must_use]
+    pub fn keys(&self) -> Vec<(&str, Vec<usize>)> {
+        let mut keys: Vec<(&str, Vec<usize>)> = Vec::new();
+        for (i, tag) in self.tags.iter().enumerate() {
+            match keys.iter_mut().find(|(k, _)| *k == tag.key) {
+                Some((_, tags)) => tags.push(i),
+                None => keys.push((tag.key.as_str(), vec![i])),
+            }
+        }
+        keys
+    }
+}
+
 /// When a tag channel forms a sample.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Formation {

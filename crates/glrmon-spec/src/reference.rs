@@ -395,6 +395,7 @@ name = "tank"
 [channels.raw]          #   with payload = "raw": the f64 record layout
 [channels.tags]         #   instead of key: one key per signal, samples formed
 [channels.tags.keys]    #     each signal's key (and JSON field)
+[channels.topics]       #   optional: a foreign recording's topics, as tags
 [channels.columns]      #   optional: signal names (CSV columns) and units
 [[channels.faults]]     #   the fault dictionary, one table per fault
 [channels.glr]          #   optional: window, threshold, alarms, isolation

@@ -287,6 +287,12 @@ pub struct ChannelSpec {
     /// as MQTT and OPC UA gateways publish), instead of whole samples on `key`.
     /// Default: none.
     pub tags: Option<TagsSpec>,
+    /// `[channels.topics]`: how `glrmon replay` reads the channel from a recording glrmon
+    /// did not write (a ROS 2 bag or Foxglove MCAP: JSON, ROS 2 CDR by the file's
+    /// `ros2msg` schemas): as `[channels.tags]`, with topic names as keys (`y0 = { key =
+    /// "/dc_motor/y", field = "data.0" }`); `time = "zenoh"` is a message's publish
+    /// time, `"arrival"` its log time. Default: none.
+    pub topics: Option<TagsSpec>,
     /// Sample period in seconds (finite, positive): turns sample counts into times in
     /// reports, and discretises a continuous-time model (`model.A`), for which it is
     /// required. Default: none.
@@ -720,7 +726,8 @@ pub struct TagFieldsSpec {
     /// The Zenoh key expression the signal arrives on (outside `glrmon/**`). Required.
     pub key: String,
     /// The path of the value in a JSON object, fields joined by `.` (`value`,
-    /// `data.speed`). Default: the payload is the bare number.
+    /// `data.speed`; a number indexes an array, `data.0`). Default: the payload is the
+    /// bare number.
     pub field: Option<String>,
     /// The path of the value's time (seconds since the Unix epoch, a number) in the
     /// JSON object. Default: the time `time` says.

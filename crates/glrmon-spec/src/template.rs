@@ -78,6 +78,8 @@ name = "@NAME@"
 # tags = { period = 0.1, hold = 3, time = "zenoh", keys = { u0 = "plant/u", y0 = { key = "plant/y", field = "value", time_field = "ts" } } }
 #                                    # instead of key: one key per signal (docs/WIRE.md);
 #                                    # trigger = "y0" instead of period: a sample per y0
+# topics = { trigger = "y0", keys = { u0 = { key = "/plant/u", field = "data.0" }, y0 = { key = "/plant/y", field = "data.0" } } }
+#                                    # glrmon replay of a ROS 2 bag or Foxglove MCAP
 # period = 0.1                       # seconds; required with A (continuous time)
 # signals = 0                        # scheduling signals p0...; default: highest used + 1
 

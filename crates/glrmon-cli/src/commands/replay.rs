@@ -282,11 +282,24 @@ fn replay_csv(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
 fn replay_error(e: ReplayError) -> anyhow::Error {
     match e {
         ReplayError::Read(e) => read_ahead_error(e),
+        ReplayError::Input(e) => input_error(e),
         e => e.into(),
     }
 }
 
 fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
+    // A configuration that maps a recording's topics to its channels reads a recording
+    // glrmon did not write.
+    if let Some(path) = &args.config {
+        let cfg = load_config(path)?;
+        if cfg
+            .channels
+            .iter()
+            .any(|c| c.topics.is_some() && args.channel.as_ref().is_none_or(|n| *n == c.name))
+        {
+            return replay_foreign(args, zone, &cfg);
+        }
+    }
     let mut input = McapInput::open(args.first()).map_err(input_error)?;
     let cfg = match &args.config {
         Some(path) => load_config(path)?,
@@ -395,6 +408,82 @@ fn replay_mcap(args: &ReplayArgs, zone: Zone) -> anyhow::Result<()> {
             args.first().display()
         ))
         .into());
+    }
+    Ok(())
+}
+
+/// Replays a recording glrmon did not write (a ROS 2 bag, a Foxglove MCAP) into the
+/// channels whose `[channels.topics]` map its topics.
+fn replay_foreign(args: &ReplayArgs, zone: Zone, cfg: &glrmon_spec::Config) -> anyhow::Result<()> {
+    if let Some(name) = &args.channel
+        && let Err(e) = cfg.pick_channel(Some(name))
+    {
+        return Err(InvalidInput(e.to_string()).into());
+    }
+    let replayed: Vec<&glrmon_spec::Channel> = cfg
+        .channels
+        .iter()
+        .filter(|c| c.topics.is_some() && args.channel.as_ref().is_none_or(|n| *n == c.name))
+        .collect();
+    let header = FileHeader {
+        config: cfg.source.clone(),
+        channels: replayed.iter().map(|c| c.name.clone()).collect(),
+        extra: std::collections::BTreeMap::from([(
+            "source".to_owned(),
+            args.first().display().to_string(),
+        )]),
+    };
+    let (sinks, lines) = output_sinks(args, zone, &header, cfg, &replayed)?;
+    let mut fanout = Fanout::new(sinks, 1);
+    let mut pipelines = Vec::with_capacity(replayed.len());
+    for (i, c) in replayed.iter().enumerate() {
+        let mut pipeline = ChannelPipeline::new(i, Monitor::from_channel(c)?, fanout.plan());
+        if let Some(decoder) = glrmon_input::topics_decoder(c) {
+            pipeline = pipeline.with_decoder(decoder);
+        }
+        pipelines.push(pipeline);
+    }
+    let started = std::time::Instant::now();
+    let limits = DecodeLimits {
+        max_payload_bytes: cfg.daemon.max_payload_bytes,
+        ..DecodeLimits::default()
+    };
+    let done = glrmon_input::replay_foreign_mcap(
+        args.first(),
+        &replayed,
+        &mut pipelines,
+        &limits,
+        &mut fanout,
+    )
+    .map_err(replay_error)?;
+    let elapsed = started.elapsed().as_secs_f64();
+    let written = fanout.records();
+    close(fanout)?;
+    let topics: Vec<String> = done
+        .by_topic
+        .iter()
+        .map(|(t, n)| format!("{} {n}", Escaped(t)))
+        .collect();
+    eprintln!(
+        "glrmon replay: {}: {} messages ({}) replayed in {elapsed:.2} s, {written} records written",
+        args.first().display(),
+        done.messages,
+        topics.join(", "),
+    );
+    for (c, pipeline) in replayed.iter().zip(&pipelines) {
+        eprintln!("  channel \"{}\": {}", c.name, counts(pipeline));
+    }
+    for (topic, (n, why)) in &done.unreadable {
+        eprintln!(
+            "  topic {}: {n} messages not read: {}",
+            Escaped(topic),
+            Escaped(why)
+        );
+    }
+    if lines_on_stderr(args) {
+        for line in &take_lines(&lines) {
+            eprintln!("  {line}");
+        }
     }
     Ok(())
 }

@@ -18,7 +18,7 @@ use std::fmt;
 
 use glrmon_spec::{Formation, TagTime, Tags};
 use glrmon_wire::{DecodeError, DecodeErrorKind, DecodeLimits, Sample, SizeLimit};
-use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, Visitor};
+use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, SeqAccess, Visitor};
 
 use super::{Arrival, PayloadDecoder};
 
@@ -91,6 +91,10 @@ pub struct TagDecoder {
     values: Vec<f64>,
     /// Samples whose buffers the next formed samples reuse.
     spare: Vec<Sample>,
+    /// Each input key's tags, the trigger last ([`Tags::keys`]).
+    keys: Vec<Vec<usize>>,
+    /// The values of the payload being read: (tag, time, value).
+    pending: Vec<(usize, f64, f64)>,
     notice: Option<DecodeError>,
 }
 
@@ -99,6 +103,18 @@ impl TagDecoder {
     #[must_use]
     pub fn new(spec: Tags, inputs: usize, outputs: usize, signals: usize) -> Self {
         let n = spec.tags.len();
+        let trigger = match spec.formation {
+            Formation::Trigger(i) => Some(i),
+            Formation::Period(_) => None,
+        };
+        let keys = spec
+            .keys()
+            .into_iter()
+            .map(|(_, mut tags)| {
+                tags.sort_by_key(|&i| Some(i) == trigger);
+                tags
+            })
+            .collect();
         let state = TagState {
             history: VecDeque::with_capacity(HISTORY),
             held: None,
@@ -115,6 +131,8 @@ impl TagDecoder {
             triggers: 0,
             values: vec![0.0; n],
             spare: Vec::new(),
+            keys,
+            pending: Vec::with_capacity(n),
             notice: None,
         }
     }
@@ -272,6 +290,48 @@ impl TagDecoder {
     }
 }
 
+impl TagDecoder {
+    /// Tag `tag`'s value `value` at `t`: kept, then the samples it completes formed.
+    fn apply(
+        &mut self,
+        channel: &str,
+        tag: usize,
+        t: f64,
+        value: f64,
+        out: &mut Vec<Sample>,
+        limits: &DecodeLimits,
+    ) {
+        let state = &mut self.tags[tag];
+        state.stale = false;
+        match self.spec.formation {
+            Formation::Period(p) => {
+                match self.next {
+                    // Already passed by a formed sample: the latest value for the next.
+                    #[allow(clippy::cast_precision_loss)]
+                    Some(next) if t <= (next - 1) as f64 * p => state.held = Some((t, value)),
+                    _ => {
+                        if state.history.len() == HISTORY
+                            && let Some(oldest) = state.history.pop_front()
+                        {
+                            state.held = Some(oldest);
+                        }
+                        state.history.push_back((t, value));
+                    }
+                }
+                self.watermark = self.watermark.max(t);
+                self.form_periodic(channel, p, out, limits);
+            }
+            Formation::Trigger(trigger) => {
+                state.held = Some((t, value));
+                state.at_trigger = self.triggers;
+                if tag == trigger {
+                    self.form_triggered(channel, t, out, limits);
+                }
+            }
+        }
+    }
+}
+
 impl PayloadDecoder for TagDecoder {
     fn format(&self) -> &'static str {
         "tags"
@@ -305,12 +365,12 @@ impl PayloadDecoder for TagDecoder {
     ) -> Result<(), DecodeError> {
         // Most payloads form no sample: the samples' buffers wait here, not freed.
         self.spare.append(out);
-        let Some(spec) = self.spec.tags.get(tag) else {
+        let Some(group) = self.keys.get(tag) else {
             return Err(DecodeError::new(
                 channel,
                 None,
                 DecodeErrorKind::WrongType {
-                    expected: format!("one of the channel's {} tags", self.spec.tags.len()),
+                    expected: format!("one of the channel's {} tag keys", self.keys.len()),
                 },
             ));
         };
@@ -321,64 +381,47 @@ impl PayloadDecoder for TagDecoder {
                 limits.max_payload_bytes,
                 payload.len(),
             );
-            return fail(
-                Some(spec.signal.clone()),
-                DecodeErrorKind::TooLarge { what, limit, got },
-            );
+            let field = Some(self.spec.tags[group[0]].signal.clone());
+            return fail(field, DecodeErrorKind::TooLarge { what, limit, got });
         }
-        let (value, time) = match read(payload, &spec.field, spec.time_field.as_deref()) {
-            Ok(read) => read,
-            Err((path, kind)) => {
-                let field = if path.is_empty() {
-                    spec.signal.clone()
-                } else {
-                    format!("{} ({})", spec.signal, path)
-                };
-                return fail(Some(field), kind);
+        // Every value of the payload is read before any is used: a payload with one
+        // bad field changes nothing.
+        self.pending.clear();
+        for &i in group {
+            let spec = &self.spec.tags[i];
+            let (value, time) = match read(payload, &spec.field, spec.time_field.as_deref()) {
+                Ok(read) => read,
+                Err((path, kind)) => {
+                    let field = if path.is_empty() {
+                        spec.signal.clone()
+                    } else {
+                        format!("{} ({})", spec.signal, path)
+                    };
+                    return fail(Some(field), kind);
+                }
+            };
+            let t = time.unwrap_or(match self.spec.time {
+                TagTime::Zenoh => arrival.source_time.unwrap_or(arrival.received),
+                TagTime::Arrival => arrival.received,
+            });
+            if let Some((previous, _)) = self.tags[i].newest()
+                && t <= previous
+            {
+                #[allow(clippy::cast_possible_truncation)]
+                let ns = |s: f64| (s * 1e9).round() as i64;
+                let (t_ns, previous_ns) = (ns(t), ns(previous));
+                return fail(
+                    Some(spec.signal.clone()),
+                    DecodeErrorKind::NotAfter { t_ns, previous_ns },
+                );
             }
-        };
-        let t = time.unwrap_or(match self.spec.time {
-            TagTime::Zenoh => arrival.source_time.unwrap_or(arrival.received),
-            TagTime::Arrival => arrival.received,
-        });
-        let state = &mut self.tags[tag];
-        if let Some((previous, _)) = state.newest()
-            && t <= previous
-        {
-            #[allow(clippy::cast_possible_truncation)]
-            let ns = |s: f64| (s * 1e9).round() as i64;
-            let (t_ns, previous_ns) = (ns(t), ns(previous));
-            return fail(
-                Some(spec.signal.clone()),
-                DecodeErrorKind::NotAfter { t_ns, previous_ns },
-            );
+            self.pending.push((i, t, value));
         }
-        state.stale = false;
-        match self.spec.formation {
-            Formation::Period(p) => {
-                match self.next {
-                    // Already passed by a formed sample: the latest value for the next.
-                    #[allow(clippy::cast_precision_loss)]
-                    Some(next) if t <= (next - 1) as f64 * p => state.held = Some((t, value)),
-                    _ => {
-                        if state.history.len() == HISTORY
-                            && let Some(oldest) = state.history.pop_front()
-                        {
-                            state.held = Some(oldest);
-                        }
-                        state.history.push_back((t, value));
-                    }
-                }
-                self.watermark = self.watermark.max(t);
-                self.form_periodic(channel, p, out, limits);
-            }
-            Formation::Trigger(trigger) => {
-                state.held = Some((t, value));
-                state.at_trigger = self.triggers;
-                if tag == trigger {
-                    self.form_triggered(channel, t, out, limits);
-                }
-            }
+        // The trigger last, so that it forms its sample with the other values of its
+        // own payload.
+        for n in 0..self.pending.len() {
+            let (i, t, value) = self.pending[n];
+            self.apply(channel, i, t, value, out, limits);
         }
         Ok(())
     }
@@ -511,6 +554,35 @@ impl<'de> Visitor<'de> for Walk<'_, '_> {
             }
         }
         Ok(())
+    }
+
+    /// An array: a path's next field that is a number (`data.0`) is an index into it.
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
+        let Walk {
+            paths,
+            found,
+            problem,
+        } = self;
+        let index = |p: Option<&[String]>| p.and_then(|p| p.first()?.parse::<usize>().ok());
+        let wanted = [index(paths[0]), index(paths[1])];
+        let mut i = 0usize;
+        loop {
+            let next = [0, 1].map(|j| paths[j].filter(|_| wanted[j] == Some(i)).map(|p| &p[1..]));
+            let more = if next.iter().all(Option::is_none) {
+                seq.next_element::<IgnoredAny>()?.is_some()
+            } else {
+                seq.next_element_seed(Walk {
+                    paths: next,
+                    found: &mut *found,
+                    problem: &mut *problem,
+                })?
+                .is_some()
+            };
+            if !more {
+                return Ok(());
+            }
+            i += 1;
+        }
     }
 }
 
@@ -772,6 +844,21 @@ mod tests {
             "channel \"dc_motor\": field y0 is timed at 0.9 s, not after its previous value at 1 s"
         );
         assert_eq!(e.code(), ErrorCode::OutOfOrder);
+    }
+
+    #[test]
+    fn a_field_path_indexes_arrays() {
+        let (v, t) = read(
+            br#"{"layout":{"dim":[]},"data":[1.5,-2.5,{"x":[7,8]}],"stamp":[0,12.25]}"#,
+            &["data".into(), "2".into(), "x".into(), "1".into()],
+            Some(&["stamp".into(), "1".into()]),
+        )
+        .unwrap();
+        assert_eq!((v, t), (8.0, Some(12.25)));
+        let (v, _) = read(b"[3, 4]", &["1".into()], None).unwrap();
+        assert_eq!(v, 4.0);
+        let e = read(b"[3, 4]", &["2".into()], None).unwrap_err();
+        assert_eq!(e.1, DecodeErrorKind::MissingField);
     }
 
     #[test]

@@ -194,8 +194,12 @@ impl Validator {
                     "is not read: the tags of `[channels.tags]` are JSON numbers or objects".into(),
                 );
             }
-            self.tags(prefix, t, &columns)
+            self.tags(prefix, "tags", t, &columns)
         });
+        let topics = spec
+            .topics
+            .as_ref()
+            .and_then(|t| self.tags(prefix, "topics", t, &columns));
         if self.errors.len() > before {
             return None;
         }
@@ -237,6 +241,7 @@ impl Validator {
             name: spec.name.clone(),
             payload,
             tags,
+            topics,
             key: spec
                 .key
                 .clone()

@@ -21,15 +21,18 @@ fn path(text: &str) -> Result<Vec<String>, String> {
 }
 
 impl Validator {
-    /// `[channels.tags]` into [`Tags`]: every signal has a key, and only signals do.
+    /// `[channels.tags]` (or `[channels.topics]`, `table`) into [`Tags`]: every signal
+    /// has a key, and only signals do. Topics are names in a recording, not key
+    /// expressions: only their being non-empty is checked.
     pub(super) fn tags(
         &mut self,
         prefix: &str,
+        table: &str,
         spec: &TagsSpec,
         columns: &Columns,
     ) -> Option<Tags> {
         let before = self.errors.len();
-        let at = |field: &str| join(prefix, &format!("tags.{field}"));
+        let at = |field: &str| join(prefix, &format!("{table}.{field}"));
         let signals: Vec<&str> = [&columns.u, &columns.y, &columns.p]
             .into_iter()
             .flatten()
@@ -76,7 +79,7 @@ impl Validator {
             }
             (None, None) => {
                 self.error(
-                    join(prefix, "tags"),
+                    join(prefix, table),
                     "needs `period` (seconds between samples) or `trigger` (the signal whose \
                      values form samples)"
                         .into(),
@@ -111,7 +114,16 @@ impl Validator {
                     (f.key.clone(), f.field.as_deref(), f.time_field.as_deref())
                 }
             };
-            if let Err(e) = keys::check_input_key(&key) {
+            let checked = if table == "topics" {
+                if key.is_empty() {
+                    Err("is empty: give the topic's name".to_owned())
+                } else {
+                    Ok(())
+                }
+            } else {
+                keys::check_input_key(&key)
+            };
+            if let Err(e) = checked {
                 self.error(format!("{field_at}.key"), e);
             }
             let field = match field.map(path).transpose() {
