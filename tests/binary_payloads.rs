@@ -12,13 +12,13 @@
 #[path = "support.rs"]
 mod support;
 
-use std::io::{BufRead as _, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Stdio};
-use std::time::{Duration, Instant};
 
-use glrmon_wire::{DecodeLimits, Record, Sample, decode_record};
-use support::{Scratch, free_port, glrmon, python, run_ok, unhex};
+use glrmon_wire::{DecodeLimits, Record, Sample};
+use support::{
+    RunningDaemon, Scratch, client, collect_records, free_port, glrmon, matched_publisher, python,
+    run_ok, unhex,
+};
 use zenoh::Wait as _;
 
 /// The formats under test: (channel, key, the channel's payload settings).
@@ -172,36 +172,6 @@ fn official_encoders_payloads_decode_to_the_csvs_samples() {
     }
 }
 
-/// A running `glrmon run`, killed at the end of the test.
-struct Daemon(Child);
-
-impl Daemon {
-    fn start(config: &Path) -> Self {
-        let mut child = glrmon()
-            .args(["run", "--config"])
-            .arg(config)
-            .args(["--instance", &format!("binary-{}", std::process::id())])
-            .env("GLRMON_LOG", "warn")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .unwrap();
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        assert!(line.contains("monitoring 5 channel(s)"), "{line}");
-        Self(child)
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 /// Publishes each `(key, payload)` in order to the daemon at `endpoint` (a publisher
 /// per key, as separate devices would) and returns the records published on
 /// `glrmon/**` (but `stat`) until `until` says enough.
@@ -212,49 +182,18 @@ fn exchange(
 ) -> Vec<Record> {
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
-        let session = glrmon_zenoh::open(&glrmon_zenoh::SessionSettings {
-            mode: Some("client".into()),
-            connect: vec![endpoint.to_owned()],
-            multicast_scouting: Some(false),
-            ..glrmon_zenoh::SessionSettings::default()
-        })
-        .await
-        .unwrap();
+        let session = client(endpoint).await;
         let results = session.declare_subscriber("glrmon/*/*").await.unwrap();
         let mut publishers = std::collections::BTreeMap::new();
         for (key, _) in payloads {
             if !publishers.contains_key(key) {
-                let p = session
-                    .declare_publisher(key.to_string())
-                    .congestion_control(zenoh::qos::CongestionControl::Block)
-                    .await
-                    .unwrap();
-                let t = Instant::now();
-                while !p.matching_status().await.unwrap().matching() {
-                    assert!(
-                        t.elapsed() < Duration::from_secs(10),
-                        "no subscriber of {key}"
-                    );
-                    tokio::time::sleep(Duration::from_millis(10)).await;
-                }
-                publishers.insert(*key, p);
+                publishers.insert(*key, matched_publisher(&session, key).await);
             }
         }
         for (key, p) in payloads {
             publishers[key].put(p.clone()).wait().unwrap();
         }
-        let mut records = Vec::new();
-        let t = Instant::now();
-        while !until(&records) {
-            let left = Duration::from_secs(30).saturating_sub(t.elapsed());
-            assert!(!left.is_zero(), "records so far: {records:#?}");
-            if let Ok(Ok(sample)) = tokio::time::timeout(left, results.recv_async()).await {
-                let record = decode_record(&sample.payload().to_bytes()).unwrap();
-                if !matches!(record, Record::Stat(_)) {
-                    records.push(record);
-                }
-            }
-        }
+        let records = collect_records(&results, until).await;
         session.close().await.unwrap();
         records
     })
@@ -267,7 +206,7 @@ fn every_format_raises_the_alarm_of_the_json_channel() {
     let config = config(&scratch.0, &endpoint);
     let (csv, samples) = simulated(&scratch.0, &config);
     let payloads = encoded(&scratch.0, &csv);
-    let _daemon = Daemon::start(&config);
+    let _daemon = RunningDaemon::start(&config, &format!("binary-{}", std::process::id()), 5);
     let spark_key = |i: usize| {
         if i == 0 {
             "spBv1.0/plant/DBIRTH/edge1/dc_motor"
@@ -317,7 +256,7 @@ fn hostile_binary_payloads_are_errors_naming_channel_and_field() {
     let scratch = Scratch::new("binary-hostile");
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let config = config(&scratch.0, &endpoint);
-    let _daemon = Daemon::start(&config);
+    let _daemon = RunningDaemon::start(&config, &format!("binary-{}", std::process::id()), 5);
     // Header; no dimension, data_offset 0, two values (after 4 bytes of padding to the
     // f64's alignment) for the channel's three.
     let mut short_array = vec![0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 2, 0, 0, 0, 0, 0, 0, 0];

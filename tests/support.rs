@@ -170,3 +170,92 @@ pub(crate) fn unhex(hex: &str) -> Vec<u8> {
         .map(|i| u8::from_str_radix(&hex[i..i + 2], 16).unwrap())
         .collect()
 }
+
+/// A client session to the daemon at `endpoint` (multicast scouting off).
+pub(crate) async fn client(endpoint: &str) -> zenoh::Session {
+    glrmon_zenoh::open(&glrmon_zenoh::SessionSettings {
+        mode: Some("client".into()),
+        connect: vec![endpoint.to_owned()],
+        multicast_scouting: Some(false),
+        ..glrmon_zenoh::SessionSettings::default()
+    })
+    .await
+    .unwrap()
+}
+
+/// A reliable publisher on `key`, returned once a subscriber matches (10 s at most).
+pub(crate) async fn matched_publisher(
+    session: &zenoh::Session,
+    key: &str,
+) -> zenoh::pubsub::Publisher<'static> {
+    let p = session
+        .declare_publisher(key.to_owned())
+        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .await
+        .unwrap();
+    let t = Instant::now();
+    while !p.matching_status().await.unwrap().matching() {
+        assert!(
+            t.elapsed() < Duration::from_secs(10),
+            "no subscriber on {key}"
+        );
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    p
+}
+
+/// A running `glrmon run --config <config> --instance <instance>` (WARN log), returned
+/// once it says it monitors `channels` channels; killed when dropped.
+pub(crate) struct RunningDaemon(pub(crate) Child);
+
+impl RunningDaemon {
+    pub(crate) fn start(config: &std::path::Path, instance: &str, channels: usize) -> Self {
+        use std::io::BufRead as _;
+        let mut child = glrmon()
+            .args(["run", "--config"])
+            .arg(config)
+            .args(["--instance", instance])
+            .env("GLRMON_LOG", "warn")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        std::io::BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        assert!(
+            line.contains(&format!("monitoring {channels} channel(s)")),
+            "{line}"
+        );
+        Self(child)
+    }
+}
+
+impl Drop for RunningDaemon {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// The records (but `stat`) received on `results` until `until` says enough (30 s at
+/// most).
+pub(crate) async fn collect_records(
+    results: &zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    until: impl Fn(&[glrmon_wire::Record]) -> bool,
+) -> Vec<glrmon_wire::Record> {
+    let mut records = Vec::new();
+    let t = Instant::now();
+    while !until(&records) {
+        let left = Duration::from_secs(30).saturating_sub(t.elapsed());
+        assert!(!left.is_zero(), "records so far: {records:#?}");
+        if let Ok(Ok(sample)) = tokio::time::timeout(left, results.recv_async()).await {
+            let record = glrmon_wire::decode_record(&sample.payload().to_bytes()).unwrap();
+            if !matches!(record, glrmon_wire::Record::Stat(_)) {
+                records.push(record);
+            }
+        }
+    }
+    records
+}

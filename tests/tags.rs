@@ -15,13 +15,15 @@
 #[path = "support.rs"]
 mod support;
 
-use std::io::{BufRead as _, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use glrmon_wire::{Record, decode_record};
-use support::{Scratch, free_port, glrmon, run_ok};
+use glrmon_wire::Record;
+use support::{
+    RunningDaemon, Scratch, client, collect_records as collect, free_port, glrmon,
+    matched_publisher, run_ok,
+};
 use zenoh::Wait as _;
 
 const TAGS: [&str; 3] = ["plant/dc/voltage", "plant/dc/current", "plant/dc/speed"];
@@ -81,51 +83,6 @@ fn simulated(dir: &Path, config: &Path, samples: usize, onset: usize) -> Vec<[f6
         .collect()
 }
 
-/// A running `glrmon run`, killed at the end of the test.
-struct Daemon(Child);
-
-impl Daemon {
-    fn start(config: &Path, channels: usize) -> Self {
-        let mut child = glrmon()
-            .args(["run", "--config"])
-            .arg(config)
-            .args(["--instance", &format!("tags-{}", std::process::id())])
-            .env("GLRMON_LOG", "warn")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .unwrap();
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        assert!(
-            line.contains(&format!("monitoring {channels} channel(s)")),
-            "{line}"
-        );
-        Self(child)
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-/// A client session to `endpoint`.
-async fn client(endpoint: &str) -> zenoh::Session {
-    glrmon_zenoh::open(&glrmon_zenoh::SessionSettings {
-        mode: Some("client".into()),
-        connect: vec![endpoint.to_owned()],
-        multicast_scouting: Some(false),
-        ..glrmon_zenoh::SessionSettings::default()
-    })
-    .await
-    .unwrap()
-}
-
 /// One publisher per key, each on a session of its own, declared once a subscriber
 /// matches.
 async fn publishers(
@@ -135,42 +92,10 @@ async fn publishers(
     let mut out = Vec::new();
     for key in keys {
         let session = client(endpoint).await;
-        let p = session
-            .declare_publisher(key.to_string())
-            .congestion_control(zenoh::qos::CongestionControl::Block)
-            .await
-            .unwrap();
-        let t = Instant::now();
-        while !p.matching_status().await.unwrap().matching() {
-            assert!(
-                t.elapsed() < Duration::from_secs(10),
-                "no subscriber of {key}"
-            );
-            tokio::time::sleep(Duration::from_millis(10)).await;
-        }
+        let p = matched_publisher(&session, key).await;
         out.push((session, p));
     }
     out
-}
-
-/// The records (but `stat`) the daemon publishes until `until` says enough.
-async fn collect(
-    results: &zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
-    until: impl Fn(&[Record]) -> bool,
-) -> Vec<Record> {
-    let mut records = Vec::new();
-    let t = Instant::now();
-    while !until(&records) {
-        let left = Duration::from_secs(30).saturating_sub(t.elapsed());
-        assert!(!left.is_zero(), "records so far: {records:#?}");
-        if let Ok(Ok(sample)) = tokio::time::timeout(left, results.recv_async()).await {
-            let record = decode_record(&sample.payload().to_bytes()).unwrap();
-            if !matches!(record, Record::Stat(_)) {
-                records.push(record);
-            }
-        }
-    }
-    records
 }
 
 /// A small xorshift for the jitter and the order: the test is the same every run.
@@ -203,7 +128,7 @@ fn tags_from_separate_publishers_raise_the_alarm_of_whole_samples() {
     std::fs::write(&config, text.replacen("hold = 3", "hold = 10", 1)).unwrap();
     let n = 400;
     let data = simulated(&scratch.0, &config, n, 200);
-    let _daemon = Daemon::start(&config, 2);
+    let _daemon = RunningDaemon::start(&config, &format!("tags-{}", std::process::id()), 2);
     // The current is silent for values 100 … 129: value j of every tag is timed at
     // (j + f)·P, f jittered in [0.05, 0.45), so the sample at instant j + 1 holds the
     // values j; the current's value 99 is held up to 10 periods (instants 101 … 109,
@@ -302,7 +227,7 @@ fn the_shipped_tags_example_forms_a_sample_every_period_in_real_time() {
     let config = config(&scratch.0, &endpoint, keys);
     let n = 300;
     let data = simulated(&scratch.0, &config, n, 150);
-    let _daemon = Daemon::start(&config, 2);
+    let _daemon = RunningDaemon::start(&config, &format!("tags-{}", std::process::id()), 2);
     // `glrmon watch` of a plant key shows the raw tags as they arrive.
     let watch = glrmon()
         .args([
@@ -422,7 +347,7 @@ fn simulate_publishes_a_tag_channel_as_its_plant_would() {
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let keys = "[channels.tags.keys]\nu0 = \"plant/dc/voltage\"\ny0 = \"plant/dc/current\"\ny1 = \"plant/dc/speed\"\n";
     let config = config(&scratch.0, &endpoint, keys);
-    let _daemon = Daemon::start(&config, 2);
+    let _daemon = RunningDaemon::start(&config, &format!("tags-{}", std::process::id()), 2);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let records = rt.block_on(async {
         let watcher = client(&endpoint).await;

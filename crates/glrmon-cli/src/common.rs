@@ -93,3 +93,30 @@ pub(crate) fn simulator(
         other => other.into(),
     })
 }
+
+/// A reliable publisher on `key` with `encoding`, once a subscriber matches (so that
+/// the first samples are not lost); an error after 10 s without one.
+pub(crate) async fn matched_publisher(
+    session: &zenoh::Session,
+    key: &str,
+    encoding: zenoh::bytes::Encoding,
+) -> anyhow::Result<zenoh::pubsub::Publisher<'static>> {
+    let publisher = session
+        .declare_publisher(key.to_owned())
+        .encoding(encoding)
+        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .await
+        .map_err(|e| anyhow::anyhow!("declaring a publisher on {key}: {e}"))?;
+    let start = std::time::Instant::now();
+    while !publisher
+        .matching_status()
+        .await
+        .is_ok_and(|m| m.matching())
+    {
+        if start.elapsed() > std::time::Duration::from_secs(10) {
+            anyhow::bail!("no subscriber on {key} after 10 s: is `glrmon run` reachable?");
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+    }
+    Ok(publisher)
+}

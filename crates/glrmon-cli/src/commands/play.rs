@@ -6,7 +6,6 @@
 
 use std::collections::HashMap;
 use std::path::PathBuf;
-use std::time::Duration;
 
 use clap::Args;
 use glrmon_wire::text::Escaped;
@@ -57,24 +56,12 @@ async fn play(mut playback: glrmon_input::Playback, args: &PlayArgs) -> anyhow::
     let session = glrmon_zenoh::open(&args.zenoh.client_settings()).await?;
     let mut publishers = HashMap::new();
     for (_, key) in &channels {
-        let publisher = session
-            .declare_publisher(key.clone())
-            .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
-            .congestion_control(zenoh::qos::CongestionControl::Block)
-            .await
-            .map_err(|e| anyhow::anyhow!("declaring a publisher on {key}: {e}"))?;
-        // Once a subscriber matches, so that the first samples are not lost.
-        let start = std::time::Instant::now();
-        while !publisher
-            .matching_status()
-            .await
-            .is_ok_and(|m| m.matching())
-        {
-            if start.elapsed() > Duration::from_secs(10) {
-                anyhow::bail!("no subscriber on {key} after 10 s: is `glrmon run` reachable?");
-            }
-            tokio::time::sleep(Duration::from_millis(5)).await;
-        }
+        let publisher = crate::common::matched_publisher(
+            &session,
+            key,
+            zenoh::bytes::Encoding::APPLICATION_JSON,
+        )
+        .await?;
         publishers.insert(key.clone(), publisher);
     }
     let mut buf = Vec::new();

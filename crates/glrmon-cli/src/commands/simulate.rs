@@ -272,23 +272,12 @@ async fn publish(
         .into_iter()
         .zip(out.iter().map(|p| p.encoding))
     {
-        let publisher = session
-            .declare_publisher(key.clone())
-            .encoding(zenoh::bytes::Encoding::from(encoding))
-            .congestion_control(zenoh::qos::CongestionControl::Block)
-            .await
-            .map_err(|e| anyhow::anyhow!("declaring a publisher on {key}: {e}"))?;
-        let start = std::time::Instant::now();
-        while !publisher
-            .matching_status()
-            .await
-            .is_ok_and(|m| m.matching())
-        {
-            if start.elapsed() > std::time::Duration::from_secs(10) {
-                anyhow::bail!("no subscriber on {key} after 10 s: is `glrmon run` reachable?");
-            }
-            tokio::time::sleep(std::time::Duration::from_millis(5)).await;
-        }
+        let publisher = crate::common::matched_publisher(
+            &session,
+            &key,
+            zenoh::bytes::Encoding::from(encoding),
+        )
+        .await?;
         publishers.push(publisher);
     }
     if let Some(glrmon_spec::Formation::Period(p)) = channel.tags.as_ref().map(|t| t.formation) {

@@ -13,7 +13,7 @@ use glrmon_spec::{CdrMessage, PayloadFormat};
 use glrmon_wire::{DecodeError, DecodeErrorKind, DecodeLimits, Sample, SizeLimit};
 use serde::de::{self, DeserializeSeed, SeqAccess, Visitor};
 
-use super::{PayloadDecoder, single};
+use super::{PayloadDecoder, single, within_limit};
 
 /// The decoder of a `cdr` channel: `message` with `dims` (inputs, outputs, signals)
 /// values.
@@ -50,16 +50,9 @@ impl PayloadDecoder for CdrDecoder {
             out.clear();
             Err(DecodeError::new(channel, field.map(str::to_owned), kind))
         };
-        if payload.len() > limits.max_payload_bytes {
-            return fail(
-                out,
-                None,
-                DecodeErrorKind::TooLarge {
-                    what: SizeLimit::PayloadBytes,
-                    limit: limits.max_payload_bytes,
-                    got: payload.len(),
-                },
-            );
+        if let Err(e) = within_limit(channel, None, payload, limits) {
+            out.clear();
+            return Err(e);
         }
         let (little, body) = match payload {
             [0, 1, _, _, body @ ..] => (true, body),

@@ -19,7 +19,8 @@ pub use tags::TagDecoder;
 
 use glrmon_spec::{Channel, PayloadFormat};
 use glrmon_wire::{
-    DecodeError, DecodeLimits, Sample, SignalNames, decode_samples, decode_samples_named,
+    DecodeError, DecodeErrorKind, DecodeLimits, Sample, SignalNames, SizeLimit, decode_samples,
+    decode_samples_named,
 };
 
 /// Turns one payload into the samples it carries.
@@ -158,6 +159,28 @@ pub fn decoder(channel: &Channel) -> Box<dyn PayloadDecoder> {
         PayloadFormat::Sparkplug => Box::new(SparkplugDecoder::new(c)),
         PayloadFormat::Raw(layout) => Box::new(RawDecoder::new(layout.clone(), c)),
     }
+}
+
+/// The payload-size limit every decoder checks first: a `too_large` error for
+/// `channel` (at `field`, if the payload is one field's) beyond `limits`.
+pub(crate) fn within_limit(
+    channel: &str,
+    field: Option<&str>,
+    payload: &[u8],
+    limits: &DecodeLimits,
+) -> Result<(), DecodeError> {
+    if payload.len() <= limits.max_payload_bytes {
+        return Ok(());
+    }
+    Err(DecodeError::new(
+        channel,
+        field.map(str::to_owned),
+        DecodeErrorKind::TooLarge {
+            what: SizeLimit::PayloadBytes,
+            limit: limits.max_payload_bytes,
+            got: payload.len(),
+        },
+    ))
 }
 
 /// `out` as one sample, its buffers kept and emptied.

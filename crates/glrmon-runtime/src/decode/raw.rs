@@ -5,7 +5,7 @@
 use glrmon_spec::{Columns, PayloadFormat, RawField, RawLayout};
 use glrmon_wire::{DecodeError, DecodeErrorKind, DecodeLimits, Sample, SizeLimit};
 
-use super::{PayloadDecoder, slot};
+use super::{PayloadDecoder, slot, within_limit};
 
 /// Largest `k` an f64 holds exactly (2⁵³).
 const MAX_EXACT_INDEX: f64 = 9_007_199_254_740_992.0;
@@ -60,10 +60,9 @@ impl PayloadDecoder for RawDecoder {
             out.clear();
             Err(DecodeError::new(channel, field, kind))
         };
-        if payload.len() > limits.max_payload_bytes {
-            let got = payload.len();
-            let (what, limit) = (SizeLimit::PayloadBytes, limits.max_payload_bytes);
-            return fail(out, None, DecodeErrorKind::TooLarge { what, limit, got });
+        if let Err(e) = within_limit(channel, None, payload, limits) {
+            out.clear();
+            return Err(e);
         }
         let size = self.layout.record_bytes();
         if payload.is_empty() || !payload.len().is_multiple_of(size) {

@@ -19,10 +19,10 @@
 use std::collections::HashMap;
 
 use glrmon_spec::{Columns, PayloadFormat};
-use glrmon_wire::{DecodeError, DecodeErrorKind, DecodeLimits, Sample, SizeLimit};
+use glrmon_wire::{DecodeError, DecodeErrorKind, DecodeLimits, Sample};
 use quick_protobuf::BytesReader;
 
-use super::{PayloadDecoder, single};
+use super::{PayloadDecoder, single, within_limit};
 
 /// Wire types of a protobuf tag (the low 3 bits).
 const VARINT: u32 = 0;
@@ -251,10 +251,9 @@ impl PayloadDecoder for SparkplugDecoder {
             out.clear();
             Err(DecodeError::new(channel, field, kind))
         };
-        if payload.len() > limits.max_payload_bytes {
-            let got = payload.len();
-            let (what, limit) = (SizeLimit::PayloadBytes, limits.max_payload_bytes);
-            return fail(out, (None, DecodeErrorKind::TooLarge { what, limit, got }));
+        if let Err(e) = within_limit(channel, None, payload, limits) {
+            out.clear();
+            return Err(e);
         }
         let timestamp = match self.read(payload) {
             Ok(t) => t,

@@ -17,10 +17,10 @@ use std::collections::VecDeque;
 use std::fmt;
 
 use glrmon_spec::{Formation, TagTime, Tags};
-use glrmon_wire::{DecodeError, DecodeErrorKind, DecodeLimits, Sample, SizeLimit};
+use glrmon_wire::{DecodeError, DecodeErrorKind, DecodeLimits, Sample};
 use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, SeqAccess, Visitor};
 
-use super::{Arrival, PayloadDecoder};
+use super::{Arrival, PayloadDecoder, within_limit};
 
 /// Values a tag keeps that are timed after the last formed sample: beyond, the oldest
 /// is folded into the held value.
@@ -375,15 +375,12 @@ impl PayloadDecoder for TagDecoder {
             ));
         };
         let fail = |field: Option<String>, kind| Err(DecodeError::new(channel, field, kind));
-        if payload.len() > limits.max_payload_bytes {
-            let (what, limit, got) = (
-                SizeLimit::PayloadBytes,
-                limits.max_payload_bytes,
-                payload.len(),
-            );
-            let field = Some(self.spec.tags[group[0]].signal.clone());
-            return fail(field, DecodeErrorKind::TooLarge { what, limit, got });
-        }
+        within_limit(
+            channel,
+            Some(&self.spec.tags[group[0]].signal),
+            payload,
+            limits,
+        )?;
         // Every value of the payload is read before any is used: a payload with one
         // bad field changes nothing.
         self.pending.clear();
