@@ -243,9 +243,14 @@ pub fn channel_report(channel: &Channel) -> Result<ChannelReport, ReportError> {
 fn settings(channel: &Channel) -> String {
     let d = channel.dims;
     let mut s = String::new();
-    let input = match &channel.tags {
-        None => format!("key {}, {}", channel.key, channel.payload.name()),
-        Some(tags) => {
+    let input = match (&channel.tags, &channel.topics) {
+        (None, None) => format!("key {}, {}", channel.key, channel.payload.name()),
+        (Some(tags), _) | (None, Some(tags)) => {
+            let what = if channel.tags.is_some() {
+                "tags"
+            } else {
+                "recording topics"
+            };
             let formed = match tags.formation {
                 Formation::Period(p) => format!("every {p} s"),
                 Formation::Trigger(i) => format!("at each {}", tags.tags[i].signal),
@@ -262,7 +267,7 @@ fn settings(channel: &Channel) -> String {
                     format!("{} ← {}{field}", t.signal, t.key)
                 })
                 .collect();
-            format!("tags {}, {formed}, held {} ", keys.join(", "), tags.hold)
+            format!("{what} {}, {formed}, held {} ", keys.join(", "), tags.hold)
                 + if matches!(tags.formation, Formation::Period(_)) {
                     "periods"
                 } else {
