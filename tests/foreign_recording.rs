@@ -77,6 +77,14 @@ fn a_ros2_bag_replays_to_the_records_of_its_csv() {
             "{said}"
         );
     }
+    // `glrmon info` lists what a mapping needs.
+    let info = run_ok(glrmon().arg("info").arg(&bag));
+    let info = String::from_utf8(info.stdout).unwrap();
+    assert!(
+        info.contains("written:   not by glrmon (mcap-python/")
+            && info.contains("/dc_motor/y  std_msgs/msg/Float64MultiArray (schema ros2msg, messages cdr)  400 messages"),
+        "{info}"
+    );
     // A mapping naming a topic the bag does not have.
     let wrong = scratch.0.join("wrong.toml");
     std::fs::write(

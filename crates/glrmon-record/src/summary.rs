@@ -34,6 +34,11 @@ pub enum SummaryError {
         messages: u64,
         /// Topics seen.
         topics: usize,
+        /// Each topic with its schema and messages, in name order: what a mapping of a
+        /// foreign recording's topics (`[channels.topics]`) needs to know.
+        found: Vec<TopicSummary>,
+        /// The writer's `library` string.
+        library: Option<String>,
     },
 }
 
@@ -44,6 +49,10 @@ pub struct TopicSummary {
     pub topic: String,
     /// Its schema's name.
     pub schema: String,
+    /// Its schema's encoding (`jsonschema` for glrmon's topics, `ros2msg`, `protobuf`).
+    pub schema_encoding: String,
+    /// Its messages' encoding (`json`, `cdr`, `protobuf`).
+    pub message_encoding: String,
     /// The glrmon channel (none for the log topic).
     pub channel: Option<String>,
     /// The glrmon kind.
@@ -171,6 +180,8 @@ pub fn summarize(path: &Path) -> Result<RecordingSummary, SummaryError> {
             TopicSummary {
                 topic: t.topic.clone(),
                 schema: t.schema.clone(),
+                schema_encoding: t.schema_encoding.clone(),
+                message_encoding: t.message_encoding.clone(),
                 channel: t.channel.clone(),
                 kind: t.kind,
                 messages: c.map_or(0, |c| c.0),
@@ -180,15 +191,17 @@ pub fn summarize(path: &Path) -> Result<RecordingSummary, SummaryError> {
         })
         .collect();
     let messages = reader.messages();
+    let mut topics = topics;
+    topics.sort_by(|a, b| a.topic.cmp(&b.topic));
     let Some(header) = header else {
         return Err(SummaryError::NotGlrmon {
             path: path.to_owned(),
             messages,
             topics: topics.len(),
+            found: topics,
+            library,
         });
     };
-    let mut topics = topics;
-    topics.sort_by(|a, b| a.topic.cmp(&b.topic));
     Ok(RecordingSummary {
         path: path.to_owned(),
         bytes,

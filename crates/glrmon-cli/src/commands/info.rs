@@ -29,8 +29,19 @@ pub(crate) struct InfoArgs {
 
 /// Summarises `args.file`; the table shows wall-clock times in `zone` (JSON: UTC).
 pub(crate) fn run(args: &InfoArgs, zone: Zone) -> anyhow::Result<()> {
-    let s = glrmon_record::summarize(&args.file)
-        .map_err(|e| InvalidInput(escape_control(&e.to_string()).into_owned()))?;
+    let s = match glrmon_record::summarize(&args.file) {
+        Ok(s) => s,
+        Err(glrmon_record::SummaryError::NotGlrmon {
+            messages,
+            found,
+            library,
+            ..
+        }) if !found.is_empty() && !args.json => {
+            print_foreign(&args.file, messages, &found, library.as_deref(), zone);
+            return Ok(());
+        }
+        Err(e) => return Err(InvalidInput(escape_control(&e.to_string()).into_owned()).into()),
+    };
     if args.json {
         // serde_json escapes U+0000–U+001F only; each line of its output is made safe
         // alone, so that the pretty-printing's own line breaks stay.
@@ -41,6 +52,44 @@ pub(crate) fn run(args: &InfoArgs, zone: Zone) -> anyhow::Result<()> {
         print_table(&s, zone);
     }
     Ok(())
+}
+
+/// A recording glrmon did not write (a ROS 2 bag, a Foxglove MCAP): its topics, with
+/// what a `[channels.topics]` mapping needs (schema, encodings, messages, times).
+fn print_foreign(
+    path: &std::path::Path,
+    messages: u64,
+    topics: &[glrmon_record::TopicSummary],
+    library: Option<&str>,
+    zone: Zone,
+) {
+    let time =
+        |t: Option<u64>| t.map_or_else(|| "-".to_owned(), |ns| format_time(ns as f64 / 1e9, zone));
+    println!("file:      {}", Escaped(&path.to_string_lossy()));
+    println!(
+        "written:   not by glrmon{}",
+        library.map_or_else(String::new, |l| format!(" ({})", Escaped(l)))
+    );
+    println!("messages:  {messages} on {} topic(s)", topics.len());
+    println!("topics:");
+    for t in topics {
+        println!(
+            "  {}  {} (schema {}, messages {})  {} messages  {} .. {}",
+            Escaped(&t.topic),
+            Escaped(&t.schema),
+            Escaped(&t.schema_encoding),
+            Escaped(&t.message_encoding),
+            t.messages,
+            time(t.first_ns),
+            time(t.last_ns)
+        );
+    }
+    println!(
+        "replay:    map its topics to a channel's signals with [channels.topics] (docs/WIRE.md, \
+         \"Recordings glrmon did not write\"; config/examples/ros2-bag.toml), then \
+         glrmon replay --config FILE {}",
+        Escaped(&path.to_string_lossy())
+    );
 }
 
 fn status(s: &RecordingSummary) -> String {
