@@ -494,6 +494,7 @@ impl Runtime {
                     inputs: plan.inputs,
                     stat_drops: stat_drops.clone(),
                 },
+                workers: workers_n,
                 limits: settings.limits,
                 clock,
             };
@@ -641,6 +642,8 @@ const FLUSH_INTERVAL: Duration = Duration::from_secs(1);
 /// What a worker needs besides its queue and pipelines.
 struct WorkerContext {
     emit: QueueEmit,
+    /// Number of workers W (channel i is worker i mod W's).
+    workers: usize,
     limits: DecodeLimits,
     clock: Clock,
 }
@@ -674,6 +677,19 @@ impl Emit for QueueEmit {
     }
 }
 
+/// Channel `channel`'s pipeline in its worker's shard: channel i is the (i / W)-th of
+/// worker i mod W (a direct index: a search would walk every pipeline of the shard
+/// for every payload).
+fn pipeline_of(
+    shard: &mut [ChannelPipeline],
+    channel: ChannelIndex,
+    workers: usize,
+) -> Option<&mut ChannelPipeline> {
+    shard
+        .get_mut(channel / workers.max(1))
+        .filter(|p| p.index() == channel)
+}
+
 fn worker(
     rx: Receiver<Job>,
     mut shard: Vec<ChannelPipeline>,
@@ -698,14 +714,14 @@ fn worker(
             }
             Job::Reject(c, _, _, at) => (*c, *at),
             Job::Retune(c, tuning) => {
-                if let Some(pipeline) = shard.iter_mut().find(|p| p.index() == *c) {
+                if let Some(pipeline) = pipeline_of(&mut shard, *c, cx.workers) {
                     pipeline.monitor_mut().retune(tuning);
                 }
                 continue;
             }
             Job::Stop => return,
         };
-        let Some(pipeline) = shard.iter_mut().find(|p| p.index() == channel) else {
+        let Some(pipeline) = pipeline_of(&mut shard, channel, cx.workers) else {
             continue;
         };
         let log_time_ns = cx.clock.unix_ns(received);

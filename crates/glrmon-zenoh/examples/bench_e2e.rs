@@ -1,20 +1,43 @@
 //! End-to-end load benchmark: N bench-A channels (LPV n = 2, p = 1, m = 2, w = 100)
-//! published through Zenoh on loopback to the daemon's runtime, as fast as the
-//! publisher can go. Reports sustained samples/s, drops, alarm latency (publish of the
-//! batch holding the alarm's sample → alarm received) and memory per channel.
+//! published through Zenoh on loopback to the daemon's runtime, publisher and daemon in
+//! one process on this machine's cores.
 //!
-//! `cargo run --release -p glrmon-zenoh --example bench_e2e -- --channels 1000 --samples 300 --batch 10`
+//! For each rate of `--rates` (samples/s over all channels; 0: as fast as the publisher
+//! can go) it runs two phases on the same payloads, each with fresh sessions:
+//! - **zenoh**: Zenoh alone, a subscriber per key that only counts: the transport's own
+//!   throughput and one-way latency for these payload sizes, the ceiling for glrmon;
+//! - **glrmon**: the daemon's runtime (Zenoh source, workers, Zenoh sink, and a recorder
+//!   with `--record DIR`): sustained samples/s, drops, alarms (detected faults, false
+//!   alarms, repeats), alarm latency (publication of the sample → alarm received by a
+//!   subscriber) and alarm delivery (receipt → written by every sink, the runtime's
+//!   histogram).
+//!
+//! Every `--faulty-every`-th channel gets a sensor bias of 1.0 (5 σ of its noise) at
+//! the middle sample; `--faulty-every 1 --stat-every 1 --record DIR` is the plant-wide
+//! burst: every channel alarmed at once, every statistic published and recorded.
+//!
+//! ```text
+//! cargo run --release -p glrmon-zenoh --example bench_e2e -- --channels 100 --samples 5000 --batch 1 --rates 0,500000
+//! cargo run --release -p glrmon-zenoh --example bench_e2e -- --channels 1000 --samples 300 --batch 1 --rates 5000 \
+//!     --faulty-every 1 --stat-every 1 --record /tmp/rec
+//! ```
 
-use std::collections::HashMap;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use glrmon_monitor::Monitor;
-use glrmon_runtime::{Runtime, RuntimeEvents, RuntimeSettings, SinkError};
+use glrmon_runtime::{
+    LATENCY_BUCKETS, LatencyHistogram, Runtime, RuntimeEvents, RuntimeSettings, SinkError,
+};
 use glrmon_wire::{Record, Sample, decode_record, encode_samples};
 use glrmon_zenoh::{SessionSettings, ZenohSink, ZenohSource};
 use zenoh::Wait as _;
+use zenoh::bytes::ZBytes;
+
+/// The allocator of the `glrmon` binary, so that the runtime is measured as it runs.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 struct Quiet;
 impl RuntimeEvents for Quiet {
@@ -23,13 +46,15 @@ impl RuntimeEvents for Quiet {
     }
 }
 
-fn arg(name: &str, default: u64) -> u64 {
+fn arg(name: &str) -> Option<String> {
     let args: Vec<String> = std::env::args().collect();
     args.iter()
         .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
+        .and_then(|i| args.get(i + 1).cloned())
+}
+
+fn arg_u64(name: &str, default: u64) -> u64 {
+    arg(name).and_then(|v| v.parse().ok()).unwrap_or(default)
 }
 
 fn rss_kib() -> u64 {
@@ -63,43 +88,96 @@ kind = "sensor_bias"
 output = 0
 [channels.glr]
 window = 100
-false_alarm = 1e-4
+false_alarm = ALPHA
 [channels.simulation]
 inputs = ["sin(0.05*k)"]
 signals = ["sin(0.01*k)"]
 "#;
 
+/// What the run is asked for.
+struct Plan {
+    channels: usize,
+    samples: u64,
+    batch: usize,
+    workers: usize,
+    faulty_every: usize,
+    onset: u64,
+    stat_every: u64,
+    alpha: f64,
+    record: Option<String>,
+}
+
+/// Each channel's payloads: (first k, last k, bytes) per batch.
+type Payloads = Vec<Vec<(u64, u64, ZBytes)>>;
+
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
 async fn main() {
-    let channels = arg("--channels", 100) as usize;
-    let samples = arg("--samples", 1000);
-    let batch = arg("--batch", 10).max(1) as usize;
-    let workers = arg("--workers", 2) as usize;
-    let faulty_every = arg("--faulty-every", 10) as usize;
-    // Target total rate in samples/s (0: as fast as the publisher can go).
-    let rate = arg("--rate", 0) as f64;
-    let onset = samples / 2;
-
-    let text: String = (0..channels)
-        .map(|i| CHANNEL.replace("NAME", &format!("ch{i}")))
+    let samples = arg_u64("--samples", 1000);
+    let plan = Plan {
+        channels: arg_u64("--channels", 100) as usize,
+        samples,
+        batch: arg_u64("--batch", 10).max(1) as usize,
+        workers: arg_u64("--workers", 2) as usize,
+        faulty_every: arg_u64("--faulty-every", 10).max(1) as usize,
+        onset: samples / 2,
+        stat_every: arg_u64("--stat-every", 0),
+        alpha: arg("--false-alarm")
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(1e-7),
+        record: arg("--record"),
+    };
+    let rates: Vec<f64> = arg("--rates")
+        .or_else(|| arg("--rate"))
+        .unwrap_or_else(|| "0".into())
+        .split(',')
+        .filter_map(|r| r.trim().parse().ok())
+        .collect();
+    let text: String = (0..plan.channels)
+        .map(|i| {
+            CHANNEL
+                .replace("NAME", &format!("ch{i}"))
+                .replace("ALPHA", &format!("{:e}", plan.alpha))
+        })
         .collect();
     let cfg = glrmon_spec::parse(&text).expect("config");
-    let rss0 = rss_kib();
-    let monitors: Vec<Monitor> = cfg
-        .channels
-        .iter()
-        .map(|c| Monitor::from_channel(c).expect("monitor"))
-        .collect();
-    let rss1 = rss_kib();
+    let payloads = payloads(&cfg, &plan);
+    let bytes: usize = payloads.iter().flatten().map(|(_, _, b)| b.len()).sum();
+    let messages: usize = payloads.iter().map(Vec::len).sum();
+    println!(
+        "{} channels × {} samples in batches of {} ({} messages, {:.0} bytes each on average), \
+         faults on every {}th channel from k = {}, false_alarm = {:e}, stat_every = {}, recording {}",
+        plan.channels,
+        plan.samples,
+        plan.batch,
+        messages,
+        bytes as f64 / messages as f64,
+        plan.faulty_every,
+        plan.onset,
+        plan.alpha,
+        plan.stat_every,
+        plan.record.as_deref().unwrap_or("off"),
+    );
+    for rate in rates {
+        if !std::env::args().any(|a| a == "--no-zenoh") {
+            zenoh_alone(&cfg, &payloads, &plan, rate).await;
+        }
+        glrmon(&cfg, &payloads, &plan, rate).await;
+    }
+}
 
-    // Data: bench-A simulated; every `faulty_every`-th channel gets a sensor bias of 1.0.
-    let payloads = payloads(&cfg, samples, batch, faulty_every, onset);
+/// A free loopback endpoint.
+fn endpoint() -> String {
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
         .unwrap()
         .port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
+    format!("tcp/127.0.0.1:{port}")
+}
+
+/// The daemon's side (a peer listening on loopback) and the plant's (a client).
+async fn sessions() -> (zenoh::Session, zenoh::Session) {
+    let endpoint = endpoint();
     let daemon = glrmon_zenoh::open(&SessionSettings {
         mode: Some("peer".into()),
         listen: vec![endpoint.clone()],
@@ -108,22 +186,6 @@ async fn main() {
     })
     .await
     .expect("daemon session");
-    let settings = RuntimeSettings {
-        workers,
-        stat_every: 0,
-        ..RuntimeSettings::default()
-    };
-    let (sinks, recorder_stats) = sinks(&daemon, &cfg);
-    let runtime = Runtime::start(monitors, sinks, &settings, Arc::new(Quiet));
-    let keys: Vec<Vec<String>> = cfg
-        .channels
-        .iter()
-        .map(glrmon_spec::Channel::input_keys)
-        .collect();
-    let _source = ZenohSource::declare(&daemon, &keys, &runtime.intake())
-        .await
-        .expect("source");
-
     let plant = glrmon_zenoh::open(&SessionSettings {
         mode: Some("client".into()),
         connect: vec![endpoint],
@@ -132,49 +194,189 @@ async fn main() {
     })
     .await
     .expect("plant session");
-    let received: Arc<Mutex<Vec<(String, u64, Instant)>>> = Arc::default();
-    let r = received.clone();
-    let _alarms = plant
+    (daemon, plant)
+}
+
+/// Publishes every payload round-robin over the channels, one batch of each channel per
+/// round, `rate` samples/s over all channels (0: as fast as the publisher can go); the
+/// publisher sleeps when it is ahead, as a plant's would. Returns each message's
+/// publication time since `start`, by channel and batch, and how long it took.
+fn publish(
+    publishers: &[zenoh::pubsub::Publisher<'static>],
+    payloads: &Payloads,
+    plan: &Plan,
+    rate: f64,
+    start: Instant,
+) -> (Vec<Vec<u64>>, Duration) {
+    let batches = payloads[0].len();
+    let mut sent = vec![vec![0u64; batches]; payloads.len()];
+    let round = if rate > 0.0 {
+        (payloads.len() * plan.batch) as f64 / rate
+    } else {
+        0.0
+    };
+    for b in 0..batches {
+        if rate > 0.0 {
+            let due = start + Duration::from_secs_f64(round * b as f64);
+            let ahead = due.saturating_duration_since(Instant::now());
+            if ahead > Duration::from_micros(200) {
+                std::thread::sleep(ahead);
+            }
+        }
+        for (i, (p, channel)) in publishers.iter().zip(payloads).enumerate() {
+            p.put(channel[b].2.clone()).wait().expect("put");
+            sent[i][b] = ns_since(start);
+        }
+    }
+    (sent, start.elapsed())
+}
+
+fn ns_since(start: Instant) -> u64 {
+    u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX)
+}
+
+/// Percentile `p` of sorted values.
+fn pct(sorted: &[f64], p: f64) -> f64 {
+    sorted
+        .get(((sorted.len() as f64 - 1.0) * p).round() as usize)
+        .copied()
+        .unwrap_or(f64::NAN)
+}
+
+/// Zenoh alone: the same publishers and payloads, a subscriber per key that records the
+/// receipt time of each message.
+async fn zenoh_alone(cfg: &glrmon_spec::Config, payloads: &Payloads, plan: &Plan, rate: f64) {
+    let (daemon, plant) = sessions().await;
+    let keys = keys(cfg);
+    let batches = payloads[0].len();
+    let received: Arc<Vec<Vec<AtomicU64>>> = Arc::new(
+        (0..payloads.len())
+            .map(|_| (0..batches).map(|_| AtomicU64::new(0)).collect())
+            .collect(),
+    );
+    let start = Instant::now() + Duration::from_secs(3600);
+    let start = Arc::new(Mutex::new(start));
+    let mut subscribers = Vec::new();
+    for (i, key) in keys.iter().flatten().enumerate() {
+        let received = received.clone();
+        let start = start.clone();
+        let next = AtomicU64::new(0);
+        subscribers.push(
+            daemon
+                .declare_subscriber(key.as_str())
+                .callback(move |s| {
+                    let _bytes = s.payload().to_bytes();
+                    let b = next.fetch_add(1, Ordering::Relaxed) as usize;
+                    let t0 = *start.lock().unwrap();
+                    if let Some(slot) = received[i].get(b) {
+                        slot.store(
+                            u64::try_from(Instant::now().saturating_duration_since(t0).as_nanos())
+                                .unwrap_or(0),
+                            Ordering::Relaxed,
+                        );
+                    }
+                })
+                .await
+                .expect("subscriber"),
+        );
+    }
+    let publishers = publishers(&plant, &keys.concat()).await;
+    let t0 = Instant::now();
+    *start.lock().unwrap() = t0;
+    let (sent, published) = publish(&publishers, payloads, plan, rate, t0);
+    let total: u64 = received.iter().map(|c| c.len() as u64).sum();
+    let arrived = || {
+        received
+            .iter()
+            .flatten()
+            .filter(|r| r.load(Ordering::Relaxed) > 0)
+            .count() as u64
+    };
+    let wait = Instant::now();
+    while arrived() < total && wait.elapsed() < Duration::from_secs(10) {
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
+    let last = received
+        .iter()
+        .flatten()
+        .map(|r| r.load(Ordering::Relaxed))
+        .max()
+        .unwrap_or(0);
+    let mut lat: Vec<f64> = received
+        .iter()
+        .zip(&sent)
+        .flat_map(|(r, s)| r.iter().zip(s))
+        .filter(|(r, _)| r.load(Ordering::Relaxed) > 0)
+        .map(|(r, s)| r.load(Ordering::Relaxed).saturating_sub(*s) as f64 / 1e6)
+        .collect();
+    lat.sort_by(f64::total_cmp);
+    let secs = last as f64 / 1e9;
+    println!(
+        "zenoh  rate={rate}: {} of {total} messages in {secs:.3} s = {:.0} messages/s = {:.0} samples/s \
+         (publishing took {:.3} s), latency p50={:.3} ms p99={:.3} ms",
+        arrived(),
+        arrived() as f64 / secs,
+        (arrived() as usize * plan.batch) as f64 / secs,
+        published.as_secs_f64(),
+        pct(&lat, 0.5),
+        pct(&lat, 0.99),
+    );
+    drop(subscribers);
+    let _ = plant.close().await;
+    let _ = daemon.close().await;
+}
+
+/// Each channel's input keys.
+fn keys(cfg: &glrmon_spec::Config) -> Vec<Vec<String>> {
+    cfg.channels
+        .iter()
+        .map(glrmon_spec::Channel::input_keys)
+        .collect()
+}
+
+/// glrmon: the daemon's runtime between the Zenoh source and sinks.
+async fn glrmon(cfg: &glrmon_spec::Config, payloads: &Payloads, plan: &Plan, rate: f64) {
+    let rss0 = rss_kib();
+    let monitors: Vec<Monitor> = cfg
+        .channels
+        .iter()
+        .map(|c| Monitor::from_channel(c).expect("monitor"))
+        .collect();
+    let rss1 = rss_kib();
+    let (daemon, plant) = sessions().await;
+    let settings = RuntimeSettings {
+        workers: plan.workers,
+        stat_every: plan.stat_every,
+        ..RuntimeSettings::default()
+    };
+    let (sinks, recorder_stats) = sinks(&daemon, cfg, plan);
+    let runtime = Runtime::start(monitors, sinks, &settings, Arc::new(Quiet));
+    let keys = keys(cfg);
+    let source = ZenohSource::declare(&daemon, &keys, &runtime.intake())
+        .await
+        .expect("source");
+    let received: Arc<Mutex<Vec<(String, u64, u64)>>> = Arc::default();
+    let start = Arc::new(Mutex::new(Instant::now() + Duration::from_secs(3600)));
+    let (r, t0) = (received.clone(), start.clone());
+    let alarms_sub = plant
         .declare_subscriber("glrmon/*/alarm")
         .callback(move |s| {
             if let Ok(Record::Alarm(a)) = decode_record(&s.payload().to_bytes()) {
-                r.lock().unwrap().push((a.channel, a.k, Instant::now()));
+                let at = Instant::now().saturating_duration_since(*t0.lock().unwrap());
+                r.lock()
+                    .unwrap()
+                    .push((a.channel, a.k, u64::try_from(at.as_nanos()).unwrap_or(0)));
             }
         })
         .await
         .expect("alarm subscriber");
     let publishers = publishers(&plant, &keys.concat()).await;
-    // Publish round-robin over channels, one batch at a time.
-    let mut sent_at: HashMap<(usize, u64), Instant> = HashMap::new();
-    let start = Instant::now();
-    let batches = payloads[0].len();
-    let round = Duration::from_secs_f64(if rate > 0.0 {
-        (channels * batch) as f64 / rate
-    } else {
-        0.0
-    });
-    for b in 0..batches {
-        if rate > 0.0 {
-            let due = start + round * b as u32;
-            while Instant::now() < due {
-                std::hint::spin_loop();
-                if due.saturating_duration_since(Instant::now()) > Duration::from_millis(2) {
-                    tokio::time::sleep(Duration::from_millis(1)).await;
-                }
-            }
-        }
-        for (i, (p, channel)) in publishers.iter().zip(&payloads).enumerate() {
-            let (last_k, bytes) = &channel[b];
-            p.put(bytes.clone()).wait().expect("put");
-            if i % faulty_every == 0 && *last_k >= onset {
-                sent_at.insert((i, *last_k), Instant::now());
-            }
-        }
-    }
-    let published = start.elapsed();
+    let begin = Instant::now();
+    *start.lock().unwrap() = begin;
+    let (sent, published) = publish(&publishers, payloads, plan, rate, begin);
     let stats = runtime.stats();
     let finished = settled(&stats).await;
-    let elapsed = finished.duration_since(start);
+    let elapsed = finished.duration_since(begin);
     let processed: u64 = stats
         .iter()
         .map(|s| s.samples.load(Ordering::Relaxed))
@@ -184,55 +386,152 @@ async fn main() {
         .map(|s| s.dropped.load(Ordering::Relaxed))
         .sum();
     let alarms = received.lock().unwrap().clone();
-    let lat = latencies_ms(&alarms, &sent_at, batch as u64, samples);
-    let pct = |p: f64| {
-        lat.get(((lat.len() as f64 - 1.0) * p).round() as usize)
-            .copied()
-            .unwrap_or(f64::NAN)
-    };
-    let expected_alarms = (0..channels).filter(|i| i % faulty_every == 0).count();
+    let verdict = judge(&alarms, payloads, &sent, plan);
+    let metrics = runtime.metrics();
+    let stat_drops = runtime.stat_drops();
+    let (_, sinks) = runtime.shutdown(Duration::from_secs(60));
+    drop(sinks);
     println!(
-        "channels={channels} samples/channel={samples} batch={batch} workers={workers} target rate={rate} samples/s: \
-         {processed} samples processed in {:.3} s = {:.0} samples/s (publishing took {:.3} s), \
-         dropped payloads={dropped}, alarms {}/{expected_alarms}, alarm latency p50={:.2} ms p99={:.2} ms, \
-         memory per channel ≈ {:.1} KiB (RSS {} → {} KiB for the monitors)",
+        "glrmon rate={rate}: {processed} samples processed in {:.3} s = {:.0} samples/s (publishing took {:.3} s), \
+         dropped payloads={dropped}, stat records shed={stat_drops}, faults alarmed {}/{} (false alarms {}, \
+         repeated {}; at most {:.2} false alarms expected), alarm latency p50={:.2} ms p99={:.2} ms max={:.2} ms, \
+         processing (receipt → records queued) p50 ≤ {} ms p99 ≤ {} ms, \
+         delivery of alarms/isolations/ends: {} records, p99 ≤ {} ms, {:.1} % within 50 ms; \
+         memory per channel ≈ {:.1} KiB",
         elapsed.as_secs_f64(),
         processed as f64 / elapsed.as_secs_f64(),
         published.as_secs_f64(),
-        alarms.len(),
-        pct(0.5),
-        pct(0.99),
-        (rss1.saturating_sub(rss0)) as f64 / channels as f64,
-        rss0,
-        rss1
+        verdict.detected,
+        verdict.faulty,
+        verdict.false_alarms,
+        verdict.repeated,
+        verdict.false_bound,
+        pct(&verdict.latency_ms, 0.5),
+        pct(&verdict.latency_ms, 0.99),
+        verdict.latency_ms.last().copied().unwrap_or(f64::NAN),
+        histogram_quantile_ms(&metrics.processing, 0.5),
+        histogram_quantile_ms(&metrics.processing, 0.99),
+        histogram_count(&metrics.delivery),
+        histogram_quantile_ms(&metrics.delivery, 0.99),
+        100.0 * histogram_fraction_within(&metrics.delivery, 0.05),
+        (rss1.saturating_sub(rss0)) as f64 / plan.channels as f64,
     );
-    let (_, sinks) = runtime.shutdown(Duration::from_secs(60));
-    drop(sinks);
     if let Some(stats) = recorder_stats {
         report_recording(&stats);
     }
+    drop(source);
+    drop(alarms_sub);
+    let _ = plant.close().await;
+    let _ = daemon.close().await;
 }
 
-/// Each channel's samples as JSON batches of `batch`, with the last k of each batch;
-/// every `faulty_every`-th channel has a sensor bias of 1.0 from `onset`.
-fn payloads(
-    cfg: &glrmon_spec::Config,
-    samples: u64,
-    batch: usize,
-    faulty_every: usize,
-    onset: u64,
-) -> Vec<Vec<(u64, Vec<u8>)>> {
-    let channels = cfg.channels.len();
+/// The alarms judged against the injected faults.
+struct Verdict {
+    faulty: usize,
+    detected: usize,
+    false_alarms: usize,
+    repeated: usize,
+    /// The false-alarm probability times the samples that could raise one: the
+    /// expected count's upper bound (the Bonferroni threshold is conservative).
+    false_bound: f64,
+    /// Latency of each detected fault's first alarm, sorted.
+    latency_ms: Vec<f64>,
+}
+
+fn judge(
+    alarms: &[(String, u64, u64)],
+    payloads: &Payloads,
+    sent: &[Vec<u64>],
+    plan: &Plan,
+) -> Verdict {
+    let faulty = |i: usize| i.is_multiple_of(plan.faulty_every);
+    let mut first = vec![false; plan.channels];
+    let mut v = Verdict {
+        faulty: (0..plan.channels).filter(|i| faulty(*i)).count(),
+        detected: 0,
+        false_alarms: 0,
+        repeated: 0,
+        false_bound: 0.0,
+        latency_ms: Vec::new(),
+    };
+    let healthy_samples: u64 = (0..plan.channels)
+        .map(|i| if faulty(i) { plan.onset } else { plan.samples })
+        .sum();
+    v.false_bound = plan.alpha * healthy_samples as f64;
+    for (ch, k, at) in alarms {
+        let Some(i) = ch
+            .trim_start_matches("ch")
+            .parse::<usize>()
+            .ok()
+            .filter(|i| *i < plan.channels)
+        else {
+            continue;
+        };
+        if !faulty(i) || *k < plan.onset {
+            v.false_alarms += 1;
+        } else if first[i] {
+            v.repeated += 1;
+        } else {
+            first[i] = true;
+            v.detected += 1;
+            // The message holding sample k.
+            if let Some(b) = payloads[i]
+                .iter()
+                .position(|(a, z, _)| *a <= *k && *k <= *z)
+            {
+                v.latency_ms
+                    .push(at.saturating_sub(sent[i][b]) as f64 / 1e6);
+            }
+        }
+    }
+    v.latency_ms.sort_by(f64::total_cmp);
+    v
+}
+
+fn histogram_count(h: &LatencyHistogram) -> u64 {
+    h.counts.iter().map(|c| c.load(Ordering::Relaxed)).sum()
+}
+
+/// The upper bound of the bucket holding quantile `q`, in ms.
+fn histogram_quantile_ms(h: &LatencyHistogram, q: f64) -> String {
+    let n = histogram_count(h);
+    let mut seen = 0;
+    for (i, c) in h.counts.iter().enumerate() {
+        seen += c.load(Ordering::Relaxed);
+        if n > 0 && seen as f64 >= q * n as f64 {
+            return LATENCY_BUCKETS
+                .get(i)
+                .map_or_else(|| "∞".into(), |b| format!("{}", b * 1e3));
+        }
+    }
+    "-".into()
+}
+
+fn histogram_fraction_within(h: &LatencyHistogram, bound_s: f64) -> f64 {
+    let n = histogram_count(h);
+    let within: u64 = h
+        .counts
+        .iter()
+        .zip(LATENCY_BUCKETS)
+        .filter(|(_, b)| *b <= bound_s)
+        .map(|(c, _)| c.load(Ordering::Relaxed))
+        .sum();
+    within as f64 / n.max(1) as f64
+}
+
+/// Each channel's samples as JSON batches of `batch`; every `faulty_every`-th channel
+/// has a sensor bias of 1.0 from `onset`.
+fn payloads(cfg: &glrmon_spec::Config, plan: &Plan) -> Payloads {
     let sc = glrmon_sim::scenarios::bench_a();
-    let mut payloads: Vec<Vec<(u64, Vec<u8>)>> = Vec::with_capacity(channels);
+    let mut payloads = Vec::with_capacity(cfg.channels.len());
     for (i, c) in cfg.channels.iter().enumerate() {
-        let mut sim = if i % faulty_every == 0 {
-            sc.faulty_simulator(i as u64, "sensor_bias", onset, 1.0)
+        let mut sim = if i.is_multiple_of(plan.faulty_every) {
+            sc.faulty_simulator(i as u64, "sensor_bias", plan.onset, 1.0)
                 .expect("sim")
         } else {
             sc.simulator(i as u64).expect("sim")
         };
-        let all: Vec<Sample> = (0..samples)
+        let all: Vec<Sample> = (0..plan.samples)
             .map(|_| {
                 let x = sim.next_sample();
                 Sample {
@@ -245,11 +544,12 @@ fn payloads(
             })
             .collect();
         payloads.push(
-            all.chunks(batch)
+            all.chunks(plan.batch)
                 .map(|b| {
                     let mut buf = Vec::new();
                     encode_samples(&c.name, b, &mut buf).expect("encode");
-                    (b.last().and_then(|s| s.k).unwrap_or(0), buf)
+                    let k = |s: Option<&Sample>| s.and_then(|s| s.k).unwrap_or(0);
+                    (k(b.first()), k(b.last()), ZBytes::from(buf))
                 })
                 .collect(),
         );
@@ -257,7 +557,7 @@ fn payloads(
     payloads
 }
 
-/// A publisher per key, each waiting until the daemon's subscriber matches it.
+/// A publisher per key, each waiting until a subscriber matches it.
 async fn publishers(
     plant: &zenoh::Session,
     keys: &[String],
@@ -311,27 +611,6 @@ async fn settled(stats: &[Arc<glrmon_runtime::ChannelStats>]) -> Instant {
     finished
 }
 
-/// Each alarm's latency in ms, from the publication of the batch holding its sample.
-fn latencies_ms(
-    alarms: &[(String, u64, Instant)],
-    sent_at: &HashMap<(usize, u64), Instant>,
-    batch: u64,
-    samples: u64,
-) -> Vec<f64> {
-    let mut lat: Vec<f64> = alarms
-        .iter()
-        .filter_map(|(ch, k, at)| {
-            let i: usize = ch.trim_start_matches("ch").parse().ok()?;
-            // The batch holding sample k was published at sent_at[(i, last k of that batch)].
-            let last = ((k / batch) + 1) * batch - 1;
-            let sent = sent_at.get(&(i, last.min(samples - 1)))?;
-            Some(at.duration_since(*sent).as_secs_f64() * 1e3)
-        })
-        .collect();
-    lat.sort_by(f64::total_cmp);
-    lat
-}
-
 /// What the recorder wrote.
 fn report_recording(stats: &glrmon_record::RecorderStats) {
     let files = stats.finished.lock().unwrap().clone();
@@ -350,25 +629,19 @@ fn report_recording(stats: &glrmon_record::RecorderStats) {
 }
 
 /// The Zenoh publisher sink and, with `--record DIR`, a recorder of every input and
-/// stat to MCAP, as `glrmon run` has.
+/// record to MCAP, as `glrmon run` has.
 fn sinks(
     daemon: &zenoh::Session,
     cfg: &glrmon_spec::Config,
+    plan: &Plan,
 ) -> (
     Vec<Box<dyn glrmon_runtime::Sink>>,
     Option<Arc<glrmon_record::RecorderStats>>,
 ) {
     let mut sinks: Vec<Box<dyn glrmon_runtime::Sink>> =
         vec![Box::new(ZenohSink::new(daemon.clone()))];
-    // `--record DIR`: also record every input and stat to MCAP, as `glrmon run` does.
-    let record_dir = {
-        let args: Vec<String> = std::env::args().collect();
-        args.iter()
-            .position(|a| a == "--record")
-            .and_then(|i| args.get(i + 1).cloned())
-    };
     let mut recorder_stats = None;
-    if let Some(dir) = &record_dir {
+    if let Some(dir) = &plan.record {
         let recorder = glrmon_record::Recorder::start(
             glrmon_record::RecorderSettings {
                 directory: dir.into(),
