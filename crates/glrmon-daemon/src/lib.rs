@@ -266,7 +266,9 @@ impl DaemonBuilder {
             .iter()
             .map(ChannelSetup::from_channel)
             .collect::<Result<Vec<_>, _>>()?;
-        let mut sinks: Vec<Box<dyn Sink>> = vec![Box::new(ZenohSink::new(session.clone()))];
+        let names: Vec<String> = config.channels.iter().map(|c| c.name.clone()).collect();
+        let mut sinks: Vec<Box<dyn Sink>> =
+            vec![Box::new(ZenohSink::declaring(session.clone(), &names)?)];
         sinks.extend(extra);
         let mut recorder_stats = None;
         if let Some(settings) = recorder {

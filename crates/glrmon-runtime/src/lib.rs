@@ -177,10 +177,23 @@ enum Job {
     Stop,
 }
 
+/// What the output stage's bulk queue carries (its urgent queue carries the records
+/// that must arrive, which overtake these).
 enum OutMsg {
     Record(Output),
     Input(InputOutput),
     Flush,
+}
+
+/// The two queues to the output stage. Alarms, isolation updates, alarm ends,
+/// diagnoses and errors take the urgent one, which the output stage always empties
+/// first: under a burst of statistics and inputs (a plant-wide fault, a recorder on)
+/// they overtake everything queued before them. Each record type keeps one queue, so
+/// the records of a type (a recording's topic) stay in order.
+#[derive(Clone)]
+struct OutputQueues {
+    urgent: crossbeam_channel::Sender<Output>,
+    bulk: crossbeam_channel::Sender<OutMsg>,
 }
 
 /// Converts receive instants to wall-clock nanoseconds since the Unix epoch, from one
@@ -387,7 +400,7 @@ pub struct Runtime {
     intake: Intake,
     workers: Vec<JoinHandle<()>>,
     output: Option<JoinHandle<Vec<Box<dyn Sink>>>>,
-    out_tx: Option<SyncSender<OutMsg>>,
+    out_tx: Option<OutputQueues>,
     stats: Arc<Vec<Arc<ChannelStats>>>,
     names: Vec<String>,
     stat_drops: Arc<AtomicU64>,
@@ -458,7 +471,13 @@ impl Runtime {
                 .map(|_| Arc::new(ChannelStats::default()))
                 .collect(),
         );
-        let (out_tx, out_rx) = mpsc::sync_channel::<OutMsg>(settings.output_queue.max(16));
+        let capacity = settings.output_queue.max(16);
+        let (urgent_tx, urgent_rx) = crossbeam_channel::bounded::<Output>(capacity);
+        let (bulk_tx, bulk_rx) = crossbeam_channel::bounded::<OutMsg>(capacity);
+        let out_tx = OutputQueues {
+            urgent: urgent_tx,
+            bulk: bulk_tx,
+        };
         let stat_drops = Arc::new(AtomicU64::new(0));
         let metrics = Arc::new(RuntimeMetrics::default());
         let fanout = Fanout::new(sinks, settings.stat_every);
@@ -467,7 +486,9 @@ impl Runtime {
         let out_metrics = metrics.clone();
         let output = std::thread::Builder::new()
             .name("glrmon-output".into())
-            .spawn(move || output_stage(out_rx, fanout, events.as_ref(), &out_metrics))
+            .spawn(move || {
+                output_stage(&urgent_rx, &bulk_rx, fanout, events.as_ref(), &out_metrics)
+            })
             .ok();
         let mut shards: Vec<Vec<ChannelPipeline>> = (0..workers_n).map(|_| Vec::new()).collect();
         for (i, c) in channels.into_iter().enumerate() {
@@ -595,7 +616,7 @@ impl Runtime {
     /// Asks the output stage to flush its sinks (e.g. periodically).
     pub fn flush(&self) {
         if let Some(tx) = &self.out_tx {
-            let _ = tx.try_send(OutMsg::Flush);
+            let _ = tx.bulk.try_send(OutMsg::Flush);
         }
     }
 
@@ -650,7 +671,7 @@ struct WorkerContext {
 
 /// A worker's emitter: hands inputs and records to the output stage's queue.
 struct QueueEmit {
-    out: SyncSender<OutMsg>,
+    out: OutputQueues,
     /// A sink records every input: then every record must arrive too.
     inputs: bool,
     stat_drops: Arc<AtomicU64>,
@@ -660,18 +681,19 @@ impl Emit for QueueEmit {
     /// Inputs wait for room (a recording must hold every input for the replay to be
     /// exact).
     fn input(&mut self, input: InputOutput) -> Result<(), SinkError> {
-        let _ = self.out.send(OutMsg::Input(input));
+        let _ = self.out.bulk.send(OutMsg::Input(input));
         Ok(())
     }
 
     fn record(&mut self, output: Output) -> Result<(), SinkError> {
-        if output.stat_index.is_some() && !self.inputs {
+        if output.stat_index.is_none() {
+            let _ = self.out.urgent.send(output);
+        } else if self.inputs {
+            // A recording holds every statistic: wait for room.
+            let _ = self.out.bulk.send(OutMsg::Record(output));
+        } else if self.out.bulk.try_send(OutMsg::Record(output)).is_err() {
             // Without a recorder, decimated statistics may be shed under load.
-            if self.out.try_send(OutMsg::Record(output)).is_err() {
-                self.stat_drops.fetch_add(1, Ordering::Relaxed);
-            }
-        } else {
-            let _ = self.out.send(OutMsg::Record(output));
+            self.stat_drops.fetch_add(1, Ordering::Relaxed);
         }
         Ok(())
     }
@@ -754,38 +776,88 @@ fn worker(
     }
 }
 
+/// What the output stage takes next.
+enum Next {
+    Urgent(Output),
+    UrgentClosed,
+    Bulk(OutMsg),
+    BulkClosed,
+}
+
 fn output_stage(
-    rx: Receiver<OutMsg>,
+    urgent: &crossbeam_channel::Receiver<Output>,
+    bulk: &crossbeam_channel::Receiver<OutMsg>,
     mut fanout: Fanout,
     events: &dyn RuntimeEvents,
     metrics: &RuntimeMetrics,
 ) -> Vec<Box<dyn Sink>> {
     let mut report = |e: SinkError| events.sink_error(&e);
     let mut last_flush = Instant::now();
-    loop {
-        // Sinks are flushed when the queue is idle and at least every second under load.
+    let deliver = |fanout: &mut Fanout, o: &Output, report: &mut dyn FnMut(SinkError)| {
+        fanout.record(o, report);
+        let now = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
+        metrics
+            .delivery
+            .observe(Duration::from_nanos(now.saturating_sub(o.log_time_ns)));
+    };
+    let (mut urgent_open, mut bulk_open) = (true, true);
+    while urgent_open || bulk_open {
+        // Sinks are flushed when the queues are idle and at least every second under
+        // load.
         if last_flush.elapsed() >= FLUSH_INTERVAL {
             fanout.flush(&mut report);
             last_flush = Instant::now();
         }
-        match rx.recv_timeout(Duration::from_millis(200)) {
-            Ok(OutMsg::Record(o)) => {
-                fanout.record(&o, &mut report);
-                if o.stat_index.is_none() {
-                    let now = SystemTime::now()
-                        .duration_since(UNIX_EPOCH)
-                        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
-                    metrics
-                        .delivery
-                        .observe(Duration::from_nanos(now.saturating_sub(o.log_time_ns)));
-                }
+        // Every urgent record first, then one bulk message, then look again.
+        match urgent.try_recv() {
+            Ok(o) => {
+                deliver(&mut fanout, &o, &mut report);
+                continue;
             }
-            Ok(OutMsg::Input(i)) => fanout.input(&i, &mut report),
-            Ok(OutMsg::Flush) | Err(mpsc::RecvTimeoutError::Timeout) => {
+            Err(crossbeam_channel::TryRecvError::Disconnected) => urgent_open = false,
+            Err(crossbeam_channel::TryRecvError::Empty) => {}
+        }
+        let next = if urgent_open && bulk_open {
+            crossbeam_channel::select_biased! {
+                recv(urgent) -> o => o.map_or(Next::UrgentClosed, Next::Urgent),
+                recv(bulk) -> m => m.map_or(Next::BulkClosed, Next::Bulk),
+                default(Duration::from_millis(200)) => Next::Bulk(OutMsg::Flush),
+            }
+        } else if bulk_open {
+            match bulk.recv_timeout(Duration::from_millis(200)) {
+                Ok(m) => Next::Bulk(m),
+                Err(crossbeam_channel::RecvTimeoutError::Timeout) => Next::Bulk(OutMsg::Flush),
+                Err(crossbeam_channel::RecvTimeoutError::Disconnected) => Next::BulkClosed,
+            }
+        } else {
+            // Only the urgent queue is left: the try_recv above drains it.
+            match urgent.recv() {
+                Ok(o) => Next::Urgent(o),
+                Err(_) => Next::UrgentClosed,
+            }
+        };
+        let msg = match next {
+            Next::Urgent(o) => {
+                deliver(&mut fanout, &o, &mut report);
+                continue;
+            }
+            Next::UrgentClosed => {
+                urgent_open = false;
+                continue;
+            }
+            Next::Bulk(m) => Some(m),
+            Next::BulkClosed => None,
+        };
+        match msg {
+            Some(OutMsg::Record(o)) => fanout.record(&o, &mut report),
+            Some(OutMsg::Input(i)) => fanout.input(&i, &mut report),
+            Some(OutMsg::Flush) => {
                 fanout.flush(&mut report);
                 last_flush = Instant::now();
             }
-            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+            None => bulk_open = false,
         }
     }
     fanout.close(&mut report)

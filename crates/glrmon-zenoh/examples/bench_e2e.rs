@@ -638,8 +638,10 @@ fn sinks(
     Vec<Box<dyn glrmon_runtime::Sink>>,
     Option<Arc<glrmon_record::RecorderStats>>,
 ) {
-    let mut sinks: Vec<Box<dyn glrmon_runtime::Sink>> =
-        vec![Box::new(ZenohSink::new(daemon.clone()))];
+    let names: Vec<String> = cfg.channels.iter().map(|c| c.name.clone()).collect();
+    let mut sinks: Vec<Box<dyn glrmon_runtime::Sink>> = vec![Box::new(
+        ZenohSink::declaring(daemon.clone(), &names).expect("publishers"),
+    )];
     let mut recorder_stats = None;
     if let Some(dir) = &plan.record {
         let recorder = glrmon_record::Recorder::start(

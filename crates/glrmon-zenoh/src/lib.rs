@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 
 use glrmon_runtime::{ChannelStats, Intake, Output, Payload, Sink, SinkError};
 use glrmon_wire::text::Escaped;
-use glrmon_wire::{InstanceStatus, Record, ZenohSessions, status};
+use glrmon_wire::{InstanceStatus, ZenohSessions, status};
 use zenoh::bytes::Encoding;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
@@ -515,15 +515,32 @@ impl ZenohSource {
 /// Publishes records on `glrmon/<channel>/<type>`: alarms, alarm ends, diagnoses and
 /// errors reliably (congestion control Block, high priority, express); `stat` may be
 /// dropped under congestion.
+///
+/// A publisher is declared once per key and kept. [`ZenohSink::declaring`] declares
+/// those of the records that must arrive for every channel up front: declaring one
+/// takes tens of microseconds, which a plant-wide fault would otherwise pay a thousand
+/// times over, on the first alarm of each channel, the one that matters most.
 pub struct ZenohSink {
     session: Session,
-    publishers: HashMap<String, Publisher<'static>>,
+    /// Each channel's publishers, by record kind ([`KINDS`]).
+    publishers: HashMap<String, [Option<Publisher<'static>>; KINDS.len()]>,
 }
+
+/// The record kinds, in the order of a channel's publisher slots.
+const KINDS: [&str; 7] = [
+    "stat",
+    "alarm",
+    "isolation",
+    "alarm_end",
+    "diagnosis",
+    "error",
+    "consistency",
+];
 
 impl std::fmt::Debug for ZenohSink {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ZenohSink")
-            .field("publishers", &self.publishers.len())
+            .field("channels", &self.publishers.len())
             .finish()
     }
 }
@@ -537,6 +554,61 @@ impl ZenohSink {
             publishers: HashMap::new(),
         }
     }
+
+    /// A sink on `session` with the publishers of every record kind but `stat`
+    /// declared now for each of `channels`.
+    ///
+    /// # Errors
+    /// [`ZenohError::Session`] when a declaration fails.
+    pub fn declaring(session: Session, channels: &[String]) -> Result<Self, ZenohError> {
+        let mut sink = Self::new(session);
+        for channel in channels {
+            for (slot, kind) in KINDS.iter().enumerate().skip(1) {
+                sink.publisher(channel, slot, kind)
+                    .map_err(session_err("declare publisher"))?;
+            }
+        }
+        Ok(sink)
+    }
+
+    /// The publisher of `kind` (slot `slot` of [`KINDS`]) for `channel`, declared on
+    /// first use.
+    fn publisher(
+        &mut self,
+        channel: &str,
+        slot: usize,
+        kind: &str,
+    ) -> Result<&Publisher<'static>, zenoh::Error> {
+        if !self.publishers.contains_key(channel) {
+            self.publishers
+                .insert(channel.to_owned(), std::array::from_fn(|_| None));
+        }
+        let slots = self
+            .publishers
+            .get_mut(channel)
+            .ok_or_else(|| zenoh::Error::from("no publisher slots"))?;
+        let entry = &mut slots[slot];
+        if entry.is_none() {
+            let builder = self
+                .session
+                .declare_publisher(glrmon_wire::result_key(channel, kind))
+                .encoding(Encoding::APPLICATION_JSON);
+            let builder = if kind == "stat" {
+                builder
+                    .congestion_control(CongestionControl::Drop)
+                    .priority(Priority::DataLow)
+            } else {
+                builder
+                    .congestion_control(CongestionControl::Block)
+                    .priority(Priority::InteractiveHigh)
+                    .express(true)
+            };
+            *entry = Some(builder.wait()?);
+        }
+        entry
+            .as_ref()
+            .ok_or_else(|| zenoh::Error::from("publisher not declared"))
+    }
 }
 
 impl Sink for ZenohSink {
@@ -545,36 +617,20 @@ impl Sink for ZenohSink {
     }
 
     fn write(&mut self, output: &Output) -> Result<(), SinkError> {
-        let key = output.record.key();
+        let kind = output.record.kind_str();
+        let channel = output.record.channel();
         let err = |what: &str, e: zenoh::Error| SinkError {
             sink: "zenoh".into(),
-            message: format!("{what} {key}: {e}"),
+            message: format!("{what} {}: {e}", glrmon_wire::result_key(channel, kind)),
         };
-        if !self.publishers.contains_key(&key) {
-            let reliable = !matches!(output.record, Record::Stat(_));
-            let builder = self
-                .session
-                .declare_publisher(key.clone())
-                .encoding(Encoding::APPLICATION_JSON);
-            let builder = if reliable {
-                builder
-                    .congestion_control(CongestionControl::Block)
-                    .priority(Priority::InteractiveHigh)
-                    .express(true)
-            } else {
-                builder
-                    .congestion_control(CongestionControl::Drop)
-                    .priority(Priority::DataLow)
-            };
-            let p = builder.wait().map_err(|e| err("declare publisher", e))?;
-            self.publishers.insert(key.clone(), p);
-        }
-        if let Some(p) = self.publishers.get(&key) {
-            p.put(output.json.clone())
-                .wait()
-                .map_err(|e| err("put", e))?;
-        }
-        Ok(())
+        let slot = KINDS.iter().position(|k| *k == kind).unwrap_or(0);
+        let publisher = self
+            .publisher(channel, slot, kind)
+            .map_err(|e| err("declare publisher", e))?;
+        publisher
+            .put(output.json.clone())
+            .wait()
+            .map_err(|e| err("put", e))
     }
 }
 
