@@ -279,3 +279,63 @@ fn intake_memory_is_bounded_in_bytes() {
     assert!(in_time);
     assert_eq!(metrics.queued_bytes.load(Ordering::Relaxed), 0);
 }
+
+/// Records that must arrive overtake the statistics queued before them: with the sink
+/// stalled on the first `stat`, 300 more `stat` records and then an `error` record
+/// queue up; once released, the `error` is written right after the record in hand,
+/// before the 300 `stat` records queued ahead of it, and nothing is lost.
+#[test]
+fn urgent_records_overtake_queued_statistics() {
+    let (cfg, monitors) = demo_monitors();
+    let data = payloads(&cfg, 301);
+    let (release_tx, release_rx) = std::sync::mpsc::channel::<()>();
+    let release_rx = std::sync::Mutex::new(release_rx);
+    let written: Arc<Mutex<Vec<&'static str>>> = Arc::default();
+    let w = written.clone();
+    let sink = crate::FnSink::new("stall", move |o: &crate::Output| {
+        let mut w = w.lock().unwrap();
+        if w.is_empty() {
+            let _ = release_rx.lock().unwrap().recv();
+        }
+        w.push(o.record.kind_str());
+    });
+    let settings = RuntimeSettings {
+        workers: 1,
+        output_queue: 4096,
+        stat_every: 1,
+        ..RuntimeSettings::default()
+    };
+    let rt = Runtime::start(
+        monitors,
+        vec![Box::new(sink)],
+        &settings,
+        Arc::new(NoEvents),
+    );
+    let intake = rt.intake();
+    let payload = |bytes: Vec<u8>| Payload {
+        bytes,
+        received: Instant::now(),
+        source_time: None,
+        tag: 0,
+    };
+    for bytes in &data[0] {
+        assert_eq!(intake.offer(0, payload(bytes.clone())), Offer::Accepted);
+    }
+    assert_eq!(intake.offer(0, payload(b"not json".to_vec())), Offer::Accepted);
+    let stats = rt.stats();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while stats[0].errors.lock().unwrap().values().sum::<u64>() == 0 {
+        assert!(Instant::now() < deadline, "the worker did not finish");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    assert_eq!(stats[0].samples.load(Ordering::Relaxed), 301);
+    release_tx.send(()).unwrap();
+    let (in_time, _) = rt.shutdown(Duration::from_secs(30));
+    assert!(in_time);
+    let written = written.lock().unwrap();
+    assert_eq!(written.len(), 302, "every record written");
+    assert_eq!(written.iter().filter(|k| **k == "stat").count(), 301);
+    let error_at = written.iter().position(|k| *k == "error").unwrap();
+    // The stalled `stat`, at most one more taken before the error arrived, then it.
+    assert!(error_at <= 2, "error written at position {error_at}");
+}
