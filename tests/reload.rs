@@ -199,6 +199,61 @@ async fn sighup_applies_thresholds_and_refuses_what_needs_a_restart() {
         "threshold 0.5 no longer in force after the refusals"
     );
 
+    // A storm of SIGHUPs (the same file, then a changed one) while samples flow: reloads
+    // run off the intake path and are coalesced; every sample is processed, the last
+    // file is in force (its threshold raised back: the episode ends on clean data).
+    let before = daemon
+        .stderr
+        .lock()
+        .unwrap()
+        .matches("Configuration reloaded")
+        .count();
+    std::fs::write(&cfg, format!("{head}{low}")).unwrap();
+    for _ in 0..10 {
+        daemon.signal("-HUP");
+    }
+    let high = motor.replace("false_alarm = 1e-4", "threshold = 1000.0");
+    std::fs::write(&cfg, format!("{head}{high}")).unwrap();
+    for _ in 0..10 {
+        daemon.signal("-HUP");
+    }
+    daemon.wait_log("Configuration reloaded", before + 1);
+    // Wait for the coalesced reloads to settle: the last SIGHUP's reread is applied.
+    std::thread::sleep(Duration::from_millis(1000));
+    let reloads = daemon
+        .stderr
+        .lock()
+        .unwrap()
+        .matches("Configuration reloaded")
+        .count()
+        - before;
+    assert!(
+        (1..=20).contains(&reloads),
+        "{reloads} reloads for 20 SIGHUPs"
+    );
+    let rows = rows.clone();
+    let publish_again = |ks: std::ops::Range<usize>| {
+        for (i, r) in rows[0..ks.len()].iter().enumerate() {
+            let s = Sample {
+                k: Some((ks.start + i) as u64),
+                t: None,
+                u: vec![r[2]],
+                y: vec![r[3], r[4]],
+                p: Vec::new(),
+            };
+            let mut b = Vec::new();
+            encode_sample("dc_motor", &s, &mut b).unwrap();
+            publisher.put(b).wait().unwrap();
+        }
+    };
+    publish_again(600..1200);
+    let (samples, _, active) = wait_samples(&session, 1200).await;
+    assert_eq!(samples, 1200, "no sample lost to the reloads");
+    assert!(
+        !active,
+        "the last file's threshold 1000 is in force: the episode ended"
+    );
+
     daemon.signal("-TERM");
     let mut daemon = daemon;
     let code = support::exit_code_within(&mut daemon.child, Duration::from_secs(10));

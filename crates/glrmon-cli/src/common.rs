@@ -120,3 +120,19 @@ pub(crate) async fn matched_publisher(
     }
     Ok(publisher)
 }
+
+/// Lowers the calling thread's scheduling priority by `nice` (Linux: a thread may always
+/// lower its own; elsewhere nothing), for work that must not take the CPU from intake
+/// and the monitors.
+pub(crate) fn lower_thread_priority(nice: i32) {
+    #[cfg(target_os = "linux")]
+    // SAFETY: gettid, getpriority and setpriority take and return plain integers;
+    // setpriority on the calling thread's id changes only that thread.
+    unsafe {
+        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        let current = libc::getpriority(libc::PRIO_PROCESS, tid);
+        let _ = libc::setpriority(libc::PRIO_PROCESS, tid, current + nice);
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = nice;
+}

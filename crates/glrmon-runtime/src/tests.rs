@@ -321,7 +321,10 @@ fn urgent_records_overtake_queued_statistics() {
     for bytes in &data[0] {
         assert_eq!(intake.offer(0, payload(bytes.clone())), Offer::Accepted);
     }
-    assert_eq!(intake.offer(0, payload(b"not json".to_vec())), Offer::Accepted);
+    assert_eq!(
+        intake.offer(0, payload(b"not json".to_vec())),
+        Offer::Accepted
+    );
     let stats = rt.stats();
     let deadline = Instant::now() + Duration::from_secs(30);
     while stats[0].errors.lock().unwrap().values().sum::<u64>() == 0 {

@@ -143,14 +143,38 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
                 None => std::future::pending().await,
             }
         }
+        // A reload reads and validates the file on its own thread, at a lower priority
+        // than intake and the workers; SIGHUPs that arrive meanwhile are coalesced into
+        // one more reload after it.
+        let mut reloading: Option<tokio::sync::oneshot::Receiver<Reread>> = None;
+        let mut again = false;
         loop {
             tokio::select! {
                 () = next(&mut term) => break,
                 () = next(&mut int) => break,
                 () = next(&mut hup) => {
-                    notify::reloading();
-                    tokio::task::block_in_place(|| reload(&args.config, &mut daemon));
-                    notify::ready(&monitoring);
+                    if reloading.is_some() {
+                        again = true;
+                    } else {
+                        notify::reloading();
+                        reloading = Some(reread(&args.config, daemon.config()));
+                    }
+                }
+                done = async {
+                    match reloading.as_mut() {
+                        Some(r) => r.await,
+                        None => std::future::pending().await,
+                    }
+                }, if reloading.is_some() => {
+                    reloading = None;
+                    if let Ok(done) = done {
+                        apply(&args.config, done, &mut daemon);
+                    }
+                    if std::mem::take(&mut again) {
+                        reloading = Some(reread(&args.config, daemon.config()));
+                    } else {
+                        notify::ready(&monitoring);
+                    }
                 }
             }
         }
@@ -292,13 +316,63 @@ mod notify {
     }
 }
 
-/// SIGHUP: reads the configuration file again and applies each channel's new
-/// thresholds and alarm settings to its running monitor; refuses (logging why, changing
-/// nothing) an invalid file or any change that needs a restart.
-fn reload(path: &std::path::Path, daemon: &mut Daemon) {
-    let new = match load_config(path) {
-        Ok(c) => c,
-        Err(e) => {
+/// The configuration file as a reload read it.
+enum Reread {
+    /// The same text as the configuration in force: nothing to validate or apply.
+    Unchanged,
+    /// A valid configuration, to apply.
+    Changed(Box<glrmon_spec::Config>),
+    /// Unreadable or invalid: why.
+    Refused(String),
+}
+
+/// SIGHUP: reads the configuration file again on a thread of its own, at a lower
+/// scheduling priority than intake and the workers (validating a large configuration
+/// takes a second of CPU), and validates it unless its text is the one in force.
+fn reread(
+    path: &std::path::Path,
+    current: &glrmon_spec::Config,
+) -> tokio::sync::oneshot::Receiver<Reread> {
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    let path = path.to_owned();
+    let current = current.source.clone();
+    let spawned = std::thread::Builder::new()
+        .name("glrmon-reload".into())
+        .spawn(move || {
+            crate::common::lower_thread_priority(RELOAD_NICE);
+            let reread = match std::fs::read_to_string(&path) {
+                Ok(text) if text == current => Reread::Unchanged,
+                Ok(_) => match load_config(&path) {
+                    Ok(c) => Reread::Changed(Box::new(c)),
+                    Err(e) => Reread::Refused(e.to_string()),
+                },
+                Err(e) => Reread::Refused(format!("cannot read {}: {e}", path.display())),
+            };
+            let _ = tx.send(reread);
+        });
+    if let Err(e) = spawned {
+        tracing::error!("Reload refused, nothing changed: no thread to read the file: {e}");
+    }
+    rx
+}
+
+/// How much lower than the daemon's other threads a reload runs (a nice increment).
+const RELOAD_NICE: i32 = 10;
+
+/// Applies a reread configuration: each channel's new thresholds and alarm settings go
+/// to its running monitor; an invalid file, or any change that needs a restart, is
+/// refused (logging why, changing nothing).
+fn apply(path: &std::path::Path, reread: Reread, daemon: &mut Daemon) {
+    let new = match reread {
+        Reread::Unchanged => {
+            tracing::info!(
+                config = %path.display(),
+                "Configuration reloaded: unchanged, nothing to apply."
+            );
+            return;
+        }
+        Reread::Changed(c) => *c,
+        Reread::Refused(e) => {
             tracing::error!(config = %path.display(), "Reload refused, nothing changed: {e}");
             return;
         }
