@@ -176,9 +176,11 @@ tank-table: ## the quadruple-tank identify → calibrate → monitor table of do
 bench: ## every criterion benchmark: the per-sample step and the sparse diagnosis (figures in docs/PERFORMANCE.md)
 	$(CARGO) bench --workspace
 
-bench-e2e: ## end-to-end load through Zenoh on loopback, 100 and 1000 channels (figures in docs/PERFORMANCE.md)
-	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 100 --samples 2000 --batch 10
-	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 1000 --samples 300 --batch 10
+bench-e2e: ## end-to-end load through Zenoh on loopback beside Zenoh alone: 100 and 1000 channels, and a plant-wide alarm burst with recording (figures in docs/PERFORMANCE.md)
+	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 100 --samples 5000 --batch 1 --rates 0,500000,700000
+	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 1000 --samples 1000 --batch 1 --rates 100000
+	rm -rf $(BENCH_DIR)/burst
+	$(CARGO) run --release -q -p glrmon-zenoh --example bench_e2e -- --channels 1000 --samples 40 --batch 1 --rates 5000 --faulty-every 1 --stat-every 1 --record $(BENCH_DIR)/burst
 
 BENCH_DIR ?= /tmp/glrmon-bench
 BENCH_SAMPLES ?= 10000000
