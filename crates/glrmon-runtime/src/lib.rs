@@ -20,9 +20,10 @@
 //! - **Workers** are threads, each owning the pipelines of a fixed shard of channels,
 //!   so a slow channel delays only its shard's queue, never another worker.
 //! - **Output**: records that must arrive (alarms, isolation updates, alarm ends,
-//!   diagnoses, errors) wait for room in the output queue; decimated `stat` records are
-//!   dropped (and counted) when it is full, unless a recorder needs every input and
-//!   record.
+//!   diagnoses, errors) wait for room in the urgent output queue, which the output stage
+//!   always empties first, so that they overtake statistics and inputs; decimated `stat`
+//!   records take the bulk queue and are dropped (and counted) when it is full, unless a
+//!   recorder needs every input and record.
 //! - **Shutdown** ([`Runtime::shutdown`]): stop intake, drain every worker queue, then the
 //!   output queue, then close the sinks, within a bounded time.
 #![warn(missing_docs)]
