@@ -376,12 +376,10 @@ fn print_summary(
     }
     if let Ok(l) = latency.lock() {
         for a in &l.alarms {
-            let crossing = a
-                .crossing
-                .map_or_else(|| "unseen".to_owned(), |c| format!("k={c}"));
-            let latency = a
-                .crossing
-                .map_or_else(|| "?".to_owned(), |c| a.k.saturating_sub(c).to_string());
+            let crossed = l.crossing(a);
+            let crossing = crossed.map_or_else(|| "unseen".to_owned(), |c| format!("k={c}"));
+            let latency =
+                crossed.map_or_else(|| "?".to_owned(), |c| a.k.saturating_sub(c).to_string());
             let update = match a.update {
                 Some(u) => format!("isolation update at k={u}"),
                 None => "no isolation update (episode over first)".to_owned(),
@@ -401,20 +399,19 @@ struct MeasuredAlarm {
     channel: String,
     /// The alarm record's sample.
     k: u64,
-    /// The sample at which l_k went above the threshold, from the `stat` records.
-    crossing: Option<u64>,
     /// The sample of its `isolation` record.
     update: Option<u64>,
 }
 
 /// Detection latency in samples, measured from the records as a consumer sees them:
 /// the `stat` records say where l_k went above the threshold, the `alarm` record where
-/// the alarm was raised.
+/// the alarm was raised (alarms overtake statistics, so an alarm may arrive before the
+/// `stat` of its crossing).
 #[derive(Debug, Default)]
 struct Latency {
-    /// Per channel: the last sample whose l_k went from at most λ (or none) to above
-    /// it, and whether the previous `stat` was above λ.
-    rising: std::collections::HashMap<String, (Option<u64>, bool)>,
+    /// Per channel: every sample whose l_k went from at most λ (or none) to above it,
+    /// and whether the last `stat` was above λ.
+    rising: std::collections::HashMap<String, (Vec<u64>, bool)>,
     alarms: Vec<MeasuredAlarm>,
 }
 
@@ -425,14 +422,13 @@ impl Latency {
                 let above = s.glr.zip(s.threshold).is_some_and(|(l, h)| l > h);
                 let entry = self.rising.entry(s.channel.clone()).or_default();
                 if above && !entry.1 {
-                    entry.0 = Some(s.k);
+                    entry.0.push(s.k);
                 }
                 entry.1 = above;
             }
             Record::Alarm(a) => self.alarms.push(MeasuredAlarm {
                 channel: a.channel.clone(),
                 k: a.k,
-                crossing: self.rising.get(&a.channel).and_then(|r| r.0),
                 update: None,
             }),
             Record::Isolation(u) => {
@@ -447,5 +443,12 @@ impl Latency {
             }
             _ => {}
         }
+    }
+
+    /// The sample at which l_k last went above the threshold at or before alarm `a`.
+    fn crossing(&self, a: &MeasuredAlarm) -> Option<u64> {
+        self.rising
+            .get(&a.channel)
+            .and_then(|(r, _)| r.iter().rev().find(|k| **k <= a.k).copied())
     }
 }
