@@ -370,6 +370,21 @@ async fn glrmon(cfg: &glrmon_spec::Config, payloads: &Payloads, plan: &Plan, rat
         })
         .await
         .expect("alarm subscriber");
+    // Error records by code (gaps, restarts, refusals), and their first messages.
+    let errors: Arc<Mutex<std::collections::BTreeMap<String, u64>>> = Arc::default();
+    let e = errors.clone();
+    let errors_sub = plant
+        .declare_subscriber("glrmon/*/error")
+        .callback(move |s| {
+            if let Ok(Record::Error(r)) = decode_record(&s.payload().to_bytes()) {
+                *e.lock()
+                    .unwrap()
+                    .entry(r.code.as_str().to_owned())
+                    .or_default() += 1;
+            }
+        })
+        .await
+        .expect("error subscriber");
     let publishers = publishers(&plant, &keys.concat()).await;
     let begin = Instant::now();
     *start.lock().unwrap() = begin;
@@ -416,11 +431,19 @@ async fn glrmon(cfg: &glrmon_spec::Config, payloads: &Payloads, plan: &Plan, rat
         100.0 * histogram_fraction_within(&metrics.delivery, 0.05),
         (rss1.saturating_sub(rss0)) as f64 / plan.channels as f64,
     );
+    let errors = errors.lock().unwrap().clone();
+    if !errors.is_empty() || verdict.false_alarms > 0 {
+        println!(
+            "       error records by code: {errors:?}; false alarms (channel, k): {:?}",
+            &verdict.false_list[..verdict.false_list.len().min(10)]
+        );
+    }
     if let Some(stats) = recorder_stats {
         report_recording(&stats);
     }
     drop(source);
     drop(alarms_sub);
+    drop(errors_sub);
     let _ = plant.close().await;
     let _ = daemon.close().await;
 }
@@ -436,6 +459,8 @@ struct Verdict {
     false_bound: f64,
     /// Latency of each detected fault's first alarm, sorted.
     latency_ms: Vec<f64>,
+    /// The false alarms: (channel, k).
+    false_list: Vec<(usize, u64)>,
 }
 
 fn judge(
@@ -453,6 +478,7 @@ fn judge(
         repeated: 0,
         false_bound: 0.0,
         latency_ms: Vec::new(),
+        false_list: Vec::new(),
     };
     let healthy_samples: u64 = (0..plan.channels)
         .map(|i| if faulty(i) { plan.onset } else { plan.samples })
@@ -469,6 +495,7 @@ fn judge(
         };
         if !faulty(i) || *k < plan.onset {
             v.false_alarms += 1;
+            v.false_list.push((i, *k));
         } else if first[i] {
             v.repeated += 1;
         } else {
