@@ -137,10 +137,12 @@ async fn sighup_applies_thresholds_and_refuses_what_needs_a_restart() {
         .congestion_control(zenoh::qos::CongestionControl::Block)
         .await
         .unwrap();
-    let publish = |range: std::ops::Range<usize>| {
+    // Rows `range` of the clean data, their indices shifted by `shift` (to publish the
+    // same data again later on).
+    let publish_shifted = |range: std::ops::Range<usize>, shift: u64| {
         for r in &rows[range] {
             let s = Sample {
-                k: Some(r[0] as u64),
+                k: Some(r[0] as u64 + shift),
                 t: None,
                 u: vec![r[2]],
                 y: vec![r[3], r[4]],
@@ -151,6 +153,7 @@ async fn sighup_applies_thresholds_and_refuses_what_needs_a_restart() {
             publisher.put(b).wait().unwrap();
         }
     };
+    let publish = |range: std::ops::Range<usize>| publish_shifted(range, 0);
     let t = Instant::now();
     while !publisher.matching_status().await.unwrap().matching() {
         assert!(t.elapsed() < Duration::from_secs(10));
@@ -231,22 +234,7 @@ async fn sighup_applies_thresholds_and_refuses_what_needs_a_restart() {
         (1..=20).contains(&reloads),
         "{reloads} reloads for 20 SIGHUPs"
     );
-    let rows = rows.clone();
-    let publish_again = |ks: std::ops::Range<usize>| {
-        for (i, r) in rows[0..ks.len()].iter().enumerate() {
-            let s = Sample {
-                k: Some((ks.start + i) as u64),
-                t: None,
-                u: vec![r[2]],
-                y: vec![r[3], r[4]],
-                p: Vec::new(),
-            };
-            let mut b = Vec::new();
-            encode_sample("dc_motor", &s, &mut b).unwrap();
-            publisher.put(b).wait().unwrap();
-        }
-    };
-    publish_again(600..1200);
+    publish_shifted(0..600, 600);
     let (samples, _, active) = wait_samples(&session, 1200).await;
     assert_eq!(samples, 1200, "no sample lost to the reloads");
     assert!(
