@@ -109,6 +109,13 @@ pub struct MonitorSettings {
     /// publisher started numbering again (it restarted): the filter restarts at that
     /// sample (reported as `sequence_reset`) instead of refusing every later sample.
     pub max_reorder: u64,
+    /// Samples of settling after each restart (`None`: [`Detector::memory`]): the
+    /// estimate converges from (x̂₀, P₀) with alarms held off (the `stat` records carry
+    /// no l_k), then the detector forgets the evidence gathered meanwhile
+    /// ([`Detector::forget_evidence`]). A restart follows a long outage, a publisher
+    /// numbering anew or a numerical failure, when the plant's state is far from x̂₀:
+    /// the filter's transient would otherwise look like a fault at the restart.
+    pub settle: Option<u64>,
 }
 
 /// The settings a configuration reload changes in a running monitor (the part of
@@ -204,6 +211,9 @@ pub struct Monitor {
     consistency: Option<Consistency>,
     /// Whether a `stat` record is appended for each processed sample.
     stat_records: bool,
+    /// After a restart: the first sample at which alarms may be raised again, and
+    /// whether the detector is still to forget the settling's evidence then.
+    settling: Option<Settling>,
     /// Raw plant units → model units, when the channel has `[channels.scaling]`.
     intake: Option<Intake>,
 }
@@ -214,6 +224,12 @@ struct Intake {
     scaling: SignalScaling,
     u: Vec<f64>,
     y: Vec<f64>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Settling {
+    until: u64,
+    forget: bool,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -272,6 +288,7 @@ impl Monitor {
             diagnosis_failing: false,
             consistency: None,
             stat_records: true,
+            settling: None,
             intake: None,
         }
     }
@@ -341,6 +358,7 @@ impl Monitor {
                 .collect(),
             max_gap: channel.max_gap,
             max_reorder: channel.max_reorder,
+            settle: channel.settle,
         };
         let mut monitor = Self::new(&channel.name, channel.detector()?, settings);
         if let Some(scaling) = &channel.scaling {
@@ -520,7 +538,10 @@ impl Monitor {
         }
         self.counters.samples += 1;
         self.last_t = sample.t;
-        self.check_consistency(k, sample.t, records);
+        let settling = self.settle(k);
+        if !settling {
+            self.check_consistency(k, sample.t, records);
+        }
         self.step_diagnosis(&core_sample, records);
         let stat_at = self.stat_records.then(|| {
             self.push_stat(k, sample.t, records);
@@ -639,6 +660,29 @@ impl Monitor {
                     }
                 }
             }
+        }
+        true
+    }
+
+    /// Holds the decision statistic back while the detector settles after a restart
+    /// (true then): its l_k is not published and raises no alarm, and the filter
+    /// consistency test is not fed the transient. At the last sample of the settling
+    /// the detector forgets the evidence gathered since the restart; a kind that cannot
+    /// settles for its memory more, until that evidence has left it.
+    fn settle(&mut self, k: u64) -> bool {
+        let Some(s) = self.settling else {
+            return false;
+        };
+        self.out.glr = None;
+        self.out.onset = None;
+        if k + 1 >= s.until {
+            self.settling = match s.forget {
+                true if !self.detector.forget_evidence() => Some(Settling {
+                    until: k + 1 + self.detector.memory() as u64,
+                    forget: false,
+                }),
+                _ => None,
+            };
         }
         true
     }
@@ -1135,7 +1179,20 @@ impl Monitor {
         if let Err(e) = self.detector.restart() {
             self.reject(records, Some(k), ErrorCode::Numerical, e.to_string());
         }
-        self.reject(records, Some(k), code, why);
+        let settle = self
+            .settings
+            .settle
+            .unwrap_or(self.detector.memory() as u64);
+        self.settling = (settle > 0).then_some(Settling {
+            until: k.saturating_add(settle),
+            forget: true,
+        });
+        self.reject(
+            records,
+            Some(k),
+            code,
+            format!("{why}; alarms are held off for {settle} samples while it settles"),
+        );
     }
 
     fn reject(&mut self, records: &mut Vec<Record>, k: Option<u64>, code: ErrorCode, why: String) {
@@ -1193,6 +1250,7 @@ mod tests {
                 groups: vec![],
                 max_gap: 10,
                 max_reorder: 16,
+                settle: None,
             },
         )
     }
@@ -1234,6 +1292,7 @@ mod tests {
                 groups: vec![],
                 max_gap: 10,
                 max_reorder: 16,
+                settle: None,
             },
         );
         let data = example::simulate(&example::ExampleRun {

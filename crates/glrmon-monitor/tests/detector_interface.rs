@@ -123,6 +123,7 @@ fn monitor() -> Monitor {
             groups: vec![],
             max_gap: 10,
             max_reorder: 16,
+            settle: None,
         },
     )
 }

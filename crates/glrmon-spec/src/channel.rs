@@ -374,6 +374,9 @@ pub struct Channel {
     pub kernel: Option<KernelChannelSettings>,
     /// Largest gap filled by predict-only steps.
     pub max_gap: u64,
+    /// Samples of settling after a restart, alarms held off (`None`: the detector's
+    /// memory).
+    pub settle: Option<u64>,
     /// How many indices before the last processed one a sample is refused as late;
     /// further back is a sequence reset.
     pub max_reorder: u64,

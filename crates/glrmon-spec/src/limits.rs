@@ -40,6 +40,8 @@ pub const MAX_WINDOW: usize = 100_000;
 pub const MAX_GAP: u64 = 100_000;
 /// Largest `glr.max_reorder`.
 pub const MAX_REORDER: u64 = 1_000_000;
+/// Largest `glr.settle` in samples.
+pub const MAX_SETTLE: u64 = 1_000_000_000;
 /// Largest `glr.warm_up` in samples.
 pub const MAX_WARM_UP: u64 = 1_000_000_000;
 /// Largest diagnosis `history` and `span`, in samples.

@@ -239,7 +239,7 @@ fn example(template: &str, header: &str, key: &str) -> Option<(usize, String)> {
 }
 
 fn limits_section() -> String {
-    let rows: [(&str, String, &str); 17] = [
+    let rows: [(&str, String, &str); 18] = [
         (
             "states n (rows of F)",
             limits::MAX_STATES.to_string(),
@@ -272,6 +272,7 @@ fn limits_section() -> String {
         ),
         ("`glr.window`", limits::MAX_WINDOW.to_string(), "MAX_WINDOW"),
         ("`glr.max_gap`", limits::MAX_GAP.to_string(), "MAX_GAP"),
+        ("`glr.settle`", limits::MAX_SETTLE.to_string(), "MAX_SETTLE"),
         (
             "`glr.max_reorder`",
             limits::MAX_REORDER.to_string(),

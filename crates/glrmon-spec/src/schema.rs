@@ -954,6 +954,12 @@ pub struct GlrSpec {
     /// the publisher started numbering again, and the filter restarts at it.
     #[serde(default = "default_max_reorder")]
     pub max_reorder: u64,
+    /// Samples after each restart of the filter (a gap longer than `max_gap`, a
+    /// publisher numbering anew, a numerical failure) during which alarms are held off
+    /// while the estimate converges from (x̂₀, P₀); the evidence gathered meanwhile is
+    /// then forgotten, so the initial-state transient is never read as a fault.
+    /// Default: the detector's memory (the window w for the GLR kinds).
+    pub settle: Option<u64>,
     /// Samples after the start (and after each restart) during which the GLR is held
     /// off: `"window"` (w, until the window is full, as Zhang & Basseville 2014 §6.2
     /// do), a sample count, or none (default).
@@ -1009,6 +1015,7 @@ impl Default for GlrSpec {
             rank_tolerance: None,
             max_gap: default_max_gap(),
             max_reorder: default_max_reorder(),
+            settle: None,
             warm_up: None,
         }
     }

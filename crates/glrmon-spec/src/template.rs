@@ -159,6 +159,7 @@ input = 0
 # rank_tolerance = 1e-9
 # max_gap = 100
 # max_reorder = 16
+# settle = 100                       # after a restart; default: w
 # warm_up = "window"                 # or a number of samples; default: none
 #
 # [[channels.glr.groups]]

@@ -82,6 +82,10 @@ impl Detector for Chi2Detector {
         self.glr.restart()
     }
 
+    fn forget_evidence(&mut self) -> bool {
+        self.glr.forget_evidence()
+    }
+
     fn fisher_statistics(&self, onset: u64) -> Option<FisherStatistics> {
         self.glr.fisher_statistics(onset)
     }

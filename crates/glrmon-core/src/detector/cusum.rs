@@ -534,6 +534,15 @@ impl Detector for CusumDetector {
         Ok(())
     }
 
+    fn forget_evidence(&mut self) -> bool {
+        if !self.glr.forget_evidence() {
+            return false;
+        }
+        self.sums.fill(0.0);
+        self.starts.fill(None);
+        true
+    }
+
     fn fisher_statistics(&self, onset: u64) -> Option<FisherStatistics> {
         self.glr.fisher_statistics(onset)
     }

@@ -396,6 +396,24 @@ impl GlrDetector {
         Ok(())
     }
 
+    /// Forgets the window's evidence but keeps the filter: the onsets up to the last
+    /// measured sample leave the window, the next sample is the oldest onset, and a
+    /// followed onset is dropped. For the end of the settling after a restart: the
+    /// filter has converged from (x̂₀, P₀), but the innovations it gave meanwhile carry
+    /// the initial-state error as a decaying transient that the signatures of the early
+    /// onsets would fit as a fault. Each onset's statistic depends only on the samples
+    /// from it on (eqs. (32)-(36)), so the later onsets' statistics are those of the
+    /// window that did not forget. False (nothing forgotten) for a dictionary of known
+    /// onsets, whose one onset is the run's start, and before the first sample.
+    pub fn forget_evidence(&mut self) -> bool {
+        if self.next_k.is_none() || !self.bank.forget() {
+            return false;
+        }
+        self.steady_samples = 0;
+        self.followed.stop();
+        true
+    }
+
     /// Processes sample k: the measurement update, the signatures and sufficient
     /// statistics of every onset in the window, the GLR maximum, and the time update.
     ///
@@ -763,11 +781,21 @@ impl GlrDetector {
             self.phi.as_mut_slice(),
         );
         self.bank.begin(k);
-        // The missing sample's input is unknown: the held value with the inputs' running
-        // variance (added to P through G), so a gap does not look like a fault.
+        // The missing sample's input is unknown: the held value, whose mean square
+        // error about the input's running moments, σ² + (u_held − μ)², enters P through
+        // G, so a gap does not look like a fault.
         let n = self.input_count as f64;
-        for (v, (_, m2)) in self.input_variance.iter_mut().zip(&self.input_moments) {
-            *v = if n > 1.0 { m2 / (n - 1.0) } else { 0.0 };
+        for ((v, (mean, m2)), held) in self
+            .input_variance
+            .iter_mut()
+            .zip(&self.input_moments)
+            .zip(&self.held_u)
+        {
+            *v = if n > 1.0 {
+                m2 / (n - 1.0) + (held - mean).powi(2)
+            } else {
+                0.0
+            };
         }
         self.filter
             .predict_only(&self.system, &self.held_u, &self.input_variance);
@@ -1001,6 +1029,10 @@ impl Detector for GlrDetector {
 
     fn restart(&mut self) -> Result<(), ModelError> {
         GlrDetector::restart(self)
+    }
+
+    fn forget_evidence(&mut self) -> bool {
+        GlrDetector::forget_evidence(self)
     }
 
     fn fisher_statistics(&self, onset: u64) -> Option<FisherStatistics> {

@@ -134,6 +134,17 @@ pub trait Detector: std::fmt::Debug + Send {
     /// [`ModelError`] when the initial state cannot be rebuilt.
     fn restart(&mut self) -> Result<(), ModelError>;
 
+    /// Forgets the evidence gathered so far but keeps the state estimate: the decision
+    /// statistic then only sees samples after this call. The monitor calls it at the
+    /// end of the settling that follows a restart, when the estimate has converged from
+    /// (x̂₀, P₀) but the residuals it gave meanwhile still carry the initial-state
+    /// transient. False when the kind cannot (the default): the monitor then holds
+    /// alarms off for [`Detector::memory`] more samples, until that evidence has left
+    /// the kind's memory. Off the per-sample path.
+    fn forget_evidence(&mut self) -> bool {
+        false
+    }
+
     /// The Fisher information C_k(r) and score d_k(r) of onset r after the last step,
     /// on which minmax and sensitivity isolation run (Zhang & Basseville 2014, eqs.
     /// (38)-(41)). `None` when the kind has none or r is not available. Allocates:
@@ -284,6 +295,9 @@ impl<D: Detector + ?Sized> Detector for Box<D> {
     }
     fn restart(&mut self) -> Result<(), ModelError> {
         (**self).restart()
+    }
+    fn forget_evidence(&mut self) -> bool {
+        (**self).forget_evidence()
     }
     fn fisher_statistics(&self, onset: u64) -> Option<FisherStatistics> {
         (**self).fisher_statistics(onset)

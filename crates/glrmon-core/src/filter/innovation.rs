@@ -67,6 +67,12 @@ pub struct InnovationFilter {
     tmp_n: DVector<f64>,
     tmp_pp: DMatrix<f64>,
     chol_scratch: DMatrix<f64>,
+    /// Predict-only steps since the last measured sample (the length j of the gap
+    /// so far).
+    gap_len: u64,
+    /// W_j = Σ_i A_i V A_iᵀ: the held inputs' error over the gap so far, as if its
+    /// samples were uncorrelated (see [`InnovationFilter::predict_only`]).
+    gap_cov: DMatrix<f64>,
     /// The unknown input's decoupling, when the model has one.
     unknown_input: Option<Box<Decoupling>>,
     /// S = E(W_kV_kᵀ) and S Σ_k⁻¹ (n×p each), when process and measurement noise are
@@ -121,6 +127,8 @@ impl InnovationFilter {
             tmp_n: DVector::zeros(n),
             tmp_pp: z(p, p),
             chol_scratch: z(p, p),
+            gap_len: 0,
+            gap_cov: z(n, n),
             unknown_input: None,
             cross: None,
         })
@@ -228,6 +236,7 @@ impl InnovationFilter {
     /// [`StepError::Numerical`] when Σ_k is not positive definite; nothing observable
     /// is changed then.
     pub fn measure(&mut self, sys: &SystemMatrices, u: &[f64], y: &[f64]) -> Result<(), StepError> {
+        self.gap_len = 0;
         with_shape!(self.n, self.p, |s| self.measure_in(s, sys, u, y))
     }
 
@@ -485,6 +494,7 @@ impl InnovationFilter {
     /// L of the last full [`InnovationFilter::measure`] held (the Riccati recursion has
     /// converged: eqs. (7)-(8) would give them again). Cannot fail.
     pub fn measure_steady(&mut self, sys: &SystemMatrices, u: &[f64], y: &[f64]) {
+        self.gap_len = 0;
         with_shape!(self.n, self.p, |s| self.innovation_from(s, sys, u, y));
     }
 
@@ -564,11 +574,18 @@ impl InnovationFilter {
     }
 
     /// Predict-only step for a missing sample: X̂_{k+1} = F_kX̂_k + G_kU_k,
-    /// P_{k+1} = F_kP_kF_kᵀ + Q_k + G_k diag(σ²_u) G_kᵀ, A_k = F_k, F_kK_k = 0 (no
-    /// measurement, no gain). The input of a missing sample is unknown: `u` is a guess
-    /// (the last one seen) and `input_variance` (σ²_u per input, or empty for none) its
-    /// uncertainty, so that the prediction error it causes is covered by P instead of
-    /// showing up as a fault after the gap.
+    /// P_{k+1} = F_kP_kF_kᵀ + Q_k + Δ_j, A_k = F_k, F_kK_k = 0 (no measurement, no
+    /// gain). The input of a missing sample is unknown: `u` is a guess (the last one
+    /// seen) and `input_variance` (V = diag(v), the mean square error of that guess per
+    /// input, or empty for none) its uncertainty, so that the prediction error it
+    /// causes is covered by P instead of showing up as a fault after the gap.
+    ///
+    /// The guesses' errors d_i over one gap are correlated in any way (a slow input
+    /// keeps one error for the whole gap), so P covers their worst case: after j
+    /// missing samples the error Σ_i A_i d_i (A_i = F⋯F G) has, by Cauchy–Schwarz,
+    /// Var(cᵀΣ_i A_i d_i) ≤ j·Σ_i cᵀA_iVA_iᵀc for every c. P therefore carries
+    /// j·W_j with W_j = F W_{j−1} Fᵀ + G V Gᵀ, the white-error sum, which is the
+    /// increment Δ_j = j·W_j − (j−1)·F W_{j−1} Fᵀ = F W_{j−1} Fᵀ + j·G V Gᵀ.
     pub fn predict_only(&mut self, sys: &SystemMatrices, u: &[f64], input_variance: &[f64]) {
         self.tmp_n.copy_from(&self.state);
         self.tmp_nn.copy_from(&self.cov);
@@ -583,11 +600,44 @@ impl InnovationFilter {
             u,
         );
         let n = self.n;
+        self.gap_len += 1;
+        if self.gap_len == 1 {
+            self.gap_cov.fill(0.0);
+        } else {
+            // F W_{j−1} Fᵀ, entering P once and W_j once.
+            gemm(
+                1.0,
+                sys.f.as_slice(),
+                (n, n),
+                false,
+                self.gap_cov.as_slice(),
+                (n, n),
+                false,
+                0.0,
+                self.tmp_nn2.as_mut_slice(),
+            );
+            gemm(
+                1.0,
+                self.tmp_nn2.as_slice(),
+                (n, n),
+                false,
+                sys.f.as_slice(),
+                (n, n),
+                true,
+                0.0,
+                self.tmp_nn.as_mut_slice(),
+            );
+            self.cov += &self.tmp_nn;
+            self.gap_cov.copy_from(&self.tmp_nn);
+        }
+        let j = self.gap_len as f64;
         for (i, var) in input_variance.iter().enumerate().take(sys.g.ncols()) {
             if *var > 0.0 && var.is_finite() {
                 for c in 0..n {
                     for r in 0..n {
-                        self.cov[(r, c)] += sys.g[(r, i)] * var * sys.g[(c, i)];
+                        let gvg = sys.g[(r, i)] * var * sys.g[(c, i)];
+                        self.cov[(r, c)] += j * gvg;
+                        self.gap_cov[(r, c)] += gvg;
                     }
                 }
             }
@@ -830,6 +880,43 @@ mod tests {
             assert_eq!(bits(&fixed), bits(&dynamic), "step {k}");
         }
         assert!(fixed.state().iter().all(|x| x.is_finite()));
+    }
+
+    /// Over a gap of j missing samples P is F^jP_0F^jᵀ + Σ F^iQF^iᵀ + j·Σ_i A_iVA_iᵀ
+    /// (A_i = F^iG), written out as sums, and it covers the error of a guess that is
+    /// wrong by the same d at every missing sample (the worst correlation): for the
+    /// direction c of that error, cᵀPc ≥ (cᵀΣ_i A_i d)². A measured sample ends the gap:
+    /// the next gap starts from j = 1.
+    #[test]
+    fn a_gap_covers_the_held_inputs_error_whatever_its_correlation() {
+        let mut s = sys();
+        s.f = DMatrix::from_row_slice(2, 2, &[0.9, 0.3, -0.2, 0.95]);
+        let (p0, v) = (DMatrix::identity(2, 2) * 0.1, 0.7);
+        let mut f = InnovationFilter::new(DVector::zeros(2), p0.clone(), 1).unwrap();
+        for round in 0..2 {
+            let start = f.covariance().clone();
+            let mut reference_noise = start.clone();
+            let mut white = DMatrix::zeros(2, 2);
+            let mut constant = DVector::zeros(2);
+            for j in 1..=40_u32 {
+                f.predict_only(&s, &[0.0], &[v]);
+                reference_noise = &s.f * &reference_noise * s.f.transpose() + &s.q;
+                white = &s.f * &white * s.f.transpose() + &s.g * v * s.g.transpose();
+                constant = &s.f * &constant + &s.g * v.sqrt();
+                let expected = &reference_noise + &white * f64::from(j);
+                let scale = expected.amax();
+                assert!(
+                    (f.covariance() - &expected).amax() < 1e-12 * scale,
+                    "round {round}, j = {j}"
+                );
+                let c = constant.normalize();
+                let covered = (c.transpose() * f.covariance() * &c)[(0, 0)];
+                let error = c.dot(&constant).powi(2);
+                assert!(covered >= error, "j = {j}: {covered} < {error}");
+            }
+            f.measure(&s, &[0.0], &[0.0]).unwrap();
+            f.time_update(&s, &[0.0]);
+        }
     }
 
     #[test]

@@ -367,6 +367,21 @@ impl WindowBank {
         self.pending = Some(k + 1);
     }
 
+    /// Forgets every onset up to the last measured step: only the onset announced by
+    /// the last time update (k + 1) enters the window next, as if the bank had started
+    /// there, while the filter behind it goes on. For the end of a settling period after
+    /// a restart, whose innovations carry the initial-state transient. False for the
+    /// known-onset bank, whose single onset is the run's start.
+    pub(crate) fn forget(&mut self) -> bool {
+        let Some(next) = self.pending.filter(|_| !self.known) else {
+            return false;
+        };
+        self.leave_steady();
+        self.active.fill(0.0);
+        self.first = Some(next);
+        true
+    }
+
     /// Enters the onset announced by the last time update (it replaces the oldest,
     /// k − w): Γ_k(k) = Ψ_{k−1}(k), C = 0, d = 0. Called at the start of each step.
     pub(crate) fn begin(&mut self, k: u64) {

@@ -300,6 +300,7 @@ impl Validator {
             groups: detection.groups,
             max_gap: glr.max_gap,
             max_reorder: glr.max_reorder,
+            settle: glr.settle,
             fault_names: faults.iter().map(|f| f.name.clone()).collect(),
             fault_paths,
             simulation,

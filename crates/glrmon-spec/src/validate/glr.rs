@@ -57,6 +57,17 @@ impl Validator {
                 );
             }
         }
+        if let Some(n) = glr.settle
+            && n > limits::MAX_SETTLE
+        {
+            self.error(
+                gpath("settle"),
+                format!(
+                    "{n} is more than {} (limits::MAX_SETTLE)",
+                    limits::MAX_SETTLE
+                ),
+            );
+        }
         if let Some(schema::WarmUpSpec::Samples(n)) = glr.warm_up
             && n > limits::MAX_WARM_UP
         {
