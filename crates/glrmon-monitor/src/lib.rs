@@ -1095,17 +1095,40 @@ impl Monitor {
     /// that another, alone at its own onset, explains the data without is no longer
     /// isolated; it and those of its alternatives it competes with name each other in
     /// `ambiguous_with`.
+    ///
+    /// Each group's best onset is searched among the onsets whose GLR statistic could
+    /// hold it ([`ambiguity::best_onsets_bounded`]): at an alarm the Fisher statistics of
+    /// a few onsets are built instead of the window's w.
     fn mark_ambiguous(&self, fisher: &FisherStatistics, tested: &mut [(usize, IsolationResult)]) {
+        if !tested.iter().any(|(_, r)| r.isolated) {
+            return;
+        }
         let k = self.out.k;
         let first = k.saturating_sub(self.detector.memory().saturating_sub(1) as u64);
-        let per_onset = (first..=k).filter_map(|r| Some((r, self.detector.fisher_statistics(r)?)));
+        let onsets: Vec<u64> = (first..=k).collect();
         let groups: Vec<&[usize]> = self.groups.iter().map(|g| g.faults.as_slice()).collect();
-        let best = ambiguity::best_onsets(per_onset, &groups);
         let global = fisher.global().value;
         let mut thresholds = vec![f64::INFINITY; self.groups.len()];
         for (gi, result) in tested.iter() {
             thresholds[*gi] = result.threshold;
         }
+        // No verdict reads a group's best below min_g(G − τ_g) − max_h τ_h (g isolated,
+        // h with a finite threshold: an infinite one makes `competes` true whatever).
+        let lowest = (tested.iter())
+            .filter(|(_, r)| r.isolated)
+            .map(|(_, r)| global - r.threshold)
+            .fold(f64::INFINITY, f64::min);
+        let widest = (thresholds.iter())
+            .copied()
+            .filter(|t| t.is_finite())
+            .fold(0.0, f64::max);
+        let best = ambiguity::best_onsets_bounded(
+            &onsets,
+            ambiguity::window_bounds(self.detector.as_ref(), &groups),
+            |r| self.detector.fisher_statistics(r),
+            &groups,
+            lowest - widest,
+        );
         let mut pairs = Vec::new();
         for (gi, result) in tested.iter_mut() {
             if !result.isolated {

@@ -90,6 +90,14 @@ impl Detector for Chi2Detector {
         self.glr.fisher_statistics(onset)
     }
 
+    fn onset_statistic(&self, onset: u64) -> Option<(f64, usize)> {
+        self.glr.onset_statistic(onset)
+    }
+
+    fn onset_information(&self, onset: u64, information: &mut [f64], score: &mut [f64]) -> bool {
+        Detector::onset_information(&self.glr, onset, information, score)
+    }
+
     fn innovation_filter(&self) -> Option<&InnovationFilter> {
         Some(self.glr.filter())
     }

@@ -1035,6 +1035,17 @@ impl Detector for GlrDetector {
         GlrDetector::forget_evidence(self)
     }
 
+    fn onset_statistic(&self, onset: u64) -> Option<(f64, usize)> {
+        GlrDetector::onset_statistic(self, onset)
+    }
+
+    fn onset_information(&self, onset: u64, information: &mut [f64], score: &mut [f64]) -> bool {
+        let m = self.faults.len();
+        information.len() == m * m
+            && score.len() == m
+            && self.bank.information(onset, information, score)
+    }
+
     fn fisher_statistics(&self, onset: u64) -> Option<FisherStatistics> {
         GlrDetector::fisher_statistics(self, onset)
     }

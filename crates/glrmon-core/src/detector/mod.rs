@@ -154,6 +154,24 @@ pub trait Detector: std::fmt::Debug + Send {
         None
     }
 
+    /// The GLR statistic d_k(r)ᵀC_k(r)⁺d_k(r) of onset r after the last step and the
+    /// rank of C_k(r), as the window computed them (eq. (36)); `None` when the kind has
+    /// no window of onsets or r is not in it. Allocation-free: the onset-free isolation
+    /// check bounds each onset's single-group statistics by it, to build the Fisher
+    /// statistics of few onsets only.
+    fn onset_statistic(&self, onset: u64) -> Option<(f64, usize)> {
+        let _ = onset;
+        None
+    }
+
+    /// Writes C_k(r) (m×m, column-major) and d_k(r) (m) of onset r after the last step,
+    /// as [`Detector::fisher_statistics`] wraps them, without allocating; false when
+    /// the kind has none or r is not available.
+    fn onset_information(&self, onset: u64, information: &mut [f64], score: &mut [f64]) -> bool {
+        let _ = (onset, information, score);
+        false
+    }
+
     /// The Kalman innovation filter, for the kinds that run one: sparse diagnosis
     /// restarts its residual filter from this filter's prediction.
     fn innovation_filter(&self) -> Option<&InnovationFilter> {
@@ -301,6 +319,12 @@ impl<D: Detector + ?Sized> Detector for Box<D> {
     }
     fn fisher_statistics(&self, onset: u64) -> Option<FisherStatistics> {
         (**self).fisher_statistics(onset)
+    }
+    fn onset_statistic(&self, onset: u64) -> Option<(f64, usize)> {
+        (**self).onset_statistic(onset)
+    }
+    fn onset_information(&self, onset: u64, information: &mut [f64], score: &mut [f64]) -> bool {
+        (**self).onset_information(onset, information, score)
     }
     fn innovation_filter(&self) -> Option<&InnovationFilter> {
         (**self).innovation_filter()

@@ -43,6 +43,9 @@
 
 use super::FisherStatistics;
 
+mod bounded;
+pub use bounded::{best_onsets_bounded, window_bounds};
+
 /// The best single-group explanation of the data: the largest sensitivity statistic of a
 /// group over the onsets searched, and where it is reached.
 #[derive(Debug, Clone, Copy, PartialEq)]
