@@ -457,14 +457,7 @@ fn live_run_recorded_then_replayed_gives_identical_records() {
     );
     let (replayed_mcap, _, _) = read_all(&mcap_out);
     let mut compared = BTreeMap::new();
-    for kind in [
-        "stat",
-        "alarm",
-        "isolation",
-        "alarm_end",
-        "diagnosis",
-        "error",
-    ] {
+    for kind in glrmon_wire::RECORD_KINDS {
         for channel in ["unstable", "ltv3"] {
             let key = (channel.to_owned(), kind);
             let a = live.get(&key).cloned().unwrap_or_default();

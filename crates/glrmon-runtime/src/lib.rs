@@ -111,7 +111,9 @@ pub struct RuntimeSettings {
     pub worker_queue_bytes: usize,
     /// Capacity of all worker queues together, in payload bytes.
     pub intake_bytes: usize,
-    /// Capacity of the output queue, in records.
+    /// Capacity of the output queues together, in records: half for the urgent queue
+    /// (alarms, isolation updates, alarm ends, diagnoses, errors, consistency), half
+    /// for the bulk one (statistics, inputs).
     pub output_queue: usize,
     /// Forward one `stat` record in this many (0: none) to the sinks.
     pub stat_every: u64,
@@ -472,7 +474,7 @@ impl Runtime {
                 .map(|_| Arc::new(ChannelStats::default()))
                 .collect(),
         );
-        let capacity = settings.output_queue.max(16);
+        let capacity = (settings.output_queue / 2).max(8);
         let (urgent_tx, urgent_rx) = crossbeam_channel::bounded::<Output>(capacity);
         let (bulk_tx, bulk_rx) = crossbeam_channel::bounded::<OutMsg>(capacity);
         let out_tx = OutputQueues {

@@ -212,6 +212,28 @@ fn oversized_payloads_and_unknown_channels_are_refused() {
     assert_eq!(intake.offer(0, p), Offer::Closed);
 }
 
+/// A sink that blocks on its first record until the sender sends (or is dropped), and
+/// the kinds of the records it wrote, in order.
+#[allow(clippy::type_complexity)]
+fn stalled_sink() -> (
+    Box<dyn Sink>,
+    std::sync::mpsc::Sender<()>,
+    Arc<Mutex<Vec<&'static str>>>,
+) {
+    let (release_tx, release_rx) = std::sync::mpsc::channel::<()>();
+    let release_rx = Mutex::new(release_rx);
+    let written: Arc<Mutex<Vec<&'static str>>> = Arc::default();
+    let w = written.clone();
+    let sink = crate::FnSink::new("stall", move |o: &crate::Output| {
+        let mut w = w.lock().unwrap();
+        if w.is_empty() {
+            let _ = release_rx.lock().unwrap().recv();
+        }
+        w.push(o.record.kind_str());
+    });
+    (Box::new(sink), release_tx, written)
+}
+
 /// Intake memory is bounded in bytes. One publisher of 1 MiB payloads
 /// used to grow the daemon from 140 MB to 2.9 GB (4096 payloads per worker); with the
 /// worker's queue limited to 3 MiB, a stalled worker holds at most 3 MiB of payloads,
@@ -219,17 +241,9 @@ fn oversized_payloads_and_unknown_channels_are_refused() {
 #[test]
 fn intake_memory_is_bounded_in_bytes() {
     let (_, monitors) = demo_monitors();
-    // A sink that blocks until released: the output queue fills, then the worker
-    // stalls, then its intake queue fills.
-    let (release_tx, release_rx) = std::sync::mpsc::channel::<()>();
-    let release_rx = std::sync::Mutex::new(release_rx);
-    let mut released = false;
-    let sink = crate::FnSink::new("stall", move |_: &crate::Output| {
-        if !released {
-            let _ = release_rx.lock().unwrap().recv();
-            released = true;
-        }
-    });
+    // The output queue fills behind the stalled sink, then the worker stalls, then its
+    // intake queue fills.
+    let (sink, release_tx, _) = stalled_sink();
     let settings = RuntimeSettings {
         workers: 1,
         worker_queue: 4096,
@@ -242,17 +256,13 @@ fn intake_memory_is_bounded_in_bytes() {
         },
         ..RuntimeSettings::default()
     };
-    let rt = Runtime::start(
-        monitors,
-        vec![Box::new(sink)],
-        &settings,
-        Arc::new(NoEvents),
-    );
+    let rt = Runtime::start(monitors, vec![sink], &settings, Arc::new(NoEvents));
     let intake = rt.intake();
     let metrics = rt.metrics();
     let (mut accepted, mut dropped, mut most) = (0u64, 0u64, 0i64);
-    // Not JSON: each payload becomes one error record, so 16 + 1 of them stall the
-    // worker behind the blocked sink; then the queue holds what 3 MiB allow.
+    // Not JSON: each payload becomes one error record, so 8 + 1 of them (the urgent
+    // half of output_queue, and the one in hand) stall the worker behind the blocked
+    // sink; then the queue holds what 3 MiB allow.
     for _ in 0..200 {
         let offer = intake.offer(
             0,
@@ -288,29 +298,14 @@ fn intake_memory_is_bounded_in_bytes() {
 fn urgent_records_overtake_queued_statistics() {
     let (cfg, monitors) = demo_monitors();
     let data = payloads(&cfg, 301);
-    let (release_tx, release_rx) = std::sync::mpsc::channel::<()>();
-    let release_rx = std::sync::Mutex::new(release_rx);
-    let written: Arc<Mutex<Vec<&'static str>>> = Arc::default();
-    let w = written.clone();
-    let sink = crate::FnSink::new("stall", move |o: &crate::Output| {
-        let mut w = w.lock().unwrap();
-        if w.is_empty() {
-            let _ = release_rx.lock().unwrap().recv();
-        }
-        w.push(o.record.kind_str());
-    });
+    let (sink, release_tx, written) = stalled_sink();
     let settings = RuntimeSettings {
         workers: 1,
         output_queue: 4096,
         stat_every: 1,
         ..RuntimeSettings::default()
     };
-    let rt = Runtime::start(
-        monitors,
-        vec![Box::new(sink)],
-        &settings,
-        Arc::new(NoEvents),
-    );
+    let rt = Runtime::start(monitors, vec![sink], &settings, Arc::new(NoEvents));
     let intake = rt.intake();
     let payload = |bytes: Vec<u8>| Payload {
         bytes,

@@ -81,8 +81,10 @@ pub struct DaemonSpec {
     /// Default 256.
     #[serde(default = "default_intake_mb")]
     pub intake_mb: f64,
-    /// Capacity of the output (publication) queue, in records (1 to 4194304).
-    /// Default 16384.
+    /// Capacity of the output (publication) queues, in records (1 to 4194304): half
+    /// for alarms, isolation updates, alarm ends, diagnoses and errors, which the
+    /// workers wait for, half for statistics (dropped when full) and inputs. Default
+    /// 16384.
     #[serde(default = "default_output_queue")]
     pub output_queue: usize,
     /// Publish one `stat` record (the per-sample statistics) in this many samples per

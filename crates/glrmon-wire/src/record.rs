@@ -377,7 +377,7 @@ pub enum Record {
     Consistency(Consistency),
 }
 
-/// Every record `type`, in the order of [`Record`]'s variants.
+/// Every record `type`, in the order of [`Record`]'s variants ([`Record::kind_index`]).
 pub const RECORD_KINDS: [&str; 7] = [
     "stat",
     "alarm",
@@ -404,17 +404,24 @@ impl Record {
     }
 
     /// The `type` tag: `stat`, `alarm`, `isolation`, `alarm_end`, `diagnosis`, `error`
-    /// or `consistency`.
+    /// or `consistency`; [`RECORD_KINDS`]`[self.kind_index()]`.
     #[must_use]
     pub const fn kind_str(&self) -> &'static str {
+        RECORD_KINDS[self.kind_index()]
+    }
+
+    /// The position of the record's kind in [`RECORD_KINDS`], for tables indexed by
+    /// kind (e.g. one publisher per channel and kind).
+    #[must_use]
+    pub const fn kind_index(&self) -> usize {
         match self {
-            Record::Stat(_) => "stat",
-            Record::Alarm(_) => "alarm",
-            Record::Isolation(_) => "isolation",
-            Record::AlarmEnd(_) => "alarm_end",
-            Record::Diagnosis(_) => "diagnosis",
-            Record::Error(_) => "error",
-            Record::Consistency(_) => "consistency",
+            Record::Stat(_) => 0,
+            Record::Alarm(_) => 1,
+            Record::Isolation(_) => 2,
+            Record::AlarmEnd(_) => 3,
+            Record::Diagnosis(_) => 4,
+            Record::Error(_) => 5,
+            Record::Consistency(_) => 6,
         }
     }
 

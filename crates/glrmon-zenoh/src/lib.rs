@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 
 use glrmon_runtime::{ChannelStats, Intake, Output, Payload, Sink, SinkError};
 use glrmon_wire::text::Escaped;
-use glrmon_wire::{InstanceStatus, ZenohSessions, status};
+use glrmon_wire::{InstanceStatus, RECORD_KINDS, ZenohSessions, status};
 use zenoh::bytes::Encoding;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
@@ -522,20 +522,9 @@ impl ZenohSource {
 /// times over, on the first alarm of each channel, the one that matters most.
 pub struct ZenohSink {
     session: Session,
-    /// Each channel's publishers, by record kind ([`KINDS`]).
-    publishers: HashMap<String, [Option<Publisher<'static>>; KINDS.len()]>,
+    /// Each channel's publishers, by record kind ([`glrmon_wire::Record::kind_index`]).
+    publishers: HashMap<String, [Option<Publisher<'static>>; RECORD_KINDS.len()]>,
 }
-
-/// The record kinds, in the order of a channel's publisher slots.
-const KINDS: [&str; 7] = [
-    "stat",
-    "alarm",
-    "isolation",
-    "alarm_end",
-    "diagnosis",
-    "error",
-    "consistency",
-];
 
 impl std::fmt::Debug for ZenohSink {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -563,7 +552,7 @@ impl ZenohSink {
     pub fn declaring(session: Session, channels: &[String]) -> Result<Self, ZenohError> {
         let mut sink = Self::new(session);
         for channel in channels {
-            for (slot, kind) in KINDS.iter().enumerate().skip(1) {
+            for (slot, kind) in RECORD_KINDS.iter().enumerate().skip(1) {
                 sink.publisher(channel, slot, kind)
                     .map_err(session_err("declare publisher"))?;
             }
@@ -571,7 +560,7 @@ impl ZenohSink {
         Ok(sink)
     }
 
-    /// The publisher of `kind` (slot `slot` of [`KINDS`]) for `channel`, declared on
+    /// The publisher of `kind` (slot `slot` of [`RECORD_KINDS`]) for `channel`, declared on
     /// first use.
     fn publisher(
         &mut self,
@@ -623,9 +612,8 @@ impl Sink for ZenohSink {
             sink: "zenoh".into(),
             message: format!("{what} {}: {e}", glrmon_wire::result_key(channel, kind)),
         };
-        let slot = KINDS.iter().position(|k| *k == kind).unwrap_or(0);
         let publisher = self
-            .publisher(channel, slot, kind)
+            .publisher(channel, output.record.kind_index(), kind)
             .map_err(|e| err("declare publisher", e))?;
         publisher
             .put(output.json.clone())
