@@ -3,7 +3,8 @@
 //! zstd chunks), and the same messages as Foxglove JSON, replayed with
 //! config/examples/ros2-bag.toml by the real binary, give the records (alarm, its
 //! isolation update) of the CSV the bag was made from, bit for bit but for the times;
-//! a mapping that names a topic the bag does not have is refused with the bag's topics.
+//! a mapping that names a topic the bag does not have is refused with the bag's topics;
+//! a bag cut short replays up to its last whole chunk and says so.
 
 #[path = "support.rs"]
 mod support;
@@ -77,6 +78,26 @@ fn a_ros2_bag_replays_to_the_records_of_its_csv() {
             "{said}"
         );
     }
+    // A bag cut short (its writer killed) is streamed up to its last whole chunk: the
+    // samples before are replayed, and the replay says what it lost and exits 1.
+    let cut = scratch.0.join("cut.mcap");
+    let bytes = std::fs::read(&bag).unwrap();
+    std::fs::write(&cut, &bytes[..bytes.len() * 3 / 5]).unwrap();
+    let out = glrmon()
+        .args(["replay", "--config"])
+        .arg(&config)
+        .arg(&cut)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains("the file is unfinished (no footer): read up to byte")
+            && said.contains("the file is damaged; the readable part was replayed"),
+        "{said}"
+    );
+    let replayed = String::from_utf8_lossy(&out.stdout).lines().count();
+    assert!(replayed > 0, "{said}");
     // `glrmon info` lists what a mapping needs.
     let info = run_ok(glrmon().arg("info").arg(&bag));
     let info = String::from_utf8(info.stdout).unwrap();

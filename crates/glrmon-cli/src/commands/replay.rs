@@ -485,6 +485,20 @@ fn replay_foreign(args: &ReplayArgs, zone: Zone, cfg: &glrmon_spec::Config) -> a
             eprintln!("  {line}");
         }
     }
+    for line in &done.damage {
+        eprintln!(
+            "glrmon replay: {}: {}",
+            Escaped(&args.first().to_string_lossy()),
+            Escaped(line)
+        );
+    }
+    if !done.damage.is_empty() {
+        return Err(InvalidInput(format!(
+            "{}: the file is damaged; the readable part was replayed",
+            args.first().display()
+        ))
+        .into());
+    }
     Ok(())
 }
 

@@ -12,6 +12,7 @@ mod ros2;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
+use glrmon_record::{Event, McapReader, ReadEnd, Topic};
 use glrmon_runtime::{ChannelPipeline, Fanout, PayloadDecoder, TagDecoder};
 use glrmon_spec::Channel;
 use glrmon_wire::{DecodeLimits, ErrorCode};
@@ -37,6 +38,9 @@ pub struct ForeignReplayed {
     pub by_topic: BTreeMap<String, u64>,
     /// Messages that could not be read by their schema, by topic, with the first reason.
     pub unreadable: BTreeMap<String, (u64, String)>,
+    /// What damage the file had and what it cost (one line each), empty for a sound
+    /// file: the streaming reader skips a damaged region and reads on.
+    pub damage: Vec<String>,
 }
 
 /// How one topic's messages are read.
@@ -49,7 +53,9 @@ enum Reader {
 
 /// Feeds the messages of every topic the channels of `pipelines` map
 /// (`channels[i]` configures `pipelines[i]`, whose decoder is [`topics_decoder`]'s) to
-/// them, in the file's order.
+/// them, in the file's order. The file is streamed (one chunk in memory at a time) by
+/// the damage-tolerant reader of glrmon's own recordings: a damaged region is skipped
+/// and reported in [`ForeignReplayed::damage`], and the samples it held are gaps.
 ///
 /// # Errors
 /// [`ReplayError`] when the file cannot be read or is not MCAP, a mapped topic is not
@@ -62,8 +68,6 @@ pub fn replay_foreign_mcap(
     fanout: &mut Fanout,
 ) -> Result<ForeignReplayed, ReplayError> {
     let foreign = |m: String| ReplayError::Input(InputError::new(path, InputErrorKind::Foreign(m)));
-    let bytes = std::fs::read(path)
-        .map_err(|e| ReplayError::Input(InputError::new(path, InputErrorKind::OpenRecording(e))))?;
     // Each topic's (pipeline, key index) pairs.
     let mut routes: HashMap<&str, Vec<(usize, usize)>> = HashMap::new();
     for (c, channel) in channels.iter().enumerate() {
@@ -78,43 +82,54 @@ pub fn replay_foreign_mcap(
             routes.entry(topic).or_default().push((c, key));
         }
     }
-    let summary = ::mcap::Summary::read(&bytes)
+    let file = std::fs::File::open(path)
+        .map_err(|e| ReplayError::Input(InputError::new(path, InputErrorKind::OpenRecording(e))))?;
+    let mut reader = McapReader::new(std::io::BufReader::new(file))
         .map_err(|e| foreign(format!("not a readable MCAP file: {e}")))?;
-    let present: Vec<&str> = summary
-        .as_ref()
-        .map(|s| s.channels.values().map(|c| c.topic.as_str()).collect())
-        .unwrap_or_default();
-    if summary.is_some() {
-        for topic in routes.keys() {
-            if !present.contains(topic) {
-                let mut known = present.clone();
-                known.sort_unstable();
-                known.dedup();
-                return Err(foreign(format!(
-                    "topic \"{topic}\" is not in the recording (its topics: {})",
-                    known.join(", ")
-                )));
-            }
-        }
+    // A file with a summary lists its topics up front.
+    let listed: Vec<String> = reader.topics().iter().map(|t| t.topic.clone()).collect();
+    let missing = |present: &[String]| {
+        let mut absent: Vec<&str> = routes
+            .keys()
+            .copied()
+            .filter(|t| !present.iter().any(|p| p == t))
+            .collect();
+        absent.sort_unstable();
+        absent.first().map(|topic| {
+            let mut known: Vec<&str> = present.iter().map(String::as_str).collect();
+            known.sort_unstable();
+            known.dedup();
+            foreign(format!(
+                "topic \"{topic}\" is not in the recording (its topics: {})",
+                known.join(", ")
+            ))
+        })
+    };
+    if !listed.is_empty()
+        && let Some(e) = missing(&listed)
+    {
+        return Err(e);
     }
     let mut readers: HashMap<u16, Reader> = HashMap::new();
     let mut out = ForeignReplayed::default();
-    let stream = ::mcap::MessageStream::new(&bytes)
-        .map_err(|e| foreign(format!("not an MCAP file: {e}")))?;
-    for message in stream {
-        let message = message
-            .map_err(|e| foreign(format!("damaged after {} messages: {e}", out.messages)))?;
+    while let Some(event) = reader
+        .next_event()
+        .map_err(|e| ReplayError::Input(InputError::new(path, InputErrorKind::Read(e))))?
+    {
+        let Event::Message(message) = event else {
+            continue;
+        };
         out.messages += 1;
-        let topic = message.channel.topic.as_str();
+        let topic = message.topic.topic.as_str();
         let Some(route) = routes.get(topic) else {
             continue;
         };
         *out.by_topic.entry(topic.to_owned()).or_insert(0) += 1;
         let reader = readers
-            .entry(message.channel.id)
-            .or_insert_with(|| reader_of(&message.channel));
+            .entry(message.topic.id)
+            .or_insert_with(|| reader_of(&message.topic));
         let json = match reader {
-            Reader::Json => Ok(message.data.to_vec()),
+            Reader::Json => Ok(message.data),
             Reader::Ros2(schema) => schema
                 .decode(&message.data)
                 .map(|v| serde_json::to_vec(&v).unwrap_or_default()),
@@ -158,30 +173,50 @@ pub fn replay_foreign_mcap(
             }
         }
     }
+    if listed.is_empty() {
+        // No summary: a topic never seen is one the file does not have.
+        let seen: Vec<String> = reader.topics().iter().map(|t| t.topic.clone()).collect();
+        if let Some(e) = missing(&seen) {
+            return Err(e);
+        }
+    }
+    out.damage = reader
+        .damage()
+        .iter()
+        .map(|d| format!("damaged: {d}"))
+        .collect();
+    match reader.end() {
+        ReadEnd::Finished | ReadEnd::Reading => {}
+        ReadEnd::Truncated { at, .. } => out.damage.push(format!(
+            "the file is unfinished (no footer): read up to byte {at}"
+        )),
+        ReadEnd::Unreadable { at, reason } => {
+            out.damage
+                .push(format!("unreadable from byte {at}: {reason}"));
+        }
+    }
     Ok(out)
 }
 
-fn reader_of(channel: &::mcap::Channel<'_>) -> Reader {
-    let schema = channel.schema.as_ref();
+fn reader_of(topic: &Topic) -> Reader {
     match (
-        channel.message_encoding.as_str(),
-        schema.map(|s| s.encoding.as_str()),
+        topic.message_encoding.as_str(),
+        topic.schema_encoding.as_str(),
     ) {
         ("json", _) => Reader::Json,
-        ("cdr", Some("ros2msg")) => {
-            let s = schema.expect("matched Some");
-            match std::str::from_utf8(&s.data)
+        ("cdr", "ros2msg") => {
+            match std::str::from_utf8(&topic.schema_data)
                 .map_err(|e| e.to_string())
-                .and_then(|text| ros2::Schema::parse(&s.name, text))
+                .and_then(|text| ros2::Schema::parse(&topic.schema, text))
             {
                 Ok(parsed) => Reader::Ros2(Box::new(parsed)),
-                Err(e) => Reader::Unreadable(format!("its ros2msg schema {}: {e}", s.name)),
+                Err(e) => Reader::Unreadable(format!("its ros2msg schema {}: {e}", topic.schema)),
             }
         }
         (encoding, schema) => Reader::Unreadable(format!(
             "messages encoded as \"{encoding}\" (schema encoding {}) are not read: JSON, and \
              ROS 2 CDR with a ros2msg schema, are",
-            schema.unwrap_or("none")
+            if schema.is_empty() { "none" } else { schema }
         )),
     }
 }
