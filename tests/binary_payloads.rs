@@ -22,7 +22,7 @@ use support::{
 use zenoh::Wait as _;
 
 /// The formats under test: (channel, key, the channel's payload settings).
-const CHANNELS: [(&str, &str, &str); 5] = [
+const CHANNELS: [(&str, &str, &str); 6] = [
     ("dc_json", "plant/dc/json", ""),
     ("dc_cdr", "plant/dc/cdr", "payload = \"cdr\"\n"),
     (
@@ -40,7 +40,16 @@ const CHANNELS: [(&str, &str, &str); 5] = [
         "plant/dc/raw",
         "payload = \"raw\"\nraw = { layout = [\"k\", \"t\", \"V101\", \"SI201\", \"II202\"] }\n",
     ),
+    // Configured for the default Float64MultiArray; its publisher sends
+    // glrmon_msgs/msg/Sample and says so in the Zenoh encoding.
+    ("dc_declared", DECLARED_KEY, "payload = \"cdr\"\n"),
 ];
+
+/// The key whose payloads declare their CDR type in the Zenoh encoding.
+const DECLARED_KEY: &str = "plant/dc/declared";
+
+/// The encoding that declares glrmon_msgs/msg/Sample.
+const SAMPLE_ENCODING: &str = "application/cdr;glrmon_msgs/msg/Sample";
 
 /// The DC motor of config/examples/dc-motor.toml, its signals named as a plant names
 /// them, once per format, listening on `endpoint`.
@@ -172,12 +181,12 @@ fn official_encoders_payloads_decode_to_the_csvs_samples() {
     }
 }
 
-/// Publishes each `(key, payload)` in order to the daemon at `endpoint` (a publisher
-/// per key, as separate devices would) and returns the records published on
-/// `glrmon/**` (but `stat`) until `until` says enough.
+/// Publishes each `(key, payload, Zenoh encoding)` in order to the daemon at
+/// `endpoint` (a publisher per key, as separate devices would) and returns the records
+/// published on `glrmon/**` (but `stat`) until `until` says enough.
 fn exchange(
     endpoint: &str,
-    payloads: &[(&str, Vec<u8>)],
+    payloads: &[(&str, Vec<u8>, Option<&str>)],
     until: impl Fn(&[Record]) -> bool,
 ) -> Vec<Record> {
     let rt = tokio::runtime::Runtime::new().unwrap();
@@ -185,13 +194,17 @@ fn exchange(
         let session = client(endpoint).await;
         let results = session.declare_subscriber("glrmon/*/*").await.unwrap();
         let mut publishers = std::collections::BTreeMap::new();
-        for (key, _) in payloads {
+        for (key, _, _) in payloads {
             if !publishers.contains_key(key) {
                 publishers.insert(*key, matched_publisher(&session, key).await);
             }
         }
-        for (key, p) in payloads {
-            publishers[key].put(p.clone()).wait().unwrap();
+        for (key, p, encoding) in payloads {
+            let put = publishers[key].put(p.clone());
+            match encoding {
+                Some(e) => put.encoding(*e).wait().unwrap(),
+                None => put.wait().unwrap(),
+            }
         }
         let records = collect_records(&results, until).await;
         session.close().await.unwrap();
@@ -206,7 +219,11 @@ fn every_format_raises_the_alarm_of_the_json_channel() {
     let config = config(&scratch.0, &endpoint);
     let (csv, samples) = simulated(&scratch.0, &config);
     let payloads = encoded(&scratch.0, &csv);
-    let _daemon = RunningDaemon::start(&config, &format!("binary-{}", std::process::id()), 5);
+    let _daemon = RunningDaemon::start(
+        &config,
+        &format!("binary-{}", std::process::id()),
+        CHANNELS.len(),
+    );
     let spark_key = |i: usize| {
         if i == 0 {
             "spBv1.0/plant/DBIRTH/edge1/dc_motor"
@@ -214,13 +231,14 @@ fn every_format_raises_the_alarm_of_the_json_channel() {
             "spBv1.0/plant/DDATA/edge1/dc_motor"
         }
     };
-    let mut sent: Vec<(&str, Vec<u8>)> = Vec::new();
+    let mut sent: Vec<(&str, Vec<u8>, Option<&str>)> = Vec::new();
     for (i, (s, [cdr, msg, spark])) in samples.iter().zip(payloads).enumerate() {
-        sent.push(("plant/dc/json", json(s)));
-        sent.push(("plant/dc/cdr", cdr));
-        sent.push(("plant/dc/sample", msg));
-        sent.push((spark_key(i), spark));
-        sent.push(("plant/dc/raw", raw(s)));
+        sent.push(("plant/dc/json", json(s), None));
+        sent.push(("plant/dc/cdr", cdr, None));
+        sent.push(("plant/dc/sample", msg.clone(), None));
+        sent.push((DECLARED_KEY, msg, Some(SAMPLE_ENCODING)));
+        sent.push((spark_key(i), spark, None));
+        sent.push(("plant/dc/raw", raw(s), None));
     }
     let alarms = |r: &[Record]| r.iter().filter(|r| matches!(r, Record::Alarm(_))).count();
     let records = exchange(&endpoint, &sent, |r| alarms(r) >= CHANNELS.len());
@@ -256,7 +274,11 @@ fn hostile_binary_payloads_are_errors_naming_channel_and_field() {
     let scratch = Scratch::new("binary-hostile");
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let config = config(&scratch.0, &endpoint);
-    let _daemon = RunningDaemon::start(&config, &format!("binary-{}", std::process::id()), 5);
+    let _daemon = RunningDaemon::start(
+        &config,
+        &format!("binary-{}", std::process::id()),
+        CHANNELS.len(),
+    );
     // Header; no dimension, data_offset 0, two values (after 4 bytes of padding to the
     // f64's alignment) for the channel's three.
     let mut short_array = vec![0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 2, 0, 0, 0, 0, 0, 0, 0];
@@ -264,12 +286,22 @@ fn hostile_binary_payloads_are_errors_naming_channel_and_field() {
     let mut nan = 0.0f64.to_le_bytes().repeat(2);
     nan.extend(f64::NAN.to_le_bytes());
     nan.extend(0.0f64.to_le_bytes().repeat(2));
-    let sent: Vec<(&str, Vec<u8>)> = vec![
-        ("plant/dc/cdr", b"{\"u\":[1]}".to_vec()),
-        ("plant/dc/cdr", short_array),
-        ("plant/dc/raw", vec![0; 20]),
-        ("plant/dc/raw", nan),
-        ("spBv1.0/plant/DDATA/edge1/dc_motor", vec![0x12, 0x40, 0x0a]),
+    let sent: Vec<(&str, Vec<u8>, Option<&str>)> = vec![
+        ("plant/dc/cdr", b"{\"u\":[1]}".to_vec(), None),
+        ("plant/dc/cdr", short_array.clone(), None),
+        // A CDR type the channel does not read, as the encoding declares it.
+        (
+            DECLARED_KEY,
+            short_array,
+            Some("application/cdr;sensor_msgs/msg/Imu"),
+        ),
+        ("plant/dc/raw", vec![0; 20], None),
+        ("plant/dc/raw", nan, None),
+        (
+            "spBv1.0/plant/DDATA/edge1/dc_motor",
+            vec![0x12, 0x40, 0x0a],
+            None,
+        ),
         // A Sparkplug metric named V101 (datatype Double) alone: the others never seen.
         (
             "spBv1.0/plant/DDATA/edge1/dc_motor",
@@ -277,6 +309,7 @@ fn hostile_binary_payloads_are_errors_naming_channel_and_field() {
                 0x12, 0x11, 0x0a, 0x04, b'V', b'1', b'0', b'1', 0x20, 0x0a, 0x69, 0, 0, 0, 0, 0, 0,
                 0xf0, 0x3f,
             ],
+            None,
         ),
     ];
     let n = sent.len();
@@ -311,6 +344,12 @@ fn hostile_binary_payloads_are_errors_naming_channel_and_field() {
             "wrong_type",
             "channel \"dc_raw\": payload has the wrong type: expected whole records of 40 \
              bytes (5 little-endian f64), not 20 bytes",
+        ),
+        (
+            "wrong_type",
+            "channel \"dc_declared\": field encoding has the wrong type: expected a CDR \
+             message type glrmon reads (std_msgs/msg/Float64MultiArray, \
+             glrmon_msgs/msg/Sample), as the Zenoh encoding application/cdr;<type> names it",
         ),
     ];
     for (code, message) in want {

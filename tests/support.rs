@@ -224,11 +224,14 @@ impl RunningDaemon {
         std::io::BufReader::new(child.stdout.take().unwrap())
             .read_line(&mut line)
             .unwrap();
+        // Owned before the check, so that a failed check kills it too (a daemon left
+        // running would hold the test's output open).
+        let daemon = Self(child);
         assert!(
             line.contains(&format!("monitoring {channels} channel(s)")),
             "{line}"
         );
-        Self(child)
+        daemon
     }
 }
 

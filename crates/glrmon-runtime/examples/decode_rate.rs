@@ -74,6 +74,7 @@ fn main() {
                 let arrival = Arrival {
                     source_time: Some(*t),
                     received: *t,
+                    declared: Default::default(),
                 };
                 decoder
                     .decode_tag("m", p.key, arrival, &p.bytes, &limits, &mut out)

@@ -37,11 +37,11 @@ mod sinks;
 mod status;
 
 pub use decode::{
-    Arrival, CdrDecoder, JsonDecoder, PayloadDecoder, RawDecoder, SparkplugDecoder, TagDecoder,
-    decoder,
+    Arrival, CdrDecoder, Declared, JsonDecoder, PayloadDecoder, RawDecoder, SparkplugDecoder,
+    TagDecoder, decoder,
 };
 pub use fanout::{DeliveryPlan, Fanout};
-pub use pipeline::{ChannelPipeline, Emit, PipelineError};
+pub use pipeline::{ChannelPipeline, Emit, Envelope, PipelineError};
 pub use publish::{Publication, PublishError, publications};
 pub use sink::{ChannelIndex, InputItem, InputOutput, Interest, Output, Sink, SinkError};
 pub use sinks::{FnSink, JsonLinesSink, MemorySink};
@@ -71,6 +71,8 @@ pub struct Payload {
     /// input_keys`): 0 for a channel of whole samples on one key, the signal's tag for
     /// a channel assembled from tags.
     pub tag: usize,
+    /// The message type the transport declared for it.
+    pub declared: Declared,
 }
 
 /// Callbacks for events the operator should hear about (the binary logs them).
@@ -761,8 +763,11 @@ fn worker(
                 }
                 let _ = pipeline.payload(
                     &payload.bytes,
-                    payload.tag,
-                    payload.source_time,
+                    Envelope {
+                        tag: payload.tag,
+                        source_time: payload.source_time,
+                        declared: payload.declared,
+                    },
                     &cx.limits,
                     log_time_ns,
                     &mut cx.emit,

@@ -18,7 +18,7 @@ use glrmon_wire::{
 };
 
 use crate::ChannelStats;
-use crate::decode::{Arrival, JsonDecoder, PayloadDecoder};
+use crate::decode::{Arrival, Declared, JsonDecoder, PayloadDecoder};
 use crate::fanout::{DeliveryPlan, Fanout};
 use crate::sink::{ChannelIndex, InputItem, InputOutput, Output, SinkError};
 
@@ -160,6 +160,18 @@ pub struct ChannelPipeline {
     records: Vec<Record>,
 }
 
+/// What came with a payload besides its bytes.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Envelope {
+    /// The channel's input key it arrived on (`glrmon_spec::Channel::input_keys`): 0
+    /// unless the channel is assembled from tags.
+    pub tag: usize,
+    /// The transport's timestamp (seconds since the Unix epoch), if any.
+    pub source_time: Option<f64>,
+    /// The message type the transport declared.
+    pub declared: Declared,
+}
+
 impl ChannelPipeline {
     /// A pipeline for the channel at `index` feeding sinks with this `plan`
     /// ([`Fanout::plan`]); the monitor builds `stat` records only if a sink keeps some.
@@ -201,30 +213,35 @@ impl ChannelPipeline {
         self.decoder.as_ref()
     }
 
-    /// One payload as received on the channel's input key number `tag` (0 unless the
-    /// channel is assembled from tags): decoded within `limits`, then each of its
-    /// samples as by [`ChannelPipeline::sample`], with `source_time` (the transport's
-    /// timestamp) as the time of those that carry none. A payload that cannot be
-    /// decoded is [`ChannelPipeline::rejected`] whole, with its text if short enough;
-    /// what the decoder noticed about the stream (a tag gone silent) follows the
-    /// samples as an `error` record.
+    /// One payload as received with `envelope` (its input key, the transport's
+    /// timestamp and declared type): decoded within `limits`, then each of its samples
+    /// as by [`ChannelPipeline::sample`], with the transport's timestamp as the time of
+    /// those that carry none. A payload that cannot be decoded is
+    /// [`ChannelPipeline::rejected`] whole, with its text if short enough; what the
+    /// decoder noticed about the stream (a tag gone silent) follows the samples as an
+    /// `error` record.
     ///
     /// # Errors
     /// As [`ChannelPipeline::sample`]; the first error, after every sample had its turn.
     pub fn payload(
         &mut self,
         payload: &[u8],
-        tag: usize,
-        source_time: Option<f64>,
+        envelope: Envelope,
         limits: &DecodeLimits,
         log_time_ns: u64,
         emit: &mut dyn Emit,
     ) -> Result<(), PipelineError> {
+        let Envelope {
+            tag,
+            source_time,
+            declared,
+        } = envelope;
         let mut samples = std::mem::take(&mut self.samples);
         #[allow(clippy::cast_precision_loss)]
         let arrival = Arrival {
             source_time,
             received: log_time_ns as f64 / 1e9,
+            declared,
         };
         let decoded =
             self.decoder

@@ -75,6 +75,7 @@ fn runtime_gives_the_same_records_as_direct_monitoring() {
                     received: Instant::now(),
                     source_time: None,
                     tag: 0,
+                    declared: Declared::Nothing,
                 },
             );
             assert_eq!(offer, Offer::Accepted);
@@ -138,6 +139,7 @@ fn full_queue_drops_are_counted_and_become_gaps() {
                     received: Instant::now(),
                     source_time: None,
                     tag: 0,
+                    declared: Declared::Nothing,
                 },
             ) {
                 Offer::Dropped => dropped += 1,
@@ -191,6 +193,7 @@ fn oversized_payloads_and_unknown_channels_are_refused() {
         received: Instant::now(),
         source_time: None,
         tag: 0,
+        declared: Declared::Nothing,
     };
     assert_eq!(intake.offer(0, big), Offer::TooLarge);
     let p = Payload {
@@ -198,6 +201,7 @@ fn oversized_payloads_and_unknown_channels_are_refused() {
         received: Instant::now(),
         source_time: None,
         tag: 0,
+        declared: Declared::Nothing,
     };
     assert_eq!(intake.offer(99, p), Offer::UnknownChannel);
     let stats = rt.stats();
@@ -208,6 +212,7 @@ fn oversized_payloads_and_unknown_channels_are_refused() {
         received: Instant::now(),
         source_time: None,
         tag: 0,
+        declared: Declared::Nothing,
     };
     assert_eq!(intake.offer(0, p), Offer::Closed);
 }
@@ -271,6 +276,7 @@ fn intake_memory_is_bounded_in_bytes() {
                 received: Instant::now(),
                 source_time: None,
                 tag: 0,
+                declared: Declared::Nothing,
             },
         );
         match offer {
@@ -312,6 +318,7 @@ fn urgent_records_overtake_queued_statistics() {
         received: Instant::now(),
         source_time: None,
         tag: 0,
+        declared: Declared::Nothing,
     };
     for bytes in &data[0] {
         assert_eq!(intake.offer(0, payload(bytes.clone())), Offer::Accepted);

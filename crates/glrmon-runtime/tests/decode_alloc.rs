@@ -71,6 +71,7 @@ fn binary_formats_and_tags_decode_without_allocating() {
             let arrival = Arrival {
                 source_time: Some(*t),
                 received: *t,
+                declared: Default::default(),
             };
             decoder
                 .decode_tag("m", p.key, arrival, &p.bytes, &limits, out)

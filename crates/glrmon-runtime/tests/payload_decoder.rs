@@ -128,7 +128,13 @@ fn a_decoder_from_outside_the_crate_feeds_a_pipeline() {
     assert_eq!(pipeline.decoder().format(), "raw-f64");
     for p in payloads() {
         pipeline
-            .payload(&p, 0, None, &DecodeLimits::default(), 0, &mut fanout)
+            .payload(
+                &p,
+                Default::default(),
+                &DecodeLimits::default(),
+                0,
+                &mut fanout,
+            )
             .unwrap();
     }
     fanout.close(&mut |e| panic!("{e}"));
@@ -181,6 +187,7 @@ fn the_daemons_workers_decode_with_the_channels_decoder() {
                 received: Instant::now(),
                 source_time: Some(1.5e9),
                 tag: 0,
+                declared: glrmon_runtime::Declared::Nothing,
             },
         );
     }

@@ -105,6 +105,7 @@ glr = { window = 20, threshold = 30.0 }
                 received: Instant::now(),
                 source_time: None,
                 tag: 0,
+                declared: glrmon_runtime::Declared::Nothing,
             },
         );
     }

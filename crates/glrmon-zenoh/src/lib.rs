@@ -16,7 +16,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use glrmon_runtime::{ChannelStats, Intake, Output, Payload, Sink, SinkError};
+use glrmon_runtime::{ChannelStats, Declared, Intake, Output, Payload, Sink, SinkError};
 use glrmon_wire::text::Escaped;
 use glrmon_wire::{InstanceStatus, RECORD_KINDS, ZenohSessions, status};
 use zenoh::bytes::Encoding;
@@ -455,6 +455,41 @@ pub struct ZenohSource {
     subscribers: Vec<Subscriber<()>>,
 }
 
+/// The Zenoh encodings that declare a message type a decoder reads, built once: a
+/// payload's encoding is compared with them (an id and a few schema bytes), so the
+/// common cases allocate nothing.
+struct DeclaredTypes {
+    cdr: Vec<(Encoding, Declared)>,
+}
+
+impl DeclaredTypes {
+    fn new() -> Self {
+        let cdr = Declared::cdr_schemas()
+            .into_iter()
+            .map(|(schema, d)| (Encoding::APPLICATION_CDR.with_schema(schema), d))
+            .collect();
+        Self { cdr }
+    }
+
+    /// What `encoding` declares: a CDR type glrmon reads, another CDR type
+    /// (`application/cdr;<schema>`: only this rare case formats the encoding), or
+    /// nothing.
+    fn of(&self, encoding: &Encoding) -> Declared {
+        if let Some((_, d)) = self.cdr.iter().find(|(e, _)| e == encoding) {
+            return *d;
+        }
+        if *encoding == Encoding::APPLICATION_CDR || *encoding == Encoding::default() {
+            return Declared::Nothing;
+        }
+        let text = std::borrow::Cow::from(encoding);
+        if text.starts_with("application/cdr;") {
+            Declared::OtherCdr
+        } else {
+            Declared::Nothing
+        }
+    }
+}
+
 impl ZenohSource {
     /// Subscribes to each channel's input keys (`keys[i]` for channel index i: its
     /// `key`, or its tags' keys, `glrmon_spec::Channel::input_keys`); a payload
@@ -469,9 +504,11 @@ impl ZenohSource {
         intake: &Intake,
     ) -> Result<Self, ZenohError> {
         let mut subscribers = Vec::new();
+        let encodings = Arc::new(DeclaredTypes::new());
         for (index, channel_keys) in keys.iter().enumerate() {
             for (tag, key) in channel_keys.iter().enumerate() {
                 let intake = intake.clone();
+                let encodings = encodings.clone();
                 let sub = session
                     .declare_subscriber(key.as_str())
                     .callback(move |sample| {
@@ -488,6 +525,7 @@ impl ZenohSource {
                                 received: Instant::now(),
                                 source_time,
                                 tag,
+                                declared: encodings.of(sample.encoding()),
                             },
                         );
                     })
@@ -1115,6 +1153,37 @@ pub async fn query_status(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The encodings that name a CDR type: both spellings of the types glrmon reads,
+    /// any other schema under `application/cdr`, and the rest (no schema, JSON, a
+    /// schema under another encoding) declaring nothing.
+    #[test]
+    fn an_encoding_declares_the_cdr_type_its_schema_names() {
+        use glrmon_spec::CdrMessage;
+        let types = DeclaredTypes::new();
+        let cdr = |s: &str| Encoding::APPLICATION_CDR.with_schema(s);
+        for (encoding, want) in [
+            (
+                cdr("glrmon_msgs/msg/Sample"),
+                Declared::Cdr(CdrMessage::Sample),
+            ),
+            (cdr("glrmon_msgs/Sample"), Declared::Cdr(CdrMessage::Sample)),
+            (
+                cdr("std_msgs/msg/Float64MultiArray"),
+                Declared::Cdr(CdrMessage::Float64MultiArray),
+            ),
+            (cdr("sensor_msgs/msg/Imu"), Declared::OtherCdr),
+            (Encoding::APPLICATION_CDR, Declared::Nothing),
+            (Encoding::default(), Declared::Nothing),
+            (Encoding::APPLICATION_JSON, Declared::Nothing),
+            (
+                Encoding::APPLICATION_JSON.with_schema("glrmon_msgs/msg/Sample"),
+                Declared::Nothing,
+            ),
+        ] {
+            assert_eq!(types.of(&encoding), want, "{encoding}");
+        }
+    }
 
     #[test]
     fn zenoh_messages_lose_their_source_locations() {

@@ -13,7 +13,7 @@ use glrmon_spec::{CdrMessage, PayloadFormat};
 use glrmon_wire::{DecodeError, DecodeErrorKind, DecodeLimits, Sample, SizeLimit};
 use serde::de::{self, DeserializeSeed, SeqAccess, Visitor};
 
-use super::{PayloadDecoder, single, within_limit};
+use super::{Arrival, Declared, PayloadDecoder, single, within_limit};
 
 /// The decoder of a `cdr` channel: `message` with `dims` (inputs, outputs, signals)
 /// values.
@@ -41,6 +41,52 @@ impl PayloadDecoder for CdrDecoder {
 
     fn decode(
         &mut self,
+        channel: &str,
+        payload: &[u8],
+        limits: &DecodeLimits,
+        out: &mut Vec<Sample>,
+    ) -> Result<(), DecodeError> {
+        self.decode_message(self.message, channel, payload, limits, out)
+    }
+
+    /// The type the Zenoh encoding names (`application/cdr;<type>`) is decoded, else the
+    /// configured one; a CDR type glrmon does not read is refused.
+    fn decode_tag(
+        &mut self,
+        channel: &str,
+        _tag: usize,
+        arrival: Arrival,
+        payload: &[u8],
+        limits: &DecodeLimits,
+        out: &mut Vec<Sample>,
+    ) -> Result<(), DecodeError> {
+        let message = match arrival.declared {
+            Declared::Nothing => self.message,
+            Declared::Cdr(message) => message,
+            Declared::OtherCdr => {
+                out.clear();
+                return Err(DecodeError::new(
+                    channel,
+                    Some("encoding".to_owned()),
+                    DecodeErrorKind::WrongType {
+                        expected: format!(
+                            "a CDR message type glrmon reads ({}), as the Zenoh encoding \
+                             application/cdr;<type> names it",
+                            CdrMessage::NAMES.join(", ")
+                        ),
+                    },
+                ));
+            }
+        };
+        self.decode_message(message, channel, payload, limits, out)
+    }
+}
+
+impl CdrDecoder {
+    /// Decodes `payload` as a `message`.
+    fn decode_message(
+        &self,
+        message: CdrMessage,
         channel: &str,
         payload: &[u8],
         limits: &DecodeLimits,
@@ -76,9 +122,9 @@ impl PayloadDecoder for CdrDecoder {
             limit: limits.max_vector_len,
         };
         let result = if little {
-            read::<LittleEndian>(self.message, body, &mut state, sample)
+            read::<LittleEndian>(message, body, &mut state, sample)
         } else {
-            read::<BigEndian>(self.message, body, &mut state, sample)
+            read::<BigEndian>(message, body, &mut state, sample)
         };
         match result {
             Ok(()) => Ok(()),
@@ -87,7 +133,7 @@ impl PayloadDecoder for CdrDecoder {
                     (
                         None,
                         DecodeErrorKind::WrongType {
-                            expected: format!("a {} message: {e}", self.message.name()),
+                            expected: format!("a {} message: {e}", message.name()),
                         },
                     )
                 });

@@ -17,7 +17,7 @@ pub use raw::RawDecoder;
 pub use sparkplug::SparkplugDecoder;
 pub use tags::TagDecoder;
 
-use glrmon_spec::{Channel, PayloadFormat};
+use glrmon_spec::{CdrMessage, Channel, PayloadFormat};
 use glrmon_wire::{
     DecodeError, DecodeErrorKind, DecodeLimits, Sample, SignalNames, SizeLimit, decode_samples,
     decode_samples_named,
@@ -70,13 +70,46 @@ pub trait PayloadDecoder: Send + std::fmt::Debug {
 }
 
 /// When a payload arrived: the transport's timestamp, if it has one, and glrmon's
-/// receipt, in seconds since the Unix epoch.
+/// receipt, in seconds since the Unix epoch; and the type the transport declared.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Arrival {
     /// The publication's timestamp (Zenoh's), if any.
     pub source_time: Option<f64>,
     /// When glrmon received it.
     pub received: f64,
+    /// The message type its Zenoh encoding names.
+    pub declared: Declared,
+}
+
+/// The message type a payload's transport declares (Zenoh's encoding and its schema,
+/// e.g. `application/cdr;glrmon_msgs/msg/Sample`), where it names one a decoder reads:
+/// a `cdr` channel then decodes that type, whatever its configured one.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Declared {
+    /// Nothing: no encoding, one without a schema, or not one of the below.
+    #[default]
+    Nothing,
+    /// `application/cdr` with the schema of a ROS 2 type glrmon reads
+    /// (`std_msgs/msg/Float64MultiArray` or `glrmon_msgs/msg/Sample`, also in the
+    /// `pkg/Type` form).
+    Cdr(CdrMessage),
+    /// `application/cdr` with the schema of a type glrmon does not read.
+    OtherCdr,
+}
+
+impl Declared {
+    /// Every schema that `application/cdr;<schema>` may carry for a type glrmon reads
+    /// (`pkg/msg/Type` and `pkg/Type`), with what it declares.
+    #[must_use]
+    pub fn cdr_schemas() -> Vec<(String, Declared)> {
+        CdrMessage::ALL
+            .into_iter()
+            .flat_map(|m| {
+                [m.name().to_owned(), m.name().replacen("/msg/", "/", 1)]
+                    .map(|schema| (schema, Declared::Cdr(m)))
+            })
+            .collect()
+    }
 }
 
 /// The JSON sample format of docs/WIRE.md: one object or an array of them.

@@ -655,6 +655,7 @@ mod tests {
             let arrival = Arrival {
                 source_time: Some(t),
                 received: t + 0.5,
+                declared: Default::default(),
             };
             d.decode_tag(
                 "dc_motor",
@@ -730,6 +731,7 @@ mod tests {
             let arrival = Arrival {
                 source_time: Some(t),
                 received: t,
+                declared: Default::default(),
             };
             d.decode_tag(
                 "dc_motor",
@@ -795,6 +797,7 @@ mod tests {
         let arrival = Arrival {
             source_time: Some(1.0),
             received: 1.0,
+            declared: Default::default(),
         };
         let mut err = |tag: usize, payload: &str| {
             d.decode_tag(
@@ -830,6 +833,7 @@ mod tests {
                 Arrival {
                     source_time: Some(0.9),
                     received: 1.0,
+                    declared: Default::default(),
                 },
                 b"0.5",
                 &limits,
