@@ -21,7 +21,7 @@ deps-zenohd: ## zenohd (the Zenoh router) from crates.io, built once (about 15 m
 	else echo "zenohd $(ZENOHD_VERSION) (the Zenoh router the router-mesh test runs) is not installed: building it from crates.io once, about 15 min on 2 cores; it is kept in $(ZENOHD)"; \
 	$(CARGO) install zenohd --version $(ZENOHD_VERSION) --locked; fi
 
-# The official libraries (mcap, mcap-ros2-support, Google's protobuf) that write the
+# The official libraries (mcap, mcap-ros2-support, mcap-protobuf-support, Google's protobuf) that write the
 # binary payloads and foreign recordings the integration tests read, in a virtual
 # environment beside the build: nothing is installed outside the checkout.
 PYENV := $(or $(CARGO_TARGET_DIR),target)/pyenv
@@ -80,7 +80,7 @@ check-config: ## glrmon validate every file in config/
 config-doc: ## regenerate docs/CONFIG.md (the configuration reference) from the configuration types
 	$(CARGO) run -q -p glrmon-spec --example config_reference > docs/CONFIG.md
 
-fuzz-build: ## build the fuzz targets (fuzz/: sample, binary (CDR, Sparkplug B, raw), tags, monitor, record, status, config, expression, CSV and MCAP decoders) and run each on its regression inputs (fuzz/regressions/)
+fuzz-build: ## build the fuzz targets (fuzz/: sample, binary (CDR, Sparkplug B, raw), tags, monitor, record, status, config, expression, CSV, MCAP and foreign-message (ROS 2 CDR, protobuf) decoders) and run each on its regression inputs (fuzz/regressions/)
 	$(CARGO) build --manifest-path fuzz/Cargo.toml --target-dir target
 	@for t in $(FUZZ_TARGETS); do \
 		if [ -d fuzz/regressions/$$t ]; then \
@@ -89,7 +89,7 @@ fuzz-build: ## build the fuzz targets (fuzz/: sample, binary (CDR, Sparkplug B, 
 		fi; \
 	done
 
-FUZZ_TARGETS := samples binary tags monitor records status config expressions csv mcap
+FUZZ_TARGETS := samples binary tags monitor records status config expressions csv mcap foreign
 FUZZ_TARGET ?= samples
 FUZZ_SECONDS ?= 60
 fuzz: ## run one fuzz target with cargo-fuzz (nightly), from its corpus and regression inputs: make fuzz FUZZ_TARGET=config FUZZ_SECONDS=600

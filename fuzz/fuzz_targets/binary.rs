@@ -2,13 +2,15 @@
 //! records): decoding never panics; a decoded sample holds finite values of the
 //! channel's dimensions (the positional formats) or a value for every signal
 //! (Sparkplug); a refused payload leaves no sample behind. The first byte picks the
-//! decoder, the rest is the payload; the Sparkplug decoder keeps what earlier inputs
-//! taught it, as it does on a live key.
+//! decoder (and the message type the transport declares, which a CDR decoder follows),
+//! the rest is the payload; the Sparkplug decoder keeps what earlier inputs taught it,
+//! as it does on a live key.
 #![no_main]
 
 use std::sync::{Mutex, OnceLock};
 
-use glrmon_runtime::PayloadDecoder;
+use glrmon_runtime::{Arrival, Declared, PayloadDecoder};
+use glrmon_spec::CdrMessage;
 use glrmon_wire::DecodeLimits;
 use libfuzzer_sys::fuzz_target;
 
@@ -62,8 +64,18 @@ fuzz_target!(|data: &[u8]| {
         max_batch: 64,
         max_vector_len: 16,
     };
+    let declared = match usize::from(pick) / decoders.len() % 4 {
+        0 => Declared::Nothing,
+        1 => Declared::Cdr(CdrMessage::Float64MultiArray),
+        2 => Declared::Cdr(CdrMessage::Sample),
+        _ => Declared::OtherCdr,
+    };
+    let arrival = Arrival {
+        declared,
+        ..Arrival::default()
+    };
     let mut out = Vec::new();
-    match decoders[which].decode("fuzz", payload, &limits, &mut out) {
+    match decoders[which].decode_tag("fuzz", 0, arrival, payload, &limits, &mut out) {
         Ok(()) => {
             for s in &out {
                 assert!(s.check_finite("fuzz").is_ok(), "{s:?}");

@@ -38,6 +38,7 @@ fuzz_target!(|data: &[u8]| {
         let arrival = Arrival {
             source_time: Some(time),
             received: time,
+            declared: Default::default(),
         };
         let tag = usize::from(*tag) % 4;
         match decoder.decode_tag("tags", tag, arrival, payload, &limits, &mut out) {

@@ -16,7 +16,9 @@ pub use csv::{
     write_row,
 };
 pub use error::{InputError, InputErrorKind};
-pub use foreign::{ForeignReplayed, replay_foreign_mcap, topics_decoder};
+pub use foreign::{
+    ForeignReplayed, ForeignSamples, foreign_message_json, replay_foreign_mcap, topics_decoder,
+};
 pub use format::{InputFormat, OutputFormat, embedded_config};
 pub use mcap::{McapInput, RecordedInput};
 pub use play::{Playback, PlayedSample, due};
@@ -25,4 +27,4 @@ pub use replay::{
     CsvReplayed, McapReplayed, ReplayError, replay_csv, replay_csv_from, replay_mcap,
 };
 pub use samples::{Samples, Skipped};
-pub use table::{Table, read_table};
+pub use table::{Table, read_table, read_table_for_channel};
