@@ -159,6 +159,7 @@ fn identify_and_calibrate(files: &[PathBuf]) -> Channel {
         outputs: None,
         settings: glrmon_ident::IdentSettings::default(),
         window: 50,
+        topics: None,
         notes: vec![],
     })
     .expect("identify");

@@ -58,6 +58,9 @@ pub struct IdentifyRequest {
     pub window: usize,
     /// Lines for the head of the written file (e.g. the command line).
     pub notes: Vec<String>,
+    /// A channel whose `[channels.topics]` reads the MCAP recordings glrmon did not
+    /// write among `files` (its model is not used); `None`: none are read so.
+    pub topics: Option<glrmon_spec::Channel>,
 }
 
 /// A run that was used or left out.
@@ -151,7 +154,11 @@ pub fn identify_channel(request: &IdentifyRequest) -> Result<Identified, Identif
     check_request(request)?;
     let mut tables: Vec<(PathBuf, Table)> = Vec::new();
     for file in &request.files {
-        for table in read_runs(file, &request.channel)? {
+        let runs = match &request.topics {
+            Some(channel) => glrmon_input::read_table_for_channel(file, channel)?,
+            None => read_runs(file, &request.channel)?,
+        };
+        for table in runs {
             tables.push((file.clone(), table));
         }
     }

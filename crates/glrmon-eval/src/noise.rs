@@ -211,11 +211,12 @@ fn physical_model(channel: &Channel) -> Result<PhysicalModel, NoiseError> {
 type Names = (Vec<String>, Vec<String>);
 
 /// The runs of `file` and the names of its u and y columns: a recording's channel
-/// samples are `u0…`, `y0…`; a CSV file's columns are the channel's.
+/// samples (glrmon's, or a foreign one's through `[channels.topics]`) are `u0…`,
+/// `y0…`; a CSV file's columns are the channel's.
 fn read_runs(file: &Path, channel: &Channel) -> Result<(Vec<Table>, Names), InputError> {
     if glrmon_input::InputFormat::of(file) == glrmon_input::InputFormat::Mcap {
         let numbered = glrmon_spec::Columns::numbered(channel.dims);
-        let tables = read_table(file, Some(&channel.name))?;
+        let tables = glrmon_input::read_table_for_channel(file, channel)?;
         return Ok((tables, (numbered.u, numbered.y)));
     }
     let tables = read_table(file, None)?;

@@ -171,6 +171,7 @@ fn chain(controller: bool) {
         outputs: None,
         settings: IdentSettings::default(),
         window: 50,
+        topics: None,
         notes: vec![],
     })
     .unwrap();

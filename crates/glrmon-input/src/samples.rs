@@ -10,7 +10,7 @@ use glrmon_runtime::InputItem;
 use glrmon_spec::{Channel, Columns};
 use glrmon_wire::{IntakeEvent, Sample};
 
-use crate::{CsvReader, InputError, InputErrorKind, InputFormat, McapInput};
+use crate::{CsvReader, ForeignSamples, InputError, InputErrorKind, InputFormat, McapInput};
 
 /// The samples of one channel from a CSV file or an MCAP recording (chosen by
 /// [`InputFormat::of`]), one at a time, with the problems of each in the order they occur.
@@ -65,6 +65,7 @@ impl std::fmt::Display for Skipped {
 enum Source {
     Csv(CsvReader<BufReader<File>>),
     Mcap(Box<McapInput>, String),
+    Foreign(Box<ForeignSamples>),
 }
 
 impl Samples {
@@ -79,11 +80,19 @@ impl Samples {
     }
 
     /// [`Samples::open`] for a configured channel: a CSV file's columns are the
-    /// channel's `[channels.columns]` names.
+    /// channel's `[channels.columns]` names; an MCAP recording glrmon did not write is
+    /// read through the channel's `[channels.topics]` ([`ForeignSamples`]) when it has
+    /// them.
     ///
     /// # Errors
-    /// As [`Samples::open`].
+    /// As [`Samples::open`] and [`ForeignSamples::open`].
     pub fn for_channel(path: &Path, channel: &Channel) -> Result<Self, InputError> {
+        if channel.topics.is_some() && InputFormat::of(path) == InputFormat::Mcap {
+            return Ok(Self {
+                source: Source::Foreign(Box::new(ForeignSamples::open(path, channel)?)),
+                read: 0,
+            });
+        }
         Self::open_columns(path, &channel.name, channel.dims, &channel.columns)
     }
 
@@ -107,6 +116,7 @@ impl Samples {
         match &self.source {
             Source::Csv(csv) => format!("row {}", csv.row()),
             Source::Mcap(..) => format!("input {}", self.read),
+            Source::Foreign(f) => format!("message {}", f.messages()),
         }
     }
 
@@ -146,6 +156,15 @@ impl Samples {
                 });
                 self.read += u64::from(row.is_some());
                 Ok(row)
+            }
+            Source::Foreign(foreign) => {
+                let item = foreign.next_sample()?;
+                self.read += u64::from(item.is_some());
+                Ok(item.map(|r| {
+                    r.map(|s| {
+                        *sample = s;
+                    })
+                }))
             }
             Source::Mcap(input, channel) => loop {
                 let Some(recorded) = input.next_input(None)? else {

@@ -73,6 +73,72 @@ pub fn read_table(path: &Path, channel: Option<&str>) -> Result<Vec<Table>, Inpu
     }
 }
 
+/// [`read_table`] for a configured channel: an MCAP recording glrmon did not write is
+/// read through the channel's `[channels.topics]` ([`crate::ForeignSamples`]), with
+/// the columns `u0…`, `y0…`, `p0…`, a new run starting after a message that could not
+/// be read, a refused payload or a gap; any other file as [`read_table`] reads it for
+/// the channel's name.
+///
+/// # Errors
+/// As [`read_table`] and [`crate::ForeignSamples::open`]; a foreign recording that
+/// gives the channel no sample.
+pub fn read_table_for_channel(
+    path: &Path,
+    channel: &glrmon_spec::Channel,
+) -> Result<Vec<Table>, InputError> {
+    if channel.topics.is_none() || InputFormat::of(path) != InputFormat::Mcap {
+        return read_table(path, Some(&channel.name));
+    }
+    let mut samples = crate::ForeignSamples::open(path, channel)?;
+    let d = channel.dims;
+    let names: Vec<String> = (0..d.inputs)
+        .map(|i| format!("u{i}"))
+        .chain((0..d.outputs).map(|i| format!("y{i}")))
+        .chain((0..d.signals).map(|i| format!("p{i}")))
+        .collect();
+    let mut runs = Vec::new();
+    let mut current: Option<Run> = None;
+    let mut last_k: Option<u64> = None;
+    while let Some(item) = samples.next_sample()? {
+        let Ok(s) = item else {
+            runs.extend(current.take());
+            continue;
+        };
+        if matches!((s.k, last_k), (Some(k), Some(last)) if k != last + 1) {
+            runs.extend(current.take());
+        }
+        last_k = s.k;
+        let run =
+            current.get_or_insert_with(|| Run::new(&names, format!("k = {}", s.k.unwrap_or(0))));
+        for (c, v) in run
+            .columns
+            .iter_mut()
+            .zip(s.u.iter().chain(&s.y).chain(&s.p))
+        {
+            c.push(*v);
+        }
+        if let Some(t) = s.t {
+            run.t.push(t);
+        }
+    }
+    runs.extend(current);
+    let runs: Vec<Table> = runs
+        .into_iter()
+        .filter(|r| r.samples() > 0)
+        .map(Run::finish)
+        .collect();
+    if runs.is_empty() {
+        return Err(InputError::new(
+            path,
+            InputErrorKind::Table(format!(
+                "the recording gives channel \"{}\" no sample through its [channels.topics]",
+                channel.name
+            )),
+        ));
+    }
+    Ok(runs)
+}
+
 fn read_csv(path: &Path) -> Result<Vec<Table>, String> {
     let file = std::fs::File::open(path).map_err(|e| format!("cannot open: {e}"))?;
     let mut lines = std::io::BufReader::new(file).lines();

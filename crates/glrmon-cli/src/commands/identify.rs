@@ -44,6 +44,12 @@ pub(crate) struct IdentifyArgs {
     /// consecutive samples in it, is a separate experiment (never joined).
     #[arg(required = true)]
     input: Vec<PathBuf>,
+    /// Read MCAP recordings glrmon did not write (ROS 2 bags, Foxglove MCAP) through
+    /// the [channels.topics] of --channel in this configuration: only its mapping is
+    /// used (the columns are then u0…, y0…, p0…); the model identified is written in
+    /// place of its own. With --model, that configuration's mapping is used instead.
+    #[arg(long, value_name = "CONFIG", conflicts_with = "model")]
+    topics: Option<PathBuf>,
     /// The configuration file to write.
     #[arg(long)]
     output: PathBuf,
@@ -130,8 +136,27 @@ pub(crate) fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
         )
         .exit();
     };
+    let topics = match &args.topics {
+        Some(path) => {
+            let cfg = crate::common::load_config(path)?;
+            let c = cfg
+                .pick_channel(Some(&channel))
+                .map_err(|e| InvalidInput(format!("--topics {}: {e}", path.display())))?;
+            if c.topics.is_none() {
+                return Err(InvalidInput(format!(
+                    "--topics {}: channel \"{channel}\" has no [channels.topics] mapping a \
+                     recording's topics to its signals",
+                    path.display()
+                ))
+                .into());
+            }
+            Some(c.clone())
+        }
+        None => None,
+    };
     let request = IdentifyRequest {
         channel: channel.clone(),
+        topics,
         files: args.input.clone(),
         inputs: args.inputs.clone(),
         outputs: args.outputs.clone(),
