@@ -99,7 +99,12 @@ impl Schema {
                 continue;
             }
             if let Some(dep) = line.strip_prefix("MSG:") {
-                current = canonical(dep.trim());
+                // A definition that starts without its `===` separator ends the one
+                // before all the same.
+                let before = std::mem::replace(&mut current, canonical(dep.trim()));
+                if !fields.is_empty() || !before.is_empty() {
+                    messages.insert(before, std::mem::take(&mut fields));
+                }
                 continue;
             }
             let mut words = line.split_whitespace();
@@ -117,6 +122,9 @@ impl Schema {
         messages.retain(|k, _| !k.is_empty());
         for (name, fields) in builtin() {
             messages.entry(name.to_owned()).or_insert(fields);
+        }
+        if !messages.contains_key(&root) {
+            return Err(format!("the schema does not define {root} itself"));
         }
         let schema = Self { root, messages };
         for fields in schema.messages.values() {
@@ -238,7 +246,12 @@ impl<'de> Visitor<'de> for MessageSeed<'_> {
         if self.depth > MAX_DEPTH {
             return Err(de::Error::custom("messages nested too deep"));
         }
-        let fields = &self.schema.messages[self.name];
+        let Some(fields) = self.schema.messages.get(self.name) else {
+            return Err(de::Error::custom(format!(
+                "the schema does not define {}",
+                self.name
+            )));
+        };
         let mut object = serde_json::Map::new();
         for f in fields {
             let seed = FieldSeed {
@@ -369,6 +382,29 @@ mod tests {
             serde_json::json!({"layout": {"dim": [{"label": "x", "size": 2, "stride": 2}], "data_offset": 0}, "data": [1.5, -2.0]})
         );
         assert!(schema.decode(&data[..data.len() - 3]).is_err());
+    }
+
+    /// Found by fuzzing (it panicked: the root type was never defined, then indexed):
+    /// a dependency's `MSG:` line before any `===` ends the root's definition as the
+    /// separator would, so the root is always defined (with no field when the text
+    /// starts with a dependency, as `std_msgs/Empty`), and decoding looks types up.
+    #[test]
+    fn a_schema_without_separators_or_its_root_is_read_or_refused() {
+        let joined = MULTI_ARRAY.replacen(
+            "================================================================================\n",
+            "",
+            1,
+        );
+        let schema = Schema::parse("std_msgs/msg/Float64MultiArray", &joined).unwrap();
+        assert_eq!(schema.messages["std_msgs/Float64MultiArray"].len(), 2);
+        let rootless = "MSG: std_msgs/MultiArrayDimension\nstring label\n";
+        let empty = Schema::parse("std_msgs/msg/Float64MultiArray", rootless).unwrap();
+        assert_eq!(empty.decode(&[0, 1, 0, 0]).unwrap(), serde_json::json!({}));
+        // The fuzzer's input: the root's last line merged with a separator.
+        let text = std::fs::read("../../fuzz/regressions/foreign/ros2-root-undefined").unwrap();
+        let text = String::from_utf8_lossy(&text[3..]);
+        let _ = Schema::parse("std_msgs/msg/Float64MultiArray", &text)
+            .map(|s| s.decode(&[0, 1, 0, 0]));
     }
 
     #[test]
