@@ -139,7 +139,52 @@ impl Schema {
                 }
             }
         }
+        // Every value decoded takes bytes of the message, so a message decodes to at
+        // most as many values as it has bytes: but for the elements of a type that
+        // takes none (a message without fields), whose count only the data or the
+        // schema would bound.
+        for fields in schema.messages.values() {
+            for f in fields {
+                if let Count::Fixed(n) = f.count
+                    && n > MAX_FIXED
+                {
+                    return Err(format!(
+                        "field {} is an array of {n} values, more than {MAX_FIXED}",
+                        f.name
+                    ));
+                }
+                if f.count != Count::One && schema.min_size(&f.ty, 0) == 0 {
+                    return Err(format!(
+                        "field {} is an array of a message without fields, which takes \
+                         no byte: its length would not be bounded by the message",
+                        f.name
+                    ));
+                }
+            }
+        }
         Ok(schema)
+    }
+
+    /// The fewest bytes a value of `ty` takes in CDR (0 for a message without fields,
+    /// or nested too deep to tell).
+    fn min_size(&self, ty: &Type, depth: usize) -> usize {
+        match ty {
+            Type::Bool | Type::I8 | Type::U8 => 1,
+            Type::I16 | Type::U16 => 2,
+            Type::I32 | Type::U32 | Type::F32 | Type::String => 4,
+            Type::I64 | Type::U64 | Type::F64 => 8,
+            Type::Message(m) if depth < MAX_DEPTH => self.messages.get(m).map_or(0, |fields| {
+                fields
+                    .iter()
+                    .map(|f| match f.count {
+                        Count::One => self.min_size(&f.ty, depth + 1),
+                        Count::Fixed(n) => n.saturating_mul(self.min_size(&f.ty, depth + 1)),
+                        Count::Sequence => 4,
+                    })
+                    .fold(0, usize::saturating_add)
+            }),
+            Type::Message(_) => 0,
+        }
     }
 
     /// A message (after its 4-byte CDR encapsulation header) as a JSON value.
@@ -219,6 +264,9 @@ fn field(ty: &str, name: &str, package: &str) -> Result<Field, String> {
 
 /// Deeper nesting is refused (a definition that includes itself).
 const MAX_DEPTH: usize = 32;
+
+/// The longest fixed-size array `T[N]` a schema may declare.
+const MAX_FIXED: usize = 1 << 20;
 
 struct MessageSeed<'s> {
     schema: &'s Schema,
@@ -403,8 +451,40 @@ mod tests {
         // The fuzzer's input: the root's last line merged with a separator.
         let text = std::fs::read("../../fuzz/regressions/foreign/ros2-root-undefined").unwrap();
         let text = String::from_utf8_lossy(&text[3..]);
-        let _ = Schema::parse("std_msgs/msg/Float64MultiArray", &text)
-            .map(|s| s.decode(&[0, 1, 0, 0]));
+        let _ =
+            Schema::parse("std_msgs/msg/Float64MultiArray", &text).map(|s| s.decode(&[0, 1, 0, 0]));
+    }
+
+    /// Found by fuzzing (it ran out of memory: a sequence length of 2³² read from the
+    /// data, of a message without fields, allocates without consuming a byte): arrays
+    /// of a type that takes no byte, and fixed arrays longer than 2²⁰, are refused with
+    /// the schema, so that a message decodes to at most as many values as it has bytes.
+    #[test]
+    fn arrays_whose_length_the_message_would_not_bound_are_refused() {
+        let empty = "Empty[] many\n===\nMSG: pkg/Empty\n";
+        let e = Schema::parse("pkg/msg/Thing", empty).unwrap_err();
+        assert!(
+            e.starts_with("field many is an array of a message without fields"),
+            "{e}"
+        );
+        let nested = "Outer[3] few\n===\nMSG: pkg/Outer\nEmpty inner\n===\nMSG: pkg/Empty\n";
+        assert!(Schema::parse("pkg/msg/Thing", nested).is_err());
+        let huge = "uint8[2000000] bytes\n";
+        let e = Schema::parse("pkg/msg/Thing", huge).unwrap_err();
+        assert_eq!(
+            e,
+            "field bytes is an array of 2000000 values, more than 1048576"
+        );
+        // A sequence of non-empty messages is read.
+        let fine = "Pair[] pairs\n===\nMSG: pkg/Pair\nuint8 a\n";
+        let schema = Schema::parse("pkg/msg/Thing", fine).unwrap();
+        let mut data = vec![0, 1, 0, 0];
+        data.extend(2u32.to_le_bytes());
+        data.extend([7, 8]);
+        assert_eq!(
+            schema.decode(&data).unwrap(),
+            serde_json::json!({"pairs": [{"a": 7}, {"a": 8}]})
+        );
     }
 
     #[test]
