@@ -34,6 +34,7 @@ mod locate;
 mod names;
 mod payload;
 pub mod reference;
+mod rendezvous;
 pub mod schema;
 mod shard;
 pub mod template;
@@ -56,4 +57,5 @@ pub use crate::names::{MAX_INSTANCE_LEN, check_endpoint, validate_instance};
 pub use crate::payload::{
     CdrMessage, Formation, PayloadFormat, RawField, RawLayout, Tag, TagTime, Tags,
 };
+pub use crate::rendezvous::{rendezvous_order, rendezvous_owner, rendezvous_score};
 pub use crate::shard::{Shard, shard_hash};
