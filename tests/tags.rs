@@ -375,20 +375,37 @@ fn simulate_publishes_a_tag_channel_as_its_plant_would() {
             said.contains("published on plant/dc/voltage, plant/dc/current, plant/dc/speed"),
             "{said}"
         );
+        // The fault's alarm. Under load the daemon may form its first sample from a
+        // later one of the plant's, whose state is then far from x̂₀ = 0 with P₀ = 0.01:
+        // the filter's start-up transient can raise an alarm at k < 10 first (seen once
+        // in a loaded full run). Only a restart settles (`glr.settle`); the start is the
+        // configuration's (x̂₀, P₀), as a replay's is.
         collect(&results, |r| {
-            r.iter().any(|r| matches!(r, Record::Alarm(_)))
+            r.iter()
+                .any(|r| matches!(r, Record::Alarm(a) if a.k >= 100))
         })
         .await
     });
     let alarm = records
         .iter()
         .find_map(|r| match r {
-            Record::Alarm(a) => Some(a),
+            Record::Alarm(a) if a.k >= 100 => Some(a),
             _ => None,
         })
         .unwrap();
     assert!(
         (116..=126).contains(&alarm.onset) && alarm.k < 170,
         "{alarm:?}"
+    );
+    let early: Vec<u64> = records
+        .iter()
+        .filter_map(|r| match r {
+            Record::Alarm(a) if a.k < 100 => Some(a.k),
+            _ => None,
+        })
+        .collect();
+    assert!(
+        early.iter().all(|k| *k < 10),
+        "alarms before the fault: {early:?}"
     );
 }

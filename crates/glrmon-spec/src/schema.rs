@@ -664,7 +664,8 @@ pub struct CdrSpec {
     /// then the outputs, then the scheduling signals, from `layout.data_offset` on; the
     /// time is the transport's) or `glrmon_msgs/msg/Sample` (`int64 k`, −1 for none;
     /// `float64 t`, NaN for none; `float64[] u`, `y`, `p`). Default
-    /// `std_msgs/msg/Float64MultiArray`.
+    /// `std_msgs/msg/Float64MultiArray`. A payload whose Zenoh encoding declares its
+    /// type (`application/cdr;glrmon_msgs/msg/Sample`) is decoded as that type.
     #[schemars(extend("enum" = ["std_msgs/msg/Float64MultiArray", "glrmon_msgs/msg/Sample"]))]
     pub message: Option<String>,
 }
