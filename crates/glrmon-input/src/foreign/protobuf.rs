@@ -521,40 +521,29 @@ mod tests {
             e.ends_with("imports itself, through its imports or directly"),
             "{e}"
         );
-        // A chain of 100 files, each publicly importing the next.
-        let e = with(&|f| {
-            for i in 0..100 {
+        // A chain of n files, each publicly importing the next.
+        let chain = |n: usize| {
+            move |f: &mut Vec<FileDescriptorProto>| {
+                for i in 0..n {
+                    f.push(FileDescriptorProto {
+                        name: Some(format!("link{i}.proto")),
+                        dependency: vec![format!("link{}.proto", i + 1)],
+                        public_dependency: vec![0],
+                        ..FileDescriptorProto::default()
+                    });
+                }
                 f.push(FileDescriptorProto {
-                    name: Some(format!("link{i}.proto")),
-                    dependency: vec![format!("link{}.proto", i + 1)],
-                    public_dependency: vec![0],
+                    name: Some(format!("link{n}.proto")),
                     ..FileDescriptorProto::default()
                 });
             }
-            f.push(FileDescriptorProto {
-                name: Some("link100.proto".into()),
-                ..FileDescriptorProto::default()
-            });
-        })
-        .unwrap_err();
+        };
+        let e = with(&chain(100)).unwrap_err();
         assert!(
             e.ends_with("imports through a chain of more than 64 files"),
             "{e}"
         );
-        let short = with(&|f| {
-            for i in 0..10 {
-                f.push(FileDescriptorProto {
-                    name: Some(format!("link{i}.proto")),
-                    dependency: vec![format!("link{}.proto", i + 1)],
-                    public_dependency: vec![0],
-                    ..FileDescriptorProto::default()
-                });
-            }
-            f.push(FileDescriptorProto {
-                name: Some("link10.proto".into()),
-                ..FileDescriptorProto::default()
-            });
-        });
+        let short = with(&chain(10));
         assert!(short.is_ok());
         // Map entries: `map<string, double>` as protoc writes it reads; malformed ones,
         // which prost-reflect would panic on, are refused.
