@@ -216,6 +216,8 @@ pub struct Monitor {
     settling: Option<Settling>,
     /// Raw plant units → model units, when the channel has `[channels.scaling]`.
     intake: Option<Intake>,
+    /// [`Monitor::resume`] was called: the next admitted sample starts a settling.
+    resumed: bool,
 }
 
 /// The intake scaling and its buffers of model-unit U_k, Y_k.
@@ -290,6 +292,7 @@ impl Monitor {
             stat_records: true,
             settling: None,
             intake: None,
+            resumed: false,
         }
     }
 
@@ -389,6 +392,34 @@ impl Monitor {
         self.alarm.set_settings(tuning.alarm);
         self.alarm.set_end(tuning.episode_end);
         self.settings.tuning.clone_from(tuning);
+    }
+
+    /// Starts the channel afresh after a pause whose samples it never saw: another
+    /// instance monitored it meanwhile (this instance takes it over), or the plant ran
+    /// before this monitor started. The next sample, whatever its index, restarts the
+    /// filter from (x̂₀, P₀) and alarms are held off while it settles
+    /// ([`MonitorSettings::settle`]), as after a restart: the plant's state is then far
+    /// from x̂₀ and the filter's transient would otherwise look like a fault. An episode
+    /// going on is dropped without an `alarm_end` (this monitor did not see it end; the
+    /// instance that saw it go on ends it, or a new one is raised after the settling).
+    /// Nothing is reported: the caller knows why it resumes.
+    ///
+    /// # Errors
+    /// [`glrmon_core::ModelError`] when the initial state cannot be rebuilt (not
+    /// expected of a validated model); the monitor is unchanged then.
+    pub fn resume(&mut self) -> Result<(), glrmon_core::ModelError> {
+        self.detector.restart()?;
+        let _ = self.alarm.reset();
+        self.pending = None;
+        self.episode_alarm = None;
+        self.episode_onset = None;
+        if let Some(c) = &mut self.consistency {
+            c.reset_block();
+        }
+        self.diagnosis_restart = true;
+        self.settling = None;
+        self.resumed = true;
+        Ok(())
     }
 
     /// The channel's name.
@@ -532,6 +563,16 @@ impl Monitor {
             y,
             p: &sample.p,
         };
+        if std::mem::take(&mut self.resumed) {
+            let settle = self
+                .settings
+                .settle
+                .unwrap_or(self.detector.memory() as u64);
+            self.settling = (settle > 0).then_some(Settling {
+                until: k.saturating_add(settle),
+                forget: true,
+            });
+        }
         self.restart_diagnosis_if_due(k, records);
         if !self.step_detector(&core_sample, sample.t, records) {
             return;
