@@ -26,13 +26,16 @@
 //! ```
 #![warn(missing_docs)]
 
+mod auto;
+
 use std::sync::Arc;
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use glrmon_record::{Recorder, RecorderSettings, RecorderStats};
 use glrmon_runtime::{ChannelSetup, Runtime, RuntimeEvents, RuntimeSettings, Sink, SinkError};
-use glrmon_spec::{Config, Shard};
+use glrmon_spec::{Config, Shard, ShardMode};
 use glrmon_zenoh::{
     ConnectivityWatch, Endpoints, Ownership, Presence, StatusSource, ZenohError, ZenohSink,
     ZenohSource,
@@ -40,6 +43,10 @@ use glrmon_zenoh::{
 
 /// How long a starting instance waits for other instances' claims on its channels.
 const CLAIM_WAIT: Duration = Duration::from_secs(3);
+
+/// The longest a leaving instance of an automatic shard waits for its channels to be
+/// claimed elsewhere (it keeps monitoring them meanwhile).
+const HANDOVER_WAIT: Duration = Duration::from_secs(5);
 
 /// Why a daemon could not start.
 #[derive(Debug, thiserror::Error)]
@@ -137,7 +144,7 @@ pub fn select_channels(
 pub struct DaemonBuilder {
     config: Config,
     instance: String,
-    shard: Option<Shard>,
+    shard: Option<ShardMode>,
     sinks: Vec<Box<dyn Sink>>,
     recorder: Option<RecorderSettings>,
     runtime: RuntimeSettings,
@@ -179,10 +186,11 @@ impl DaemonBuilder {
         }
     }
 
-    /// The shard this instance monitors, for its status (the channels must already be
-    /// the shard's).
+    /// The shard this instance monitors: for a static one, its status (the channels
+    /// must already be the shard's); `auto`, the channels are assigned among the live
+    /// instances as they come and go (it needs [`DaemonBuilder::announce`]).
     #[must_use]
-    pub fn shard(mut self, shard: Option<Shard>) -> Self {
+    pub fn shard(mut self, shard: Option<ShardMode>) -> Self {
         self.shard = shard;
         self
     }
@@ -256,19 +264,23 @@ impl DaemonBuilder {
             events,
         } = self;
         let overlaps = Arc::new(AtomicU64::new(0));
+        let auto = announce && shard == Some(ShardMode::Auto);
         let network = if announce {
-            Some(Network::start(session, &instance, &config, endpoints, &overlaps).await?)
+            Some(Network::start(session, &instance, &config, endpoints, &overlaps, auto).await?)
         } else {
             None
         };
+        let generation = Arc::new(AtomicU64::new(0));
         let channels = config
             .channels
             .iter()
             .map(ChannelSetup::from_channel)
             .collect::<Result<Vec<_>, _>>()?;
         let names: Vec<String> = config.channels.iter().map(|c| c.name.clone()).collect();
-        let mut sinks: Vec<Box<dyn Sink>> =
-            vec![Box::new(ZenohSink::declaring(session.clone(), &names)?)];
+        let mut sinks: Vec<Box<dyn Sink>> = vec![Box::new(
+            ZenohSink::declaring(session.clone(), &names)?
+                .with_source(&instance, Arc::clone(&generation)),
+        )];
         sinks.extend(extra);
         let mut recorder_stats = None;
         if let Some(settings) = recorder {
@@ -288,7 +300,20 @@ impl DaemonBuilder {
             sinks.push(Box::new(recorder));
         }
         let runtime = Runtime::start(channels, sinks, &settings, events);
+        let switch = runtime.switch();
+        if auto {
+            // Idle until the first assignment takes this instance's share.
+            for index in 0..names.len() {
+                switch.release(index);
+            }
+        }
         let ready = Arc::new(AtomicBool::new(false));
+        let assignment = Arc::new(Mutex::new(glrmon_wire::Assignment {
+            generation: 0,
+            instances: Vec::new(),
+            takeovers: 0,
+            handovers: 0,
+        }));
         let metrics_server = match (&metrics, &network) {
             (Some(addr), Some(network)) => {
                 let runtime_metrics = runtime.metrics();
@@ -328,15 +353,34 @@ impl DaemonBuilder {
                 status.connectivity = Some(network.connectivity.state());
                 status.shard = shard.map(|s| s.to_string());
                 status.overlaps = overlaps;
+                status.assignment = auto.then(|| Arc::clone(&assignment));
                 Some(Presence::declare(session, status).await?)
             }
             None => None,
+        };
+        let auto_shard = if auto {
+            Some(
+                auto::AutoShard::start(
+                    session,
+                    &instance,
+                    names.clone(),
+                    switch.clone(),
+                    Arc::clone(&generation),
+                    Arc::clone(&assignment),
+                )
+                .await?,
+            )
+        } else {
+            None
         };
         ready.store(true, Ordering::Relaxed);
         Ok(Daemon {
             config,
             instance,
             shard,
+            session: session.clone(),
+            switch,
+            auto: auto_shard,
             runtime,
             source,
             presence,
@@ -362,8 +406,15 @@ impl Network {
         config: &Config,
         endpoints: &Endpoints,
         overlaps: &Arc<AtomicU64>,
+        auto: bool,
     ) -> Result<Self, DaemonError> {
-        let names: Vec<String> = config.channels.iter().map(|c| c.name.clone()).collect();
+        // An automatic shard claims its channels as its assignment moves (auto.rs):
+        // here only its name is checked.
+        let names: Vec<String> = if auto {
+            Vec::new()
+        } else {
+            config.channels.iter().map(|c| c.name.clone()).collect()
+        };
         let counted = Arc::clone(overlaps);
         let ownership = Ownership::claim(session, instance, &names, CLAIM_WAIT, move |channel, other| {
             counted.fetch_add(1, Ordering::Relaxed);
@@ -404,7 +455,10 @@ impl Network {
 pub struct Daemon {
     config: Config,
     instance: String,
-    shard: Option<Shard>,
+    shard: Option<ShardMode>,
+    session: zenoh::Session,
+    switch: glrmon_runtime::ChannelSwitch,
+    auto: Option<auto::AutoShard>,
     runtime: Runtime,
     source: ZenohSource,
     presence: Option<Presence>,
@@ -463,6 +517,26 @@ impl Daemon {
         self.recorder.as_ref()
     }
 
+    /// How many channels the instance monitors now (an automatic shard's share moves).
+    #[must_use]
+    pub fn monitored(&self) -> usize {
+        (0..self.runtime.channel_names().len())
+            .filter(|i| self.switch.is_monitored(*i))
+            .count()
+    }
+
+    /// An automatic shard's assignment now: its generation, the live instances, the
+    /// takeovers and hand-overs so far.
+    #[must_use]
+    pub fn assignment(&self) -> Option<glrmon_wire::Assignment> {
+        self.auto.as_ref().map(|a| {
+            a.assignment
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .clone()
+        })
+    }
+
     /// Applies a new configuration's thresholds and alarm settings to the running
     /// monitors (its channels cut to this instance's shard); the filters go on.
     /// Returns the number of channels retuned.
@@ -475,7 +549,7 @@ impl Daemon {
         if !blockers.is_empty() {
             return Err(ReloadRefused(blockers));
         }
-        let new = new.into_shard(self.shard);
+        let new = new.into_shard(self.shard.and_then(ShardMode::fixed));
         let retuned = self.runtime.retune_from(&new);
         self.config = new;
         Ok(retuned)
@@ -487,15 +561,33 @@ impl Daemon {
     /// go. The session stays open for the caller to close.
     pub async fn shutdown(self, timeout: Duration) -> Stopped {
         let Self {
+            instance,
+            session,
+            switch,
+            auto,
             runtime,
             source,
-            presence,
+            mut presence,
             network,
             metrics_server,
             recorder,
             ready,
             ..
         } = self;
+        if let Some(auto) = auto {
+            if auto.others_alive() {
+                hand_over(
+                    &session,
+                    &instance,
+                    &auto,
+                    &switch,
+                    presence.as_mut(),
+                    timeout,
+                )
+                .await;
+            }
+            auto.stop();
+        }
         drop(source);
         ready.store(false, Ordering::Relaxed);
         let (in_time, sinks) = tokio::task::spawn_blocking(move || runtime.shutdown(timeout))
@@ -509,5 +601,49 @@ impl Daemon {
         }
         drop(network);
         Stopped { in_time, recorder }
+    }
+}
+
+/// A clean shutdown's hand-over: the instance withdraws its token, so that the
+/// others take its channels over, and goes on monitoring them until each is claimed
+/// elsewhere (at most [`HANDOVER_WAIT`] or half of `timeout`): the channels are then
+/// monitored by both for that time, never by none.
+async fn hand_over(
+    session: &zenoh::Session,
+    instance: &str,
+    auto: &auto::AutoShard,
+    switch: &glrmon_runtime::ChannelSwitch,
+    presence: Option<&mut Presence>,
+    timeout: Duration,
+) {
+    let Some(presence) = presence else {
+        return;
+    };
+    let started = Instant::now();
+    let limit = HANDOVER_WAIT.min(timeout / 2);
+    let mine = auto.monitored(switch);
+    presence.withdraw();
+    let mut left = mine.clone();
+    while !left.is_empty() && started.elapsed() < limit {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        match glrmon_zenoh::unclaimed(session, instance, &left, Duration::from_millis(500)).await {
+            Ok(still) => left = still,
+            Err(e) => {
+                tracing::warn!(error = %e, "Could not ask who claims the channels; stopping without waiting.");
+                break;
+            }
+        }
+    }
+    if let Ok(mut a) = auto.assignment.lock() {
+        a.handovers += (mine.len() - left.len()) as u64;
+    }
+    if left.is_empty() {
+        tracing::info!(
+            channels = mine.len(),
+            elapsed_ms = started.elapsed().as_secs_f64() * 1e3,
+            "Handed every channel over before stopping."
+        );
+    } else {
+        tracing::warn!(channels = %left.join(", "), waited_ms = started.elapsed().as_secs_f64() * 1e3, "No other instance claimed these channels in time; they are unmonitored until one does.");
     }
 }

@@ -200,6 +200,13 @@ impl Samples {
                             message: format!("input {at}: a refused payload: {message}"),
                         })
                     }
+                    InputItem::Intake(IntakeEvent::Resumed { instance, .. }) => Err(Skipped {
+                        reason: "resumed",
+                        message: format!(
+                            "input {at}: instance \"{instance}\" took channel \"{channel}\" \
+                             over here, after samples it never saw"
+                        ),
+                    }),
                 }));
             },
         }

@@ -99,6 +99,9 @@ pub struct ChannelStats {
     pub next_k: AtomicU64,
     /// Rejections by code.
     pub errors: Mutex<BTreeMap<&'static str, u64>>,
+    /// True while this instance does not monitor the channel: another instance of an
+    /// automatic shard owns it ([`ChannelSwitch`]). Its payloads are not taken then.
+    pub idle: AtomicBool,
 }
 
 /// Runtime settings.
@@ -176,6 +179,9 @@ enum Job {
     Payload(ChannelIndex, Payload, u64),
     /// A payload refused at intake, reported as an `error` record by its worker.
     Reject(ChannelIndex, ErrorCode, String, Instant),
+    /// The channel was taken over by this instance (name, assignment generation): its
+    /// monitor resumes before the next payload.
+    Resume(ChannelIndex, Arc<str>, u64, Instant),
     /// New thresholds and alarm settings for a channel (a configuration reload).
     Retune(ChannelIndex, Box<glrmon_monitor::Tuning>),
     /// Queued behind every accepted payload at shutdown.
@@ -318,6 +324,8 @@ pub enum Offer {
     TooLarge,
     /// Refused: the runtime is shutting down.
     Closed,
+    /// Not taken: another instance monitors the channel ([`ChannelStats::idle`]).
+    Idle,
     /// No such channel.
     UnknownChannel,
 }
@@ -331,6 +339,9 @@ impl Intake {
         let Some(stats) = self.stats.get(channel) else {
             return Offer::UnknownChannel;
         };
+        if stats.idle.load(Ordering::Acquire) {
+            return Offer::Idle;
+        }
         if payload.bytes.len() > self.limits.max_payload_bytes {
             // Reported as an `error` record by the channel's worker (which counts it);
             // if even that cannot be queued, counted here.
@@ -397,6 +408,65 @@ impl Intake {
                 Offer::Closed
             }
         }
+    }
+}
+
+/// Turns the monitoring of channels on and off while the runtime runs: the channels of
+/// an automatic shard move between instances as instances come and go. Cheap to clone.
+#[derive(Clone, Debug)]
+pub struct ChannelSwitch {
+    intake: Intake,
+}
+
+impl ChannelSwitch {
+    /// Stops taking channel `channel`'s payloads (those already queued are
+    /// processed). False when it was already idle or there is no such channel.
+    pub fn release(&self, channel: ChannelIndex) -> bool {
+        let Some(stats) = self.intake.stats.get(channel) else {
+            return false;
+        };
+        let was_idle = stats.idle.swap(true, Ordering::AcqRel);
+        // Drops before the release belong to the time another instance covers.
+        stats.pending_drops.store(0, Ordering::Release);
+        !was_idle
+    }
+
+    /// Takes channel `channel` over as instance `instance` at assignment `generation`:
+    /// its monitor resumes ([`ChannelPipeline::resumed`]: the filter restarts at the
+    /// next sample, whatever its index, and settles) and its payloads are taken again.
+    /// Waits for room in the channel's worker queue. False when the channel was not
+    /// idle, there is no such channel or the runtime is stopping.
+    pub fn take(&self, channel: ChannelIndex, instance: &Arc<str>, generation: u64) -> bool {
+        let Some(stats) = self.intake.stats.get(channel) else {
+            return false;
+        };
+        if !stats.idle.load(Ordering::Acquire) || !self.intake.open.load(Ordering::Acquire) {
+            return false;
+        }
+        let queued = self
+            .intake
+            .queues
+            .get(channel % self.intake.queues.len().max(1))
+            .is_some_and(|q| {
+                q.send(Job::Resume(
+                    channel,
+                    Arc::clone(instance),
+                    generation,
+                    Instant::now(),
+                ))
+                .is_ok()
+            });
+        // Payloads accepted from here on are queued behind the resumption.
+        queued && stats.idle.swap(false, Ordering::AcqRel)
+    }
+
+    /// Whether channel `channel` is monitored now.
+    #[must_use]
+    pub fn is_monitored(&self, channel: ChannelIndex) -> bool {
+        self.intake
+            .stats
+            .get(channel)
+            .is_some_and(|s| !s.idle.load(Ordering::Acquire))
     }
 }
 
@@ -600,6 +670,15 @@ impl Runtime {
         self.intake.clone()
     }
 
+    /// The handle that turns the monitoring of channels on and off (an automatic
+    /// shard's assignment).
+    #[must_use]
+    pub fn switch(&self) -> ChannelSwitch {
+        ChannelSwitch {
+            intake: self.intake.clone(),
+        }
+    }
+
     /// Channel names, by index.
     #[must_use]
     pub fn channel_names(&self) -> &[String] {
@@ -739,7 +818,7 @@ fn worker(
                     .fetch_sub(p.bytes.len() as i64, Ordering::AcqRel);
                 (*c, p.received)
             }
-            Job::Reject(c, _, _, at) => (*c, *at),
+            Job::Reject(c, _, _, at) | Job::Resume(c, _, _, at) => (*c, *at),
             Job::Retune(c, tuning) => {
                 if let Some(pipeline) = pipeline_of(&mut shard, *c, cx.workers) {
                     pipeline.monitor_mut().retune(tuning);
@@ -776,6 +855,9 @@ fn worker(
             Job::Reject(_, code, message, _) => {
                 let message = format!("channel \"{}\": {message}", pipeline.name());
                 let _ = pipeline.rejected(code, message, None, None, log_time_ns, &mut cx.emit);
+            }
+            Job::Resume(_, instance, generation, _) => {
+                let _ = pipeline.resumed(&instance, generation, log_time_ns, &mut cx.emit);
             }
             Job::Retune(..) | Job::Stop => return,
         }

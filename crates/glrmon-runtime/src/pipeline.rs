@@ -325,6 +325,46 @@ impl ChannelPipeline {
         Ok(())
     }
 
+    /// This instance took the channel over (assignment `generation`): the monitor
+    /// resumes ([`Monitor::resume`]: the filter restarts at the next sample and
+    /// settles), and a recording holds the event so that a replay resumes there too.
+    ///
+    /// # Errors
+    /// As [`ChannelPipeline::sample`]; the monitor resumes even then.
+    pub fn resumed(
+        &mut self,
+        instance: &str,
+        generation: u64,
+        log_time_ns: u64,
+        emit: &mut dyn Emit,
+    ) -> Result<(), PipelineError> {
+        let mut first = None;
+        if self.plan.inputs {
+            let event = IntakeEvent::Resumed {
+                instance: instance.to_owned(),
+                generation,
+            };
+            keep_first(
+                &mut first,
+                self.input(InputItem::Intake(event), log_time_ns, emit),
+            );
+        }
+        if let Err(e) = self.monitor.resume() {
+            self.records.push(Record::Error(ErrorRecord {
+                channel: self.monitor.channel().to_owned(),
+                k: None,
+                code: ErrorCode::Numerical,
+                message: format!(
+                    "channel \"{}\": taking the channel over: {e}",
+                    self.monitor.channel()
+                ),
+                stage: Stage::Processing,
+            }));
+            keep_first(&mut first, self.hand_on_records(log_time_ns, emit));
+        }
+        first.map_or(Ok(()), Err)
+    }
+
     /// A payload or row refused before the monitor (undecodable, too large): the
     /// refusal as an input, then its `error` record (`k` if the refused input named
     /// one).
@@ -390,6 +430,10 @@ impl ChannelPipeline {
                 log_time_ns,
                 emit,
             ),
+            InputItem::Intake(IntakeEvent::Resumed {
+                instance,
+                generation,
+            }) => self.resumed(instance, *generation, log_time_ns, emit),
         }
     }
 

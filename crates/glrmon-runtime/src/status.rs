@@ -33,7 +33,8 @@ impl ChannelStats {
     }
 }
 
-/// The status of every channel: `names[i]` with the counters `stats[i]` (as
+/// The status of every channel monitored now (not [`ChannelStats::idle`]): `names[i]`
+/// with the counters `stats[i]` (as
 /// [`Runtime::channel_names`] and [`Runtime::stats`] give them, which stay readable
 /// after the runtime has shut down).
 #[must_use]
@@ -41,6 +42,7 @@ pub fn channel_statuses(names: &[String], stats: &[Arc<ChannelStats>]) -> Vec<Ch
     names
         .iter()
         .zip(stats)
+        .filter(|(_, st)| !st.idle.load(Ordering::Relaxed))
         .map(|(name, st)| st.status(name))
         .collect()
 }

@@ -58,4 +58,4 @@ pub use crate::payload::{
     CdrMessage, Formation, PayloadFormat, RawField, RawLayout, Tag, TagTime, Tags,
 };
 pub use crate::rendezvous::{rendezvous_order, rendezvous_owner, rendezvous_score};
-pub use crate::shard::{Shard, shard_hash};
+pub use crate::shard::{Shard, ShardMode, shard_hash};

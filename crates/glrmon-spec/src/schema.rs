@@ -104,8 +104,11 @@ pub struct DaemonSpec {
     pub instance: Option<String>,
     /// `"i/N"`: this instance monitors only the channels whose name hashes to shard i
     /// of N (0 ≤ i < N; a stable FNV-1a hash), so that N instances started from one
-    /// configuration split its channels between them (docs/OPERATIONS.md). Default:
-    /// every channel.
+    /// configuration split its channels between them. `"auto"`: the instances started
+    /// from one configuration find each other on Zenoh and split its channels among
+    /// the live ones (rendezvous hashing); when one is lost, the others take its
+    /// channels over within the Zenoh lease (docs/OPERATIONS.md). Default: every
+    /// channel.
     pub shard: Option<String>,
     /// Local address (`host:port`, e.g. `127.0.0.1:9464`) of the Prometheus `/metrics`,
     /// `/healthz` and `/readyz` endpoints. Default: none (no HTTP endpoint).

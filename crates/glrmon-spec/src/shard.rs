@@ -64,6 +64,55 @@ impl fmt::Display for Shard {
     }
 }
 
+/// How an instance picks its channels among a fleet's: a static shard `i/N`, or `auto`.
+///
+/// `auto`: the instances find each other on Zenoh (their liveliness tokens) and each
+/// channel is monitored by the live instance of highest rendezvous score
+/// ([`crate::rendezvous_owner`]), which every instance computes alike from the same
+/// live set: when an instance leaves, only its channels move, each to its next
+/// instance; when one joins, it takes about 1/(N+1) of the channels, from all.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ShardMode {
+    /// The channels of a fixed shard (`i/N`).
+    Static(Shard),
+    /// Channels assigned among the live instances, moving as instances come and go.
+    Auto,
+}
+
+impl ShardMode {
+    /// The static shard, if this is one.
+    #[must_use]
+    pub fn fixed(self) -> Option<Shard> {
+        match self {
+            Self::Static(s) => Some(s),
+            Self::Auto => None,
+        }
+    }
+}
+
+impl std::str::FromStr for ShardMode {
+    type Err = String;
+
+    /// `"auto"`, or a static shard `"i/N"`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s.trim() == "auto" {
+            return Ok(Self::Auto);
+        }
+        s.parse::<Shard>()
+            .map(Self::Static)
+            .map_err(|e| format!("{e}; or \"auto\" (channels assigned among the live instances)"))
+    }
+}
+
+impl fmt::Display for ShardMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Static(s) => s.fmt(f),
+            Self::Auto => f.write_str("auto"),
+        }
+    }
+}
+
 impl Config {
     /// The channels of `shard` only (all when `None`), the others dropped.
     #[must_use]
@@ -78,6 +127,19 @@ impl Config {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_shard_mode_is_auto_or_static() {
+        assert_eq!("auto".parse::<ShardMode>(), Ok(ShardMode::Auto));
+        assert_eq!(
+            "1/3".parse::<ShardMode>(),
+            Ok(ShardMode::Static(Shard { index: 1, count: 3 }))
+        );
+        let e = "automatic".parse::<ShardMode>().unwrap_err();
+        assert!(e.contains("i/N") && e.contains("\"auto\""), "{e}");
+        assert_eq!(ShardMode::Auto.to_string(), "auto");
+        assert_eq!(ShardMode::Auto.fixed(), None);
+    }
 
     #[test]
     fn shards_partition_the_channels_and_parse_strictly() {

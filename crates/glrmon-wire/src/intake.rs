@@ -43,6 +43,15 @@ pub enum IntakeEvent {
         /// publisher actually sent, for the post-mortem.
         payload: Option<String>,
     },
+    /// The instance took the channel over from another one (an automatic shard): the
+    /// monitor starts afresh at the next sample, whatever its index, and settles with
+    /// alarms held off.
+    Resumed {
+        /// The instance that took the channel over.
+        instance: String,
+        /// Its assignment generation then.
+        generation: u64,
+    },
 }
 
 /// Appends the JSON of an intake event to `out`.

@@ -6,6 +6,7 @@ mod json_schema;
 mod key;
 mod record;
 mod sample;
+mod source;
 pub mod status;
 pub mod text;
 
@@ -27,7 +28,8 @@ pub use sample::{
     DecodeLimits, Sample, SignalNames, decode_samples, decode_samples_named, encode_sample,
     encode_samples,
 };
-pub use status::{ChannelStatus, InstanceStatus, StatusError, ZenohSessions};
+pub use source::Source;
+pub use status::{Assignment, ChannelStatus, InstanceStatus, StatusError, ZenohSessions};
 
 #[cfg(test)]
 mod tests {

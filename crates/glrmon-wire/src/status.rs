@@ -8,15 +8,17 @@
 //!  "overlaps":0,"samples_per_second":1500.0,
 //!  "channels":[{"channel":"c1","samples":10,"alarms":2,"alarm_active":true,
 //!               "dropped":3,"last_k":9,"errors":{"non_finite":4}}],
-//!  "sessions":{"routers":0,"peers":0,"clients":2}}
+//!  "sessions":{"routers":0,"peers":0,"clients":2},
+//!  "assignment":{"generation":4,"instances":["a","b"],"takeovers":3,"handovers":1}}
 //! ```
 //!
 //! Decoding is strict, as for samples: every field must be present (`null` where the
 //! value is absent), of its type, and no other field may appear, so that a reader never
 //! shows a zero for a counter it failed to read. The writer and the reader ship in the
 //! same binary; a new field is a change of this format. The one exception is
-//! `sessions`, added last: a status without it (from an instance of an earlier release,
-//! during a rolling upgrade) reads as `None`, shown as unknown, never as zeros.
+//! `sessions` and `assignment`, added last: a status without them (from an instance of an
+//! earlier release, during a rolling upgrade) reads as `None`, shown as unknown, never
+//! as zeros. `assignment` is `null` but for an automatic shard.
 
 use std::collections::BTreeMap;
 
@@ -53,6 +55,27 @@ pub struct InstanceStatus {
     /// say (an instance of an earlier release, whose status has no such field).
     #[serde(default)]
     pub sessions: Option<ZenohSessions>,
+    /// The automatic shard's assignment as this instance sees it; `None` for a static
+    /// shard or none (and from an instance of an earlier release, whose status has no
+    /// such field).
+    #[serde(default)]
+    pub assignment: Option<Assignment>,
+}
+
+/// An automatic shard's view of the fleet: the live instances the channels are
+/// assigned among, and how the assignment changed since the instance started.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Assignment {
+    /// Increases by one each time this instance's view of the live instances changes
+    /// (from 1, the first view); records and recordings name it.
+    pub generation: u64,
+    /// The live instances, this one included, sorted.
+    pub instances: Vec<String>,
+    /// Channels taken over from an instance that left (or at a view change).
+    pub takeovers: u64,
+    /// Channels handed over to an instance that joined, or at a clean shutdown.
+    pub handovers: u64,
 }
 
 /// The Zenoh sessions an instance has open with other nodes, by the other node's kind
@@ -250,6 +273,12 @@ mod tests {
                 peers: 0,
                 clients: 2,
             }),
+            assignment: Some(Assignment {
+                generation: 4,
+                instances: vec!["a".into(), "b".into()],
+                takeovers: 3,
+                handovers: 1,
+            }),
         }
     }
 
@@ -260,6 +289,7 @@ mod tests {
         assert_eq!(decode(json.as_bytes()).unwrap(), s);
         let empty = InstanceStatus {
             shard: None,
+            assignment: None,
             channels: vec![],
             uptime: 0.0,
             samples_per_second: 0.0,

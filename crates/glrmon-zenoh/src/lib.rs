@@ -10,6 +10,10 @@
 //! results never see status traffic.)
 #![warn(missing_docs)]
 
+mod fleet;
+
+pub use fleet::{Claims, Membership, Ownership, owner_key, unclaimed};
+
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -24,7 +28,7 @@ use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::query::{QueryTarget, Queryable};
-use zenoh::sample::{Locality, SampleKind};
+use zenoh::sample::Locality;
 use zenoh::{Config, Session, Wait};
 
 /// Where a session comes from: a JSON5 file passed through untouched, and/or the
@@ -560,6 +564,8 @@ impl ZenohSource {
 /// times over, on the first alarm of each channel, the one that matters most.
 pub struct ZenohSink {
     session: Session,
+    /// The instance and its assignment generation, attached to every put.
+    source: Option<SourceAttachment>,
     /// Each channel's publishers, by record kind ([`glrmon_wire::Record::kind_index`]).
     publishers: HashMap<String, [Option<Publisher<'static>>; RECORD_KINDS.len()]>,
 }
@@ -578,8 +584,22 @@ impl ZenohSink {
     pub fn new(session: Session) -> Self {
         Self {
             session,
+            source: None,
             publishers: HashMap::new(),
         }
+    }
+
+    /// Attaches `{"instance":…,"generation":…}` ([`glrmon_wire::Source`]) to every
+    /// record put, the generation read from `generation` (an automatic shard's, which
+    /// moves; 0 otherwise).
+    #[must_use]
+    pub fn with_source(mut self, instance: &str, generation: Arc<AtomicU64>) -> Self {
+        self.source = Some(SourceAttachment {
+            instance: instance.to_owned(),
+            generation,
+            current: None,
+        });
+        self
     }
 
     /// A sink on `session` with the publishers of every record kind but `stat`
@@ -650,13 +670,42 @@ impl Sink for ZenohSink {
             sink: "zenoh".into(),
             message: format!("{what} {}: {e}", glrmon_wire::result_key(channel, kind)),
         };
+        let attachment = self.source.as_mut().map(SourceAttachment::bytes);
         let publisher = self
             .publisher(channel, output.record.kind_index(), kind)
             .map_err(|e| err("declare publisher", e))?;
         publisher
             .put(output.json.clone())
+            .attachment(attachment)
             .wait()
             .map_err(|e| err("put", e))
+    }
+}
+
+/// The attachment of a sink's puts, encoded again only when the generation moves.
+struct SourceAttachment {
+    instance: String,
+    generation: Arc<AtomicU64>,
+    current: Option<(u64, zenoh::bytes::ZBytes)>,
+}
+
+impl SourceAttachment {
+    fn bytes(&mut self) -> zenoh::bytes::ZBytes {
+        let g = self.generation.load(Ordering::Relaxed);
+        match &self.current {
+            Some((at, bytes)) if *at == g => bytes.clone(),
+            _ => {
+                let bytes = zenoh::bytes::ZBytes::from(
+                    glrmon_wire::Source {
+                        instance: self.instance.clone(),
+                        generation: g,
+                    }
+                    .encode(),
+                );
+                self.current = Some((g, bytes.clone()));
+                bytes
+            }
+        }
     }
 }
 
@@ -677,6 +726,8 @@ pub struct StatusSource {
     pub shard: Option<String>,
     /// Other instances seen declaring a channel of this one since start.
     pub overlaps: Arc<AtomicU64>,
+    /// An automatic shard's assignment, as its instance updates it.
+    pub assignment: Option<Arc<Mutex<glrmon_wire::Assignment>>>,
     /// (time, total samples) at the last rate estimate.
     rate: Arc<Mutex<(Instant, u64, f64)>>,
 }
@@ -698,6 +749,7 @@ impl StatusSource {
             connectivity: None,
             shard: None,
             overlaps: Arc::new(AtomicU64::new(0)),
+            assignment: None,
             rate: Arc::new(Mutex::new((now, 0, 0.0))),
         }
     }
@@ -747,6 +799,11 @@ impl StatusSource {
             samples_per_second: round(self.samples_per_second(total), 10.0),
             channels,
             sessions,
+            assignment: self.assignment.as_ref().map(|a| {
+                a.lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .clone()
+            }),
         }
     }
 }
@@ -755,7 +812,7 @@ impl StatusSource {
 #[derive(Debug)]
 pub struct Presence {
     _queryable: Queryable<()>,
-    _token: LivelinessToken,
+    token: Option<LivelinessToken>,
 }
 
 /// Key of an instance's status queryable.
@@ -801,121 +858,16 @@ impl Presence {
             .map_err(session_err("declare liveliness token"))?;
         Ok(Self {
             _queryable: queryable,
-            _token: token,
+            token: Some(token),
         })
     }
-}
 
-/// Key of the token by which `instance` claims `channel`.
-#[must_use]
-pub fn owner_key(channel: &str, instance: &str) -> String {
-    format!("glrmon/@owners/{channel}/{instance}")
-}
-
-/// The channels an instance claims: one liveliness token per channel, and a watch that
-/// reports any other instance claiming one of them later.
-#[derive(Debug)]
-pub struct Ownership {
-    _tokens: Vec<LivelinessToken>,
-    _watch: Subscriber<()>,
-}
-
-impl Ownership {
-    /// Refuses, with a message naming the channel and the other instance, when a live
-    /// instance already has this instance's name or claims one of `channels`; otherwise
-    /// claims them. Then calls `on_overlap(channel, other_instance)` whenever another
-    /// instance claims one of them (two instances started at the same moment: both are
-    /// told, and so is the operator through the status). `wait` bounds the query for
-    /// existing claims (it ends as soon as every reachable node has answered).
-    ///
-    /// # Errors
-    /// [`ZenohError::Overlap`] as above; [`ZenohError::Session`] when a query or
-    /// declaration fails.
-    pub async fn claim(
-        session: &Session,
-        instance: &str,
-        channels: &[String],
-        wait: Duration,
-        on_overlap: impl Fn(&str, &str) + Send + Sync + 'static,
-    ) -> Result<Self, ZenohError> {
-        let replies = session
-            .liveliness()
-            .get(liveliness_key(instance))
-            .timeout(wait)
-            .await
-            .map_err(session_err("liveliness query"))?;
-        if let Ok(reply) = replies.recv_async().await
-            && reply.result().is_ok()
-        {
-            return Err(ZenohError::Overlap(format!(
-                "an instance named \"{instance}\" is already running (liveliness token {}): give each instance its own name (--instance or daemon.instance)",
-                liveliness_key(instance)
-            )));
-        }
-        let replies = session
-            .liveliness()
-            .get("glrmon/@owners/**")
-            .timeout(wait)
-            .await
-            .map_err(session_err("liveliness query"))?;
-        let mut clashes = Vec::new();
-        while let Ok(reply) = replies.recv_async().await {
-            if let Ok(sample) = reply.result()
-                && let Some((channel, other)) = parse_owner(sample.key_expr().as_str())
-                && other != instance
-                && channels.iter().any(|c| c == channel)
-            {
-                clashes.push(format!("\"{channel}\" (instance \"{other}\")"));
-            }
-        }
-        if !clashes.is_empty() {
-            clashes.sort();
-            return Err(ZenohError::Overlap(format!(
-                "{} channel(s) of this instance are already monitored elsewhere: {}; give each instance a disjoint set of channels (daemon.shard = \"i/N\" or --shard)",
-                clashes.len(),
-                clashes.join(", ")
-            )));
-        }
-        let mut tokens = Vec::with_capacity(channels.len());
-        for c in channels {
-            tokens.push(
-                session
-                    .liveliness()
-                    .declare_token(owner_key(c, instance))
-                    .await
-                    .map_err(session_err("declare liveliness token"))?,
-            );
-        }
-        let mine: Vec<String> = channels.to_vec();
-        let me = instance.to_owned();
-        let watch = session
-            .liveliness()
-            .declare_subscriber("glrmon/@owners/**")
-            .history(true)
-            .callback(move |sample| {
-                if sample.kind() != SampleKind::Put {
-                    return;
-                }
-                if let Some((channel, other)) = parse_owner(sample.key_expr().as_str())
-                    && other != me
-                    && mine.iter().any(|c| c == channel)
-                {
-                    on_overlap(channel, other);
-                }
-            })
-            .await
-            .map_err(session_err("declare liveliness subscriber"))?;
-        Ok(Self {
-            _tokens: tokens,
-            _watch: watch,
-        })
+    /// Withdraws the instance's liveliness token, keeping the status queryable: the
+    /// other instances of an automatic shard then take its channels over (a clean
+    /// shutdown's hand-over).
+    pub fn withdraw(&mut self) {
+        self.token = None;
     }
-}
-
-/// (channel, instance) of an owner token's key.
-fn parse_owner(key: &str) -> Option<(&str, &str)> {
-    let rest = key.strip_prefix("glrmon/@owners/")?;
-    rest.rsplit_once('/')
 }
 
 /// The Zenoh sessions of this session with other nodes, and whether publishers can

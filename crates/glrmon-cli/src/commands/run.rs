@@ -29,9 +29,11 @@ pub(crate) struct RunArgs {
     #[arg(long)]
     instance: Option<String>,
     /// Monitor only shard I of N of the configured channels (`I/N`, 0 ≤ I < N; a stable
-    /// hash of the channel name), overriding `daemon.shard`.
-    #[arg(long, value_name = "I/N")]
-    shard: Option<glrmon_spec::Shard>,
+    /// hash of the channel name), or `auto`: the instances started from this
+    /// configuration split its channels among the live ones and take over those of an
+    /// instance that is lost (docs/OPERATIONS.md). Overrides `daemon.shard`.
+    #[arg(long, value_name = "I/N|auto")]
+    shard: Option<glrmon_spec::ShardMode>,
     /// Monitor only the channels whose input key intersects this key expression
     /// (e.g. `plant/line2/**`); applied before `--shard`.
     #[arg(long, value_name = "KEYEXPR")]
@@ -63,8 +65,12 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         (None, None) => None,
     };
     let configured = cfg.channels.len();
-    let cfg = glrmon_daemon::select_channels(cfg, args.channels.as_deref(), shard)
-        .map_err(daemon_error)?;
+    let cfg = glrmon_daemon::select_channels(
+        cfg,
+        args.channels.as_deref(),
+        shard.and_then(glrmon_spec::ShardMode::fixed),
+    )
+    .map_err(daemon_error)?;
     if let Some(name) = &args.instance
         && let Err(e) = glrmon_spec::validate_instance(name)
     {
@@ -124,10 +130,17 @@ async fn daemon(cfg: glrmon_spec::Config, args: &RunArgs) -> anyhow::Result<()> 
         )
     };
     // Lets tests and supervisors know intake is open.
-    let monitoring = format!(
-        "instance {instance} monitoring {channels} channel(s){}",
-        shard.map_or(String::new(), |s| format!(" (shard {s} of {configured})"))
-    );
+    let monitoring = match shard {
+        Some(glrmon_spec::ShardMode::Auto) => format!(
+            "instance {instance} monitoring {} channel(s) (shard auto of {configured}, generation {})",
+            daemon.monitored(),
+            daemon.assignment().map_or(0, |a| a.generation)
+        ),
+        _ => format!(
+            "instance {instance} monitoring {channels} channel(s){}",
+            shard.map_or(String::new(), |s| format!(" (shard {s} of {configured})"))
+        ),
+    };
     println!("glrmon run: {monitoring}; {zenoh_line}");
     notify::ready(&monitoring);
     let watchdog = notify::watchdog(daemon.runtime().metrics());

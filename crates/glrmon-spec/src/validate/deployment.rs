@@ -2,7 +2,7 @@
 
 use super::Validator;
 use crate::schema::{DaemonSpec, RecordingSpec, ZenohSpec};
-use crate::{Shard, check_endpoint, limits, locate, validate_instance};
+use crate::{ShardMode, check_endpoint, limits, locate, validate_instance};
 
 impl Validator {
     /// `[zenoh]`: the mode, and the syntax of each endpoint.
@@ -79,7 +79,7 @@ impl Validator {
             );
         }
         if let Some(text) = &d.shard
-            && let Err(e) = text.parse::<Shard>()
+            && let Err(e) = text.parse::<ShardMode>()
         {
             self.error("daemon.shard".into(), e);
         }
