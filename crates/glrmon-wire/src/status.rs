@@ -309,7 +309,9 @@ mod tests {
         );
         assert!(json.contains(r#""last_k":null,"errors":{}}"#), "{json}");
         assert!(
-            json.ends_with(r#"}],"sessions":{"routers":1,"peers":0,"clients":2}}"#),
+            json.ends_with(
+                r#"}],"sessions":{"routers":1,"peers":0,"clients":2},"assignment":{"generation":4,"instances":["a","b"],"takeovers":3,"handovers":1}}"#
+            ),
             "{json}"
         );
     }
@@ -338,6 +340,7 @@ mod tests {
         let old = r#"{"instance":"a\"b","uptime":3725.200,"shard":"0/2","connected":true,"reconnections":1,"overlaps":0,"samples_per_second":1500.0,"channels":[{"channel":"c1","samples":10,"alarms":2,"alarm_active":true,"dropped":3,"last_k":9,"errors":{"gap":1,"non_finite":4}},{"channel":"c\u0007","samples":0,"alarms":0,"alarm_active":false,"dropped":0,"last_k":null,"errors":{}}]}"#;
         let mut want = sample();
         want.sessions = None;
+        want.assignment = None;
         want.instance = "a\"b".into();
         want.channels[1].channel = "c\u{7}".into();
         assert_eq!(decode(old.as_bytes()).unwrap(), want);
