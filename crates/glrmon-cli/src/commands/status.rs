@@ -23,6 +23,11 @@ pub(crate) struct StatusArgs {
     /// Print each instance's status JSON on a line of its own instead of the table.
     #[arg(long)]
     json: bool,
+    /// Print one line per channel instead: the instance monitoring it (its owner), that
+    /// instance's assignment generation, and the channel's counters; a channel two
+    /// instances monitor is flagged.
+    #[arg(long, conflicts_with = "json")]
+    channels: bool,
     /// Seconds to wait for the instances' answers.
     #[arg(long, default_value_t = 3.0)]
     timeout: f64,
@@ -62,8 +67,101 @@ async fn status(args: &StatusArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    print!("{}", table(&replies));
+    if args.channels {
+        print!("{}", channel_table(&replies));
+    } else {
+        print!("{}", table(&replies));
+    }
     Ok(())
+}
+
+/// One line per channel: its owner (the instance whose status lists it), that
+/// instance's generation, samples, alarms and whether one is active; channels listed by
+/// two instances are flagged, and a last line says whether the automatic shards' views
+/// of the live instances agree.
+fn channel_table(replies: &[(String, String)]) -> String {
+    let mut owners: std::collections::BTreeMap<String, Vec<(String, String, u64, u64, bool)>> =
+        std::collections::BTreeMap::new();
+    let mut views: std::collections::BTreeSet<Vec<String>> = std::collections::BTreeSet::new();
+    for (name, json) in replies {
+        let Ok(v) = status::decode(json.as_bytes()) else {
+            continue;
+        };
+        let generation = v
+            .assignment
+            .as_ref()
+            .map_or_else(|| "-".to_owned(), |a| a.generation.to_string());
+        if let Some(a) = &v.assignment {
+            views.insert(a.instances.clone());
+        }
+        for c in &v.channels {
+            owners
+                .entry(escape_control(&c.channel).into_owned())
+                .or_default()
+                .push((
+                    escape_control(name).into_owned(),
+                    generation.clone(),
+                    c.samples,
+                    c.alarms,
+                    c.alarm_active,
+                ));
+        }
+    }
+    let mut rows =
+        vec![["CHANNEL", "OWNER", "GEN", "SAMPLES", "ALARMS", "ACTIVE", ""].map(str::to_owned)];
+    for (channel, list) in &owners {
+        for (owner, generation, samples, alarms, active) in list {
+            rows.push([
+                channel.clone(),
+                owner.clone(),
+                generation.clone(),
+                samples.to_string(),
+                alarms.to_string(),
+                if *active { "yes" } else { "no" }.to_owned(),
+                if list.len() > 1 {
+                    format!("monitored by {} instances", list.len())
+                } else {
+                    String::new()
+                },
+            ]);
+        }
+    }
+    let mut widths = [0usize; 7];
+    for r in &rows {
+        for (w, c) in widths.iter_mut().zip(r) {
+            *w = (*w).max(c.chars().count());
+        }
+    }
+    let mut out = String::new();
+    for r in &rows {
+        let cells: Vec<String> = r
+            .iter()
+            .zip(widths)
+            .enumerate()
+            .map(|(i, (c, w))| {
+                if i < 2 || i == 6 {
+                    format!("{c:<w$}")
+                } else {
+                    format!("{c:>w$}")
+                }
+            })
+            .collect();
+        out.push_str(cells.join("  ").trim_end());
+        out.push('\n');
+    }
+    let doubled = owners.values().filter(|l| l.len() > 1).count();
+    out.push_str(&format!(
+        "{} channel(s) monitored, {doubled} by more than one instance",
+        owners.len()
+    ));
+    match views.len() {
+        0 => out.push('\n'),
+        1 => out.push_str("; the automatic shard's instances agree on the live set\n"),
+        n => out.push_str(&format!(
+            "; the automatic shard's instances see {n} different live sets (a view is changing, or the network is split)\n"
+        )),
+    }
+    out
 }
 
 /// The status table: a header and one line per instance, then a total line.
@@ -112,11 +210,16 @@ fn table(replies: &[(String, String)]) -> String {
         let sps = v.samples_per_second;
         channels += ch.len() as u64;
         rate += sps;
+        let shard = v
+            .shard
+            .as_deref()
+            .map_or_else(|| "-".to_owned(), |s| escape_control(s).into_owned());
         rows.push([
             name,
-            v.shard
-                .as_deref()
-                .map_or_else(|| "-".to_owned(), |s| escape_control(s).into_owned()),
+            match &v.assignment {
+                Some(a) => format!("{shard} g{}", a.generation),
+                None => shard,
+            },
             ch.len().to_string(),
             format!("{sps:.0}"),
             active.to_string(),
@@ -197,6 +300,41 @@ fn uptime(s: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An automatic shard's statuses: each channel's owner and generation; a channel
+    /// two instances list is flagged, and so are views of the live set that differ.
+    #[test]
+    fn channel_table_names_owners_and_flags_doubles_and_split_views() {
+        let status = |name: &str, generation: u64, live: &str, channels: &[&str]| {
+            let list: Vec<String> = channels
+                .iter()
+                .map(|c| format!(r#"{{"channel":"{c}","samples":7,"alarms":1,"alarm_active":false,"dropped":0,"last_k":6,"errors":{{}}}}"#))
+                .collect();
+            format!(
+                r#"{{"instance":"{name}","uptime":1,"shard":"auto","connected":true,"reconnections":0,"overlaps":0,"samples_per_second":0.0,"channels":[{}],"assignment":{{"generation":{generation},"instances":[{live}],"takeovers":0,"handovers":0}}}}"#,
+                list.join(",")
+            )
+        };
+        let both = r#""a","b""#;
+        let t = channel_table(&[
+            ("a".into(), status("a", 3, both, &["c1", "c2"])),
+            ("b".into(), status("b", 2, both, &["c3"])),
+        ]);
+        let lines: Vec<Vec<&str>> = t.lines().map(|l| l.split_whitespace().collect()).collect();
+        assert_eq!(
+            lines[0],
+            ["CHANNEL", "OWNER", "GEN", "SAMPLES", "ALARMS", "ACTIVE"]
+        );
+        assert_eq!(lines[1], ["c1", "a", "3", "7", "1", "no"], "{t}");
+        assert_eq!(lines[3], ["c3", "b", "2", "7", "1", "no"], "{t}");
+        assert!(t.ends_with("3 channel(s) monitored, 0 by more than one instance; the automatic shard's instances agree on the live set\n"), "{t}");
+        let t = channel_table(&[
+            ("a".into(), status("a", 3, both, &["c1"])),
+            ("b".into(), status("b", 1, r#""b""#, &["c1"])),
+        ]);
+        assert!(t.contains("monitored by 2 instances"), "{t}");
+        assert!(t.contains("1 by more than one instance; the automatic shard's instances see 2 different live sets"), "{t}");
+    }
 
     #[test]
     fn table_sums_channels_and_marks_lost_connections() {
