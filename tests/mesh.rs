@@ -16,7 +16,7 @@ mod support;
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -30,107 +30,6 @@ struct TempDir(PathBuf);
 impl Drop for TempDir {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-/// The router: `zenohd` (a child process) or a router-mode session of this process.
-enum Router {
-    Zenohd(Child),
-    Session(zenoh::Session),
-}
-
-/// `zenohd` from $GLRMON_ZENOHD, the PATH or cargo's bin directory; none when
-/// GLRMON_TEST_ROUTER=session asks for the in-process router.
-fn zenohd_binary() -> Option<PathBuf> {
-    if std::env::var("GLRMON_TEST_ROUTER").as_deref() == Ok("session") {
-        return None;
-    }
-    if let Ok(p) = std::env::var("GLRMON_ZENOHD") {
-        return Some(PathBuf::from(p));
-    }
-    let mut dirs: Vec<PathBuf> = std::env::var_os("PATH")
-        .map(|p| std::env::split_paths(&p).collect())
-        .unwrap_or_default();
-    if let Some(h) = std::env::var_os("CARGO_HOME") {
-        dirs.push(PathBuf::from(h).join("bin"));
-    }
-    if let Some(h) = std::env::var_os("HOME") {
-        dirs.push(PathBuf::from(h).join(".cargo/bin"));
-    }
-    dirs.into_iter()
-        .map(|d| d.join("zenohd"))
-        .find(|p| p.is_file())
-}
-
-impl Router {
-    async fn start(endpoint: &str) -> Self {
-        let t = Instant::now();
-        loop {
-            let r = match zenohd_binary() {
-                Some(bin) => {
-                    // The shipped router configuration, on this test's port.
-                    let cfg =
-                        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/zenohd.json5");
-                    let child = Command::new(bin)
-                        .arg("--config")
-                        .arg(cfg)
-                        .args(["--listen", endpoint, "--no-multicast-scouting"])
-                        .stdout(Stdio::null())
-                        .stderr(Stdio::null())
-                        .spawn()
-                        .unwrap();
-                    let addr = endpoint.trim_start_matches("tcp/");
-                    let up = Instant::now();
-                    while std::net::TcpStream::connect(addr).is_err() {
-                        assert!(
-                            up.elapsed() < Duration::from_secs(20),
-                            "zenohd not listening"
-                        );
-                        tokio::time::sleep(Duration::from_millis(20)).await;
-                    }
-                    Some(Router::Zenohd(child))
-                }
-                None => {
-                    assert!(
-                        std::env::var_os("GLRMON_REQUIRE_ZENOHD").is_none(),
-                        "GLRMON_REQUIRE_ZENOHD is set but no zenohd was found (make deps-zenohd)"
-                    );
-                    let mut c = zenoh::Config::default();
-                    c.insert_json5("mode", "\"router\"").unwrap();
-                    c.insert_json5("listen/endpoints", &format!("[\"{endpoint}\"]"))
-                        .unwrap();
-                    c.insert_json5("scouting/multicast/enabled", "false")
-                        .unwrap();
-                    zenoh::open(c).await.ok().map(Router::Session)
-                }
-            };
-            if let Some(r) = r {
-                return r;
-            }
-            // The port of a router just stopped can take a moment to be free again.
-            assert!(
-                t.elapsed() < Duration::from_secs(20),
-                "router did not start"
-            );
-            tokio::time::sleep(Duration::from_millis(50)).await;
-        }
-    }
-
-    fn kind(&self) -> &'static str {
-        match self {
-            Router::Zenohd(_) => "zenohd",
-            Router::Session(_) => "router-mode session",
-        }
-    }
-
-    async fn stop(self) {
-        match self {
-            Router::Zenohd(mut c) => {
-                let _ = c.kill();
-                let _ = c.wait();
-            }
-            Router::Session(s) => s.close().await.unwrap(),
-        }
     }
 }
 
@@ -379,7 +278,7 @@ async fn two_sharded_instances_behind_a_router_survive_its_restart() {
         );
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
-    let router = Router::start(&endpoint).await;
+    let router = support::Router::start(&endpoint).await;
     eprintln!("router: {}", router.kind());
     let (la, lb) = (a.started_line(), b.started_line());
     let count = |l: &str| -> usize {
@@ -563,7 +462,7 @@ async fn two_sharded_instances_behind_a_router_survive_its_restart() {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     assert_eq!(http_get(&metrics, "/healthz").0, 200);
-    let router = Router::start(&endpoint).await;
+    let router = support::Router::start(&endpoint).await;
     let up = Instant::now();
     let s = wait_status(
         &publisher,

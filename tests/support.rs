@@ -262,3 +262,104 @@ pub(crate) async fn collect_records(
     }
     records
 }
+
+/// The router: `zenohd` (a child process) or a router-mode session of this process.
+pub(crate) enum Router {
+    Zenohd(Child),
+    Session(zenoh::Session),
+}
+
+/// `zenohd` from $GLRMON_ZENOHD, the PATH or cargo's bin directory; none when
+/// GLRMON_TEST_ROUTER=session asks for the in-process router.
+pub(crate) fn zenohd_binary() -> Option<PathBuf> {
+    if std::env::var("GLRMON_TEST_ROUTER").as_deref() == Ok("session") {
+        return None;
+    }
+    if let Ok(p) = std::env::var("GLRMON_ZENOHD") {
+        return Some(PathBuf::from(p));
+    }
+    let mut dirs: Vec<PathBuf> = std::env::var_os("PATH")
+        .map(|p| std::env::split_paths(&p).collect())
+        .unwrap_or_default();
+    if let Some(h) = std::env::var_os("CARGO_HOME") {
+        dirs.push(PathBuf::from(h).join("bin"));
+    }
+    if let Some(h) = std::env::var_os("HOME") {
+        dirs.push(PathBuf::from(h).join(".cargo/bin"));
+    }
+    dirs.into_iter()
+        .map(|d| d.join("zenohd"))
+        .find(|p| p.is_file())
+}
+
+impl Router {
+    pub(crate) async fn start(endpoint: &str) -> Self {
+        let t = Instant::now();
+        loop {
+            let r = match zenohd_binary() {
+                Some(bin) => {
+                    // The shipped router configuration, on this test's port.
+                    let cfg = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                        .join("../../deploy/zenohd.json5");
+                    let child = Command::new(bin)
+                        .arg("--config")
+                        .arg(cfg)
+                        .args(["--listen", endpoint, "--no-multicast-scouting"])
+                        .stdout(Stdio::null())
+                        .stderr(Stdio::null())
+                        .spawn()
+                        .unwrap();
+                    let addr = endpoint.trim_start_matches("tcp/");
+                    let up = Instant::now();
+                    while std::net::TcpStream::connect(addr).is_err() {
+                        assert!(
+                            up.elapsed() < Duration::from_secs(20),
+                            "zenohd not listening"
+                        );
+                        tokio::time::sleep(Duration::from_millis(20)).await;
+                    }
+                    Some(Router::Zenohd(child))
+                }
+                None => {
+                    assert!(
+                        std::env::var_os("GLRMON_REQUIRE_ZENOHD").is_none(),
+                        "GLRMON_REQUIRE_ZENOHD is set but no zenohd was found (make deps-zenohd)"
+                    );
+                    let mut c = zenoh::Config::default();
+                    c.insert_json5("mode", "\"router\"").unwrap();
+                    c.insert_json5("listen/endpoints", &format!("[\"{endpoint}\"]"))
+                        .unwrap();
+                    c.insert_json5("scouting/multicast/enabled", "false")
+                        .unwrap();
+                    zenoh::open(c).await.ok().map(Router::Session)
+                }
+            };
+            if let Some(r) = r {
+                return r;
+            }
+            // The port of a router just stopped can take a moment to be free again.
+            assert!(
+                t.elapsed() < Duration::from_secs(20),
+                "router did not start"
+            );
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    }
+
+    pub(crate) fn kind(&self) -> &'static str {
+        match self {
+            Router::Zenohd(_) => "zenohd",
+            Router::Session(_) => "router-mode session",
+        }
+    }
+
+    pub(crate) async fn stop(self) {
+        match self {
+            Router::Zenohd(mut c) => {
+                let _ = c.kill();
+                let _ = c.wait();
+            }
+            Router::Session(s) => s.close().await.unwrap(),
+        }
+    }
+}

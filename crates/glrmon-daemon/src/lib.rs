@@ -327,6 +327,7 @@ impl DaemonBuilder {
                     recorder: recorder_stats.clone(),
                     started: Instant::now(),
                     ready: Arc::clone(&ready),
+                    assignment: auto.then(|| Arc::clone(&assignment)),
                 };
                 let (bound, task) = glrmon_metrics::serve(addr, Arc::new(source)).await?;
                 tracing::info!(address = %bound, "Serving /metrics, /healthz and /readyz.");

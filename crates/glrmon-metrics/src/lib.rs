@@ -53,6 +53,8 @@ pub struct MetricsSource {
     pub started: Instant,
     /// Set once intake is open (subscribers declared, channels claimed).
     pub ready: Arc<AtomicBool>,
+    /// An automatic shard's assignment (`None` for a static shard or none).
+    pub assignment: Option<Arc<std::sync::Mutex<glrmon_wire::Assignment>>>,
 }
 
 impl MetricsSource {
@@ -218,6 +220,36 @@ impl MetricsSource {
             "gauge",
             format!("{:.3}", self.started.elapsed().as_secs_f64()),
         );
+        if let Some(a) = &self.assignment {
+            let a = a
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .clone();
+            gauge(
+                "glrmon_assignment_generation",
+                "The automatic shard's generation: changes of this instance's view of the live instances, from 1.",
+                "gauge",
+                a.generation.to_string(),
+            );
+            gauge(
+                "glrmon_live_instances",
+                "Live instances in this instance's view, itself included.",
+                "gauge",
+                a.instances.len().to_string(),
+            );
+            gauge(
+                "glrmon_takeovers_total",
+                "Channels taken over from an instance that left.",
+                "counter",
+                a.takeovers.to_string(),
+            );
+            gauge(
+                "glrmon_handovers_total",
+                "Channels handed over to an instance that joined, or at a clean shutdown.",
+                "counter",
+                a.handovers.to_string(),
+            );
+        }
         if let Some(rec) = &self.recorder {
             gauge(
                 "glrmon_recording_messages_total",
@@ -455,6 +487,7 @@ mod tests {
             recorder: None,
             started: Instant::now(),
             ready: Arc::new(AtomicBool::new(false)),
+            assignment: None,
         };
         let body = source.render();
         assert!(
