@@ -75,12 +75,15 @@ async fn status(args: &StatusArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// One instance's line for a channel: (owner, generation, samples, alarms, active).
+type OwnerRow = (String, String, u64, u64, bool);
+
 /// One line per channel: its owner (the instance whose status lists it), that
 /// instance's generation, samples, alarms and whether one is active; channels listed by
 /// two instances are flagged, and a last line says whether the automatic shards' views
 /// of the live instances agree.
 fn channel_table(replies: &[(String, String)]) -> String {
-    let mut owners: std::collections::BTreeMap<String, Vec<(String, String, u64, u64, bool)>> =
+    let mut owners: std::collections::BTreeMap<String, Vec<OwnerRow>> =
         std::collections::BTreeMap::new();
     let mut views: std::collections::BTreeSet<Vec<String>> = std::collections::BTreeSet::new();
     for (name, json) in replies {
