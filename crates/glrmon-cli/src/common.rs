@@ -94,17 +94,17 @@ pub(crate) fn simulator(
     })
 }
 
-/// A reliable publisher on `key` with `encoding`, once a subscriber matches (so that
-/// the first samples are not lost); an error after 10 s without one.
+/// A reliable publisher on `key` with `encoding` that keeps its last `cache` samples
+/// for an instance that takes the channel over (`glrmon_zenoh::plant_publisher`),
+/// once a subscriber matches (so that the first samples are not lost); an error after
+/// 10 s without one.
 pub(crate) async fn matched_publisher(
     session: &zenoh::Session,
     key: &str,
     encoding: zenoh::bytes::Encoding,
-) -> anyhow::Result<zenoh::pubsub::Publisher<'static>> {
-    let publisher = session
-        .declare_publisher(key.to_owned())
-        .encoding(encoding)
-        .congestion_control(zenoh::qos::CongestionControl::Block)
+    cache: usize,
+) -> anyhow::Result<zenoh_ext::AdvancedPublisher<'static>> {
+    let publisher = glrmon_zenoh::plant_publisher(session, key, encoding, cache)
         .await
         .map_err(|e| anyhow::anyhow!("declaring a publisher on {key}: {e}"))?;
     let start = std::time::Instant::now();

@@ -3,10 +3,18 @@
 //! instances' rendezvous assignment gives it ([`glrmon_spec::rendezvous_owner`]).
 //!
 //! ```text
-//!  instance tokens ─Membership─▶ views ─▶ assignment task: owner of each channel in the view
-//!  (glrmon/@instances/*)                   ├─ gained: ChannelSwitch::take (monitor resumes, settles), owner token
-//!                                          └─ lost:   ChannelSwitch::release, owner token withdrawn
+//!  instance tokens ─Membership─▶ views ─▶ assignment task: each channel's owner in the view
+//!  (glrmon/@instances/*)                   ├─ gained: ChannelSwitch::take (the monitor resumes),
+//!                                          │          ZenohSource::open (the publishers' cached
+//!                                          │          samples, then the live ones), owner token
+//!                                          └─ lost:   ZenohSource::close, ChannelSwitch::release,
+//!                                                     owner token withdrawn
 //! ```
+//!
+//! A channel taken over gets twice its settling in recent samples from the publishers'
+//! caches (zenoh-ext advanced publishers with a cache): it settles on them and its window
+//! is full when the live samples come, so a fault going on is alarmed at once. Without a
+//! cache it settles on the live samples, with alarms held off for its settling.
 //!
 //! Every instance computes the same owner from the same live set, so no instance asks
 //! another: a takeover takes as long as the lost instance's token takes to disappear
@@ -21,7 +29,7 @@ use std::time::{Duration, Instant};
 
 use glrmon_runtime::ChannelSwitch;
 use glrmon_wire::Assignment;
-use glrmon_zenoh::{Claims, Membership, ZenohError};
+use glrmon_zenoh::{Claims, Membership, ZenohError, ZenohSource};
 
 /// How long a starting instance waits for the live instances to answer before its
 /// first assignment (the query ends as soon as every reachable node has answered).
@@ -44,6 +52,7 @@ struct Assigner {
     instance: Arc<str>,
     channels: Vec<String>,
     switch: ChannelSwitch,
+    source: Arc<ZenohSource>,
     claims: Claims,
     generation: Arc<AtomicU64>,
     assignment: Arc<Mutex<Assignment>>,
@@ -58,6 +67,7 @@ impl AutoShard {
         instance: &str,
         channels: Vec<String>,
         switch: ChannelSwitch,
+        source: Arc<ZenohSource>,
         generation: Arc<AtomicU64>,
         assignment: Arc<Mutex<Assignment>>,
     ) -> Result<Self, ZenohError> {
@@ -75,6 +85,7 @@ impl AutoShard {
             instance: Arc::from(instance),
             channels: channels.clone(),
             switch,
+            source,
             claims: Claims::new(session, instance),
             generation,
             assignment: Arc::clone(&assignment),
@@ -137,11 +148,17 @@ impl Assigner {
         for (index, channel) in self.channels.iter().enumerate() {
             let mine = glrmon_spec::rendezvous_owner(channel, live) == Some(&*self.instance);
             if mine && self.switch.take(index, &self.instance, generation) {
+                // The monitor resumes first: the history and the live samples that
+                // the subscription brings come after it.
+                if let Err(e) = self.source.open(index).await {
+                    tracing::error!(channel, error = %e, "Could not subscribe to the channel's keys: it is not monitored.");
+                }
                 if let Err(e) = self.claims.claim(channel).await {
                     tracing::error!(channel, error = %e, "Could not declare the channel's owner token; it is monitored all the same.");
                 }
                 taken.push(channel.as_str());
             } else if !mine && self.switch.release(index) {
+                self.source.close(index);
                 self.claims.release(channel);
                 released.push(channel.as_str());
             }

@@ -276,6 +276,15 @@ impl DaemonBuilder {
             .iter()
             .map(ChannelSetup::from_channel)
             .collect::<Result<Vec<_>, _>>()?;
+        // A channel taken over asks the publishers' caches for twice its settling:
+        // it settles on the first half and fills its window with the second, so that
+        // it is warm when the live samples come.
+        let history: Vec<usize> = channels
+            .iter()
+            .map(|c| {
+                usize::try_from(c.monitor.settle_samples().saturating_mul(2)).unwrap_or(usize::MAX)
+            })
+            .collect();
         let names: Vec<String> = config.channels.iter().map(|c| c.name.clone()).collect();
         let mut sinks: Vec<Box<dyn Sink>> = vec![Box::new(
             ZenohSink::declaring(session.clone(), &names)?
@@ -343,7 +352,11 @@ impl DaemonBuilder {
             .iter()
             .map(glrmon_spec::Channel::input_keys)
             .collect();
-        let source = ZenohSource::declare(session, &keys, &runtime.intake()).await?;
+        let source = Arc::new(if auto {
+            ZenohSource::idle(session, &keys, &runtime.intake(), history)
+        } else {
+            ZenohSource::declare(session, &keys, &runtime.intake()).await?
+        });
         let presence = match &network {
             Some(network) => {
                 let mut status = StatusSource::new(
@@ -366,6 +379,7 @@ impl DaemonBuilder {
                     &instance,
                     names.clone(),
                     switch.clone(),
+                    Arc::clone(&source),
                     Arc::clone(&generation),
                     Arc::clone(&assignment),
                 )
@@ -461,7 +475,7 @@ pub struct Daemon {
     switch: glrmon_runtime::ChannelSwitch,
     auto: Option<auto::AutoShard>,
     runtime: Runtime,
-    source: ZenohSource,
+    source: Arc<ZenohSource>,
     presence: Option<Presence>,
     network: Option<Network>,
     metrics_server: Option<tokio::task::JoinHandle<()>>,

@@ -422,6 +422,15 @@ impl Monitor {
         Ok(())
     }
 
+    /// Samples of settling after a restart or a [`Monitor::resume`]:
+    /// [`MonitorSettings::settle`], else the detector's memory.
+    #[must_use]
+    pub fn settle_samples(&self) -> u64 {
+        self.settings
+            .settle
+            .unwrap_or(self.detector.memory() as u64)
+    }
+
     /// The channel's name.
     #[must_use]
     pub fn channel(&self) -> &str {
@@ -564,10 +573,7 @@ impl Monitor {
             p: &sample.p,
         };
         if std::mem::take(&mut self.resumed) {
-            let settle = self
-                .settings
-                .settle
-                .unwrap_or(self.detector.memory() as u64);
+            let settle = self.settle_samples();
             self.settling = (settle > 0).then_some(Settling {
                 until: k.saturating_add(settle),
                 forget: true,
@@ -1243,10 +1249,7 @@ impl Monitor {
         if let Err(e) = self.detector.restart() {
             self.reject(records, Some(k), ErrorCode::Numerical, e.to_string());
         }
-        let settle = self
-            .settings
-            .settle
-            .unwrap_or(self.detector.memory() as u64);
+        let settle = self.settle_samples();
         self.settling = (settle > 0).then_some(Settling {
             until: k.saturating_add(settle),
             forget: true,

@@ -31,6 +31,11 @@ pub(crate) struct PlayArgs {
     /// Start again from the beginning at the end, until interrupted.
     #[arg(long = "loop")]
     repeat: bool,
+    /// Keep each key's last N samples for a glrmon instance that takes a channel over
+    /// (`glrmon run --shard auto`), which asks for them to start warm (a zenoh-ext
+    /// advanced publisher cache); 0: none.
+    #[arg(long, value_name = "N", default_value_t = 1000)]
+    cache: usize,
     #[command(flatten)]
     zenoh: crate::flags::ZenohArgs,
 }
@@ -60,6 +65,7 @@ async fn play(mut playback: glrmon_input::Playback, args: &PlayArgs) -> anyhow::
             &session,
             key,
             zenoh::bytes::Encoding::APPLICATION_JSON,
+            args.cache,
         )
         .await?;
         publishers.insert(key.clone(), publisher);

@@ -61,6 +61,11 @@ pub(crate) struct SimulateArgs {
     /// assembled from tags on a period, one per period).
     #[arg(long, default_value_t = 100.0)]
     rate: f64,
+    /// Keep each key's last N samples for a glrmon instance that takes a channel over
+    /// (`glrmon run --shard auto`), which asks for them to start warm (a zenoh-ext
+    /// advanced publisher cache); 0: none.
+    #[arg(long, value_name = "N", default_value_t = 1000)]
+    cache: usize,
     #[command(flatten)]
     zenoh: crate::flags::ZenohArgs,
 }
@@ -276,6 +281,7 @@ async fn publish(
             &session,
             &key,
             zenoh::bytes::Encoding::from(encoding),
+            args.cache,
         )
         .await?;
         publishers.push(publisher);
