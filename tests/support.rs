@@ -293,23 +293,36 @@ pub(crate) fn zenohd_binary() -> Option<PathBuf> {
 }
 
 impl Router {
+    /// The shipped deploy/zenohd.json5 on `endpoint`.
     pub(crate) async fn start(endpoint: &str) -> Self {
+        Self::start_with(None, endpoint).await
+    }
+
+    /// A router from the configuration file `config` (which listens on `endpoint`), or
+    /// the shipped deploy/zenohd.json5 on `endpoint`.
+    pub(crate) async fn start_with(config: Option<&std::path::Path>, endpoint: &str) -> Self {
         let t = Instant::now();
         loop {
             let r = match zenohd_binary() {
                 Some(bin) => {
-                    // The shipped router configuration, on this test's port.
-                    let cfg = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                        .join("../../deploy/zenohd.json5");
-                    let child = Command::new(bin)
-                        .arg("--config")
-                        .arg(cfg)
-                        .args(["--listen", endpoint, "--no-multicast-scouting"])
+                    let mut cmd = Command::new(bin);
+                    match config {
+                        Some(file) => cmd.arg("--config").arg(file),
+                        // The shipped router configuration, on this test's port.
+                        None => cmd
+                            .arg("--config")
+                            .arg(
+                                std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                                    .join("../../deploy/zenohd.json5"),
+                            )
+                            .args(["--listen", endpoint, "--no-multicast-scouting"]),
+                    };
+                    let child = cmd
                         .stdout(Stdio::null())
                         .stderr(Stdio::null())
                         .spawn()
                         .unwrap();
-                    let addr = endpoint.trim_start_matches("tcp/");
+                    let addr = endpoint.split_once('/').map_or(endpoint, |(_, a)| a);
                     let up = Instant::now();
                     while std::net::TcpStream::connect(addr).is_err() {
                         assert!(
@@ -325,12 +338,18 @@ impl Router {
                         std::env::var_os("GLRMON_REQUIRE_ZENOHD").is_none(),
                         "GLRMON_REQUIRE_ZENOHD is set but no zenohd was found (make deps-zenohd)"
                     );
-                    let mut c = zenoh::Config::default();
-                    c.insert_json5("mode", "\"router\"").unwrap();
-                    c.insert_json5("listen/endpoints", &format!("[\"{endpoint}\"]"))
-                        .unwrap();
-                    c.insert_json5("scouting/multicast/enabled", "false")
-                        .unwrap();
+                    let c = match config {
+                        Some(file) => zenoh::Config::from_file(file).unwrap(),
+                        None => {
+                            let mut c = zenoh::Config::default();
+                            c.insert_json5("mode", "\"router\"").unwrap();
+                            c.insert_json5("listen/endpoints", &format!("[\"{endpoint}\"]"))
+                                .unwrap();
+                            c.insert_json5("scouting/multicast/enabled", "false")
+                                .unwrap();
+                            c
+                        }
+                    };
                     zenoh::open(c).await.ok().map(Router::Session)
                 }
             };

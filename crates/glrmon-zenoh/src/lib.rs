@@ -384,11 +384,11 @@ fn listen_reason(message: &str, endpoint: &str) -> String {
     lower_first(message.trim().trim_end_matches(['!', '.']))
 }
 
-/// "the udp transport is not built into glrmon (tcp only)".
+/// "the udp transport is not built into glrmon (tcp and tls only)".
 fn unsupported_transport(endpoint: &str) -> String {
     let protocol = endpoint.split_once('/').map_or(endpoint, |(p, _)| p);
     format!(
-        "the {} transport is not built into glrmon (tcp only)",
+        "the {} transport is not built into glrmon (tcp and tls only)",
         Escaped(protocol)
     )
 }
@@ -416,7 +416,8 @@ pub fn unreachable_reason(endpoint: &str) -> String {
     let Ok(parsed) = endpoint.parse::<zenoh::config::EndPoint>() else {
         return "not a Zenoh endpoint (PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447)".to_owned();
     };
-    if parsed.protocol().as_str() != "tcp" {
+    // TLS runs over TCP: the same probe tells whether anything listens.
+    if !matches!(parsed.protocol().as_str(), "tcp" | "tls") {
         return unsupported_transport(endpoint);
     }
     let address = parsed.address();
@@ -1370,14 +1371,14 @@ mod tests {
         assert_eq!(
             e.to_string(),
             "cannot connect to udp/127.0.0.1:1 (the udp transport is not built into glrmon \
-             (tcp only)): is `glrmon run` or a Zenoh router listening there? Check the \
+             (tcp and tls only)): is `glrmon run` or a Zenoh router listening there? Check the \
              endpoints to connect to"
         );
         let e = open_error("Unicast not supported for udp protocol", &endpoints, &s);
         assert_eq!(
             e.to_string(),
             "cannot listen on udp/127.0.0.1:7449 (the udp transport is not built into \
-             glrmon (tcp only)): choose another endpoint to listen on"
+             glrmon (tcp and tls only)): choose another endpoint to listen on"
         );
         let e = open_error(
             "Can not create a new TCP listener bound to tcp/127.0.0.1:7448: [127.0.0.1:7448: \
