@@ -20,7 +20,10 @@
 //! - the new owner of a channel published with a cache (half of them) gets its recent
 //!   samples from it, settles on them and publishes l_k from the first live sample on,
 //!   none missed; without a cache it settles on the live samples, l_k withheld for
-//!   the settling (101 samples), at most 2 samples missed (printed).
+//!   the settling (101 samples), at most 2 samples missed (printed);
+//! - `glrmon watch --since 1h`, started last, prints the alarms the live instances kept,
+//!   each naming its instance and generation, and flags an alarm record published by
+//!   the test's own session (no source).
 
 #[path = "support.rs"]
 mod support;
@@ -107,6 +110,8 @@ struct Seen {
     stats: Vec<(String, String, u64, bool)>,
     /// (time, channel, instance, k) of every alarm.
     alarms: Vec<(Instant, String, String, u64)>,
+    /// The last alarm record as published.
+    last_alarm: Vec<u8>,
 }
 
 impl Seen {
@@ -338,10 +343,14 @@ async fn a_fleet_takes_over_a_lost_instance_and_hands_over_on_sigterm() {
             else {
                 return;
             };
-            let Ok(record) = glrmon_wire::decode_record(&sample.payload().to_bytes()) else {
+            let bytes = sample.payload().to_bytes();
+            let Ok(record) = glrmon_wire::decode_record(&bytes) else {
                 return;
             };
             let mut s = s.lock().unwrap();
+            if matches!(record, Record::Alarm(_)) {
+                s.last_alarm = bytes.into_owned();
+            }
             match record {
                 Record::Stat(st) => {
                     let armed = st.glr.is_some();
@@ -671,6 +680,93 @@ async fn a_fleet_takes_over_a_lost_instance_and_hands_over_on_sigterm() {
             assert_eq!(t.blind, t.missed + settle, "settled on live samples: {t:?}");
         }
     }
+    // 7. A watcher that was away: `glrmon watch --since 1h` first prints the alarms
+    //    the live instances kept, each naming its instance; a record published by
+    //    anyone else is flagged.
+    let mut watch = Command::new(env!("CARGO_BIN_EXE_glrmon"));
+    watch
+        .args([
+            "watch",
+            "glrmon/*/alarm",
+            "--since",
+            "1h",
+            "--mode",
+            "client",
+        ])
+        .args(["--connect", &endpoint]);
+    let (mut watcher, _) = support::spawn_logged(&mut watch);
+    let lines = Arc::new(Mutex::new(Vec::<String>::new()));
+    {
+        let (lines, out) = (Arc::clone(&lines), watcher.stdout.take().unwrap());
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(out).lines().map_while(Result::ok) {
+                lines.lock().unwrap().push(line);
+            }
+        });
+    }
+    let kept_by_a = seen
+        .lock()
+        .unwrap()
+        .alarms
+        .iter()
+        .filter(|x| x.2 == na)
+        .count();
+    let t = Instant::now();
+    while lines.lock().unwrap().len() < kept_by_a.min(32 * CHANNELS) {
+        assert!(
+            t.elapsed() < Duration::from_secs(10),
+            "{kept_by_a} alarms of {na}, printed: {:?}",
+            lines.lock().unwrap()
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let from_a = format!("[from {na} g");
+    assert!(
+        lines
+            .lock()
+            .unwrap()
+            .iter()
+            .all(|l| l.contains("[from fleet")),
+        "{:?}",
+        lines.lock().unwrap()
+    );
+    assert!(
+        lines
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|l| l.contains(&from_a))
+            .count()
+            >= kept_by_a.min(32),
+        "{:?}",
+        lines.lock().unwrap()
+    );
+    let printed = lines.lock().unwrap().len();
+    // A real alarm record published again without a source, as any client could.
+    let (channel, alarm_json) = {
+        let s = seen.lock().unwrap();
+        (s.alarms.last().unwrap().1.clone(), s.last_alarm.clone())
+    };
+    session
+        .put(format!("glrmon/{channel}/alarm"), alarm_json)
+        .await
+        .unwrap();
+    let t = Instant::now();
+    while lines.lock().unwrap().len() <= printed {
+        assert!(
+            t.elapsed() < Duration::from_secs(5),
+            "the forged alarm is not printed"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let last = lines.lock().unwrap()[printed].clone();
+    assert!(
+        last.contains("[! no source: not published by a glrmon instance]"),
+        "{last}"
+    );
+    let _ = watcher.kill();
+    let _ = watcher.wait();
+
     drop((a, c));
     router.stop().await;
 }

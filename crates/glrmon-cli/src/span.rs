@@ -78,6 +78,17 @@ impl fmt::Display for Span {
     }
 }
 
+/// `clap` value parser of a time (`1h`, `30min`, `90s`, `2d`): seconds, finite and
+/// positive.
+pub(crate) fn parse_time(text: &str) -> Result<f64, String> {
+    match parse(text)? {
+        Span::Time(seconds) => Ok(seconds),
+        Span::Samples(_) => Err(format!(
+            "\"{text}\" has no unit: a time such as 1h, 30min, 90s, 2d"
+        )),
+    }
+}
+
 /// A duration in the unit that reads best: seconds below two minutes, minutes below
 /// two hours, hours below two days, days above.
 pub(crate) fn duration(seconds: f64) -> String {

@@ -74,7 +74,7 @@ impl AutoShard {
         let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<Vec<String>>();
         let view = Arc::new(Mutex::new(vec![instance.to_owned()]));
         let latest = Arc::clone(&view);
-        let membership = Membership::watch(session, instance, VIEW_WAIT, move |live| {
+        let membership = Membership::watch(session, Some(instance), VIEW_WAIT, move |live| {
             *latest
                 .lock()
                 .unwrap_or_else(std::sync::PoisonError::into_inner) = live.to_vec();

@@ -148,8 +148,8 @@ pub struct Membership {
 type View = (BTreeSet<String>, bool);
 
 impl Membership {
-    /// Follows the instances' tokens: `on_change` gets the live set (sorted, `me`
-    /// always in it) once the instances that answer within `wait` are known, then at
+    /// Follows the instances' tokens: `on_change` gets the live set (sorted, `me`, if
+    /// given, always in it) once the instances that answer within `wait` are known, then at
     /// every token that appears or disappears. It runs on Zenoh's thread under a lock
     /// (views arrive in order): it must return quickly, e.g. by sending the view on.
     ///
@@ -157,17 +157,24 @@ impl Membership {
     /// [`ZenohError::Session`] when the subscriber or the query cannot be declared.
     pub async fn watch(
         session: &Session,
-        me: &str,
+        me: Option<&str>,
         wait: Duration,
         on_change: impl Fn(&[String]) + Send + Sync + 'static,
     ) -> Result<Self, ZenohError> {
-        let view: Arc<Mutex<View>> = Arc::new(Mutex::new((BTreeSet::from([me.to_owned()]), false)));
+        let view: Arc<Mutex<View>> = Arc::new(Mutex::new((
+            me.map(str::to_owned).into_iter().collect(),
+            false,
+        )));
         let on_change = Arc::new(on_change);
         let report = |v: &View, on_change: &dyn Fn(&[String])| {
             let live: Vec<String> = v.0.iter().cloned().collect();
             on_change(&live);
         };
-        let (shared, me_owned, notify) = (Arc::clone(&view), me.to_owned(), Arc::clone(&on_change));
+        let (shared, me_owned, notify) = (
+            Arc::clone(&view),
+            me.map(str::to_owned),
+            Arc::clone(&on_change),
+        );
         let watch = session
             .liveliness()
             .declare_subscriber(format!("{INSTANCES}*"))
@@ -181,7 +188,7 @@ impl Membership {
                     .unwrap_or_else(std::sync::PoisonError::into_inner);
                 let changed = match sample.kind() {
                     SampleKind::Put => v.0.insert(name.to_owned()),
-                    SampleKind::Delete => name != me_owned && v.0.remove(name),
+                    SampleKind::Delete => me_owned.as_deref() != Some(name) && v.0.remove(name),
                 };
                 if changed && v.1 {
                     report(&v, notify.as_ref());
@@ -294,4 +301,43 @@ pub async fn unclaimed(
         .filter(|c| !elsewhere.contains(c.as_str()))
         .cloned()
         .collect())
+}
+
+/// The names of the live instances, kept up to date (for readers that tell a live
+/// instance's records from others').
+#[derive(Debug)]
+pub struct LiveInstances {
+    _membership: Membership,
+    names: Arc<Mutex<Vec<String>>>,
+}
+
+impl LiveInstances {
+    /// Follows the instances' tokens (the ones alive now known within 1 s).
+    ///
+    /// # Errors
+    /// As [`Membership::watch`].
+    pub async fn watch(session: &Session) -> Result<Self, ZenohError> {
+        let names = Arc::new(Mutex::new(Vec::new()));
+        let kept = Arc::clone(&names);
+        let membership = Membership::watch(session, None, Duration::from_secs(1), move |live| {
+            *kept
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner) = live.to_vec();
+        })
+        .await?;
+        Ok(Self {
+            _membership: membership,
+            names,
+        })
+    }
+
+    /// Whether an instance of this name is alive.
+    #[must_use]
+    pub fn contains(&self, instance: &str) -> bool {
+        self.names
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .iter()
+            .any(|n| n == instance)
+    }
 }

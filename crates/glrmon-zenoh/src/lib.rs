@@ -12,7 +12,7 @@
 
 mod fleet;
 
-pub use fleet::{Claims, Membership, Ownership, owner_key, unclaimed};
+pub use fleet::{Claims, LiveInstances, Membership, Ownership, owner_key, unclaimed};
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -25,7 +25,7 @@ use glrmon_wire::text::Escaped;
 use glrmon_wire::{InstanceStatus, RECORD_KINDS, ZenohSessions, status};
 use zenoh::bytes::Encoding;
 use zenoh::liveliness::LivelinessToken;
-use zenoh::pubsub::{Publisher, Subscriber};
+use zenoh::pubsub::Subscriber;
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::query::{QueryTarget, Queryable};
 use zenoh::sample::Locality;
@@ -698,9 +698,67 @@ pub async fn plant_publisher(
     builder.await.map_err(session_err("declare publisher"))
 }
 
+/// A subscription to results (`glrmon/<channel>/<type>` records), with the records of
+/// the last `since` seconds that the live instances kept first when asked ([`RESULT_HISTORY`]
+/// per kind and channel), in order, then the live ones; dropping it undeclares it.
+pub struct Results {
+    /// Held to be dropped (which undeclares it).
+    _subscription: Subscription,
+}
+
+impl std::fmt::Debug for Results {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Results")
+    }
+}
+
+impl Results {
+    /// Subscribes to `key` (e.g. `glrmon/**`), calling `callback` with each sample.
+    ///
+    /// # Errors
+    /// [`ZenohError::Session`] when the subscriber cannot be declared.
+    pub async fn subscribe(
+        session: &Session,
+        key: &str,
+        since: Option<f64>,
+        callback: impl Fn(zenoh::sample::Sample) + Send + Sync + 'static,
+    ) -> Result<Self, ZenohError> {
+        let subscription = match since {
+            Some(seconds) => {
+                use zenoh_ext::AdvancedSubscriberBuilderExt as _;
+                Subscription::Advanced(
+                    session
+                        .declare_subscriber(key.to_owned())
+                        .history(zenoh_ext::HistoryConfig::default().max_age(seconds))
+                        .callback(callback)
+                        .await
+                        .map_err(session_err("declare subscriber"))?,
+                )
+            }
+            None => Subscription::Plain(
+                session
+                    .declare_subscriber(key.to_owned())
+                    .callback(callback)
+                    .await
+                    .map_err(session_err("declare subscriber"))?,
+            ),
+        };
+        Ok(Self {
+            _subscription: subscription,
+        })
+    }
+}
+
+/// Records of each kind but `stat` that an instance keeps per channel for the readers
+/// that were away (`glrmon watch --since`, any zenoh-ext advanced subscriber with
+/// history): the last 32 alarms, isolation updates, alarm ends, diagnoses, errors and
+/// consistency changes of each channel, for as long as the instance runs.
+pub const RESULT_HISTORY: usize = 32;
+
 /// Publishes records on `glrmon/<channel>/<type>`: alarms, alarm ends, diagnoses and
-/// errors reliably (congestion control Block, high priority, express); `stat` may be
-/// dropped under congestion.
+/// errors reliably (congestion control Block, high priority, express), each kind's last
+/// [`RESULT_HISTORY`] kept for readers that were away (zenoh-ext advanced publishers
+/// with a cache); `stat` may be dropped under congestion.
 ///
 /// A publisher is declared once per key and kept. [`ZenohSink::declaring`] declares
 /// those of the records that must arrive for every channel up front: declaring one
@@ -711,7 +769,8 @@ pub struct ZenohSink {
     /// The instance and its assignment generation, attached to every put.
     source: Option<SourceAttachment>,
     /// Each channel's publishers, by record kind ([`glrmon_wire::Record::kind_index`]).
-    publishers: HashMap<String, [Option<Publisher<'static>>; RECORD_KINDS.len()]>,
+    publishers:
+        HashMap<String, [Option<zenoh_ext::AdvancedPublisher<'static>>; RECORD_KINDS.len()]>,
 }
 
 impl std::fmt::Debug for ZenohSink {
@@ -769,7 +828,7 @@ impl ZenohSink {
         channel: &str,
         slot: usize,
         kind: &str,
-    ) -> Result<&Publisher<'static>, zenoh::Error> {
+    ) -> Result<&zenoh_ext::AdvancedPublisher<'static>, zenoh::Error> {
         if !self.publishers.contains_key(channel) {
             self.publishers
                 .insert(channel.to_owned(), std::array::from_fn(|_| None));
@@ -784,15 +843,19 @@ impl ZenohSink {
                 .session
                 .declare_publisher(glrmon_wire::result_key(channel, kind))
                 .encoding(Encoding::APPLICATION_JSON);
+            use zenoh_ext::AdvancedPublisherBuilderExt as _;
             let builder = if kind == "stat" {
                 builder
                     .congestion_control(CongestionControl::Drop)
                     .priority(Priority::DataLow)
+                    .advanced()
             } else {
                 builder
                     .congestion_control(CongestionControl::Block)
                     .priority(Priority::InteractiveHigh)
                     .express(true)
+                    .cache(zenoh_ext::CacheConfig::default().max_samples(RESULT_HISTORY))
+                    .sample_miss_detection(zenoh_ext::MissDetectionConfig::default())
             };
             *entry = Some(builder.wait()?);
         }

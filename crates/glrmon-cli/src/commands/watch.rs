@@ -3,6 +3,12 @@
 //! (or a key outside `glrmon/**`, such as a plant's tags) every publication as it
 //! arrives: its time, key, encoding and payload.
 //!
+//! Each record line names its source: the instance that published it and its
+//! assignment generation (the Zenoh attachment of glrmon's records), flagged when no
+//! live instance has that name or the record carries no source: a record anyone else
+//! published. `--since 1h` first prints the records the live instances kept from the
+//! last hour (their publishers' caches), then the live ones.
+//!
 //! Any Zenoh peer can publish under the watched key, so nothing received reaches the
 //! terminal raw: lines, key expressions and decode errors are escaped
 //! ([`glrmon_wire::text`]), and records passed on as JSON keep their value with their
@@ -34,6 +40,10 @@ pub(crate) struct WatchArgs {
     /// configuring it: the default for a key outside glrmon/**.
     #[arg(long)]
     raw: bool,
+    /// First print the records of this last time (`1h`, `30min`, `2d`) that the live
+    /// instances kept (the last 32 of each kind per channel, since each started).
+    #[arg(long, value_name = "TIME", value_parser = crate::span::parse_time)]
+    since: Option<f64>,
     #[command(flatten)]
     zenoh: ZenohArgs,
 }
@@ -47,15 +57,20 @@ pub(crate) fn run(args: &WatchArgs) -> anyhow::Result<()> {
 
 async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
     let session = glrmon_zenoh::open(&args.zenoh.client_settings()).await?;
-    let sub = session
-        .declare_subscriber(args.key.as_str())
+    let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
+    let sub = glrmon_zenoh::Results::subscribe(&session, &args.key, args.since, move |s| {
+        let _ = tx.send(s);
+    })
+    .await
+    .map_err(|e| anyhow::anyhow!("subscribing to {}: {e}", args.key))?;
+    let live = glrmon_zenoh::LiveInstances::watch(&session)
         .await
-        .map_err(|e| anyhow::anyhow!("subscribing to {}: {e}", args.key))?;
+        .map_err(|e| anyhow::anyhow!("following the live instances: {e}"))?;
     let raw = args.raw || !glrmon_spec::keys::intersects(&args.key, "glrmon/**");
     let mut printed = 0u64;
     loop {
         let sample = tokio::select! {
-            s = sub.recv_async() => match s { Ok(s) => s, Err(_) => break },
+            s = rx.recv() => match s { Some(s) => s, None => break },
             _ = tokio::signal::ctrl_c() => break,
         };
         let bytes = sample.payload().to_bytes();
@@ -81,17 +96,44 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
         if !args.all && matches!(record, Record::Stat(_) | Record::Error(_)) {
             continue;
         }
+        let source = source_note(&sample, &live);
         match print::line(&record) {
-            Some(line) if !args.json => println!("{line}"),
-            _ => println!("{}", escape_json(&String::from_utf8_lossy(&bytes))),
+            Some(line) if !args.json => println!("{line}  [{source}]"),
+            _ => {
+                println!("{}", escape_json(&String::from_utf8_lossy(&bytes)));
+                if source.starts_with('!') {
+                    eprintln!(
+                        "glrmon watch: {}: {source}",
+                        Escaped(sample.key_expr().as_str())
+                    );
+                }
+            }
         }
         printed += 1;
         if args.count.is_some_and(|c| printed >= c) {
             break;
         }
     }
+    drop((sub, live));
     let _ = session.close().await;
     Ok(())
+}
+
+/// Who published `sample`: `from a g3` for a live instance's record, else a warning
+/// that starts with `!`.
+fn source_note(sample: &zenoh::sample::Sample, live: &glrmon_zenoh::LiveInstances) -> String {
+    let Some(source) = sample
+        .attachment()
+        .and_then(|a| glrmon_wire::Source::decode(&a.to_bytes()).ok())
+    else {
+        return "! no source: not published by a glrmon instance".to_owned();
+    };
+    let name = Escaped(&source.instance);
+    if live.contains(&source.instance) {
+        format!("from {name} g{}", source.generation)
+    } else {
+        format!("! from \"{name}\", which is not a live glrmon instance")
+    }
 }
 
 /// One publication as it arrived: `<time> <key> [<encoding>] <payload>`, the time its
