@@ -60,13 +60,19 @@ struct Instance {
 }
 
 impl Instance {
-    /// Starts `glrmon run --shard auto` and waits for its "monitoring" line.
+    /// Starts `glrmon run --shard auto` as a client of `endpoint` and waits for its
+    /// "monitoring" line.
     fn start(cfg: &Path, name: &str, endpoint: &str) -> Self {
+        Self::start_with(cfg, name, &["--mode", "client", "--connect", endpoint])
+    }
+
+    /// Starts `glrmon run --shard auto` with these Zenoh flags.
+    fn start_with(cfg: &Path, name: &str, zenoh: &[&str]) -> Self {
         let mut cmd = Command::new(env!("CARGO_BIN_EXE_glrmon"));
         cmd.args(["run", "--config"])
             .arg(cfg)
-            .args(["--shard", "auto", "--instance", name, "--mode", "client"])
-            .args(["--connect", endpoint]);
+            .args(["--shard", "auto", "--instance", name])
+            .args(zenoh);
         let (mut child, log) = support::spawn_logged(&mut cmd);
         let mut line = String::new();
         std::io::BufReader::new(child.stdout.take().unwrap())
@@ -284,31 +290,13 @@ fn names_with_shares(cfg: &glrmon_spec::Config, least: usize) -> Vec<String> {
         .unwrap()
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_fleet_takes_over_a_lost_instance_and_hands_over_on_sigterm() {
-    let dir = support::Scratch::new("failover");
-    let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
-    let router = support::Router::start(&endpoint).await;
-    eprintln!("router: {}", router.kind());
-
-    // 12 copies of the DC motor, ch00 … ch11; every stat record published.
-    let motor_path =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/examples/dc-motor.toml");
-    let motor = std::fs::read_to_string(&motor_path).unwrap();
-    let mut text = "[daemon]\nstat_every = 1\nworkers = 1\n\n".to_owned();
-    for i in 0..CHANNELS {
-        text.push_str(&motor.replace("name = \"dc_motor\"", &format!("name = \"ch{i:02}\"")));
-        text.push('\n');
-    }
-    let cfg_path = dir.0.join("fleet.toml");
-    std::fs::write(&cfg_path, &text).unwrap();
-    let cfg = glrmon_spec::parse(&text).unwrap();
-
-    // The test's session: the owners' tokens, the stat and alarm records.
-    let session = support::client(&endpoint).await;
-    let seen = Arc::new(Mutex::new(Seen::default()));
-    let s = Arc::clone(&seen);
-    let _claims = session
+/// Follows the owners' tokens into `seen` (owners now, and every event with its time).
+async fn follow_claims(
+    session: &zenoh::Session,
+    seen: &Arc<Mutex<Seen>>,
+) -> zenoh::pubsub::Subscriber<()> {
+    let s = Arc::clone(seen);
+    session
         .liveliness()
         .declare_subscriber("glrmon/@owners/**")
         .history(true)
@@ -332,7 +320,119 @@ async fn a_fleet_takes_over_a_lost_instance_and_hands_over_on_sigterm() {
                 .push((Instant::now(), channel.to_owned(), instance.to_owned(), put));
         })
         .await
+        .unwrap()
+}
+
+/// The fleet's configuration: 12 copies of the DC motor, ch00 … ch11, every stat
+/// record published; (its text, the file written in `dir`).
+fn fleet_config(dir: &Path) -> (String, std::path::PathBuf) {
+    let motor_path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/examples/dc-motor.toml");
+    let motor = std::fs::read_to_string(&motor_path).unwrap();
+    let mut text = "[daemon]\nstat_every = 1\nworkers = 1\n\n".to_owned();
+    for i in 0..CHANNELS {
+        text.push_str(&motor.replace("name = \"dc_motor\"", &format!("name = \"ch{i:02}\"")));
+        text.push('\n');
+    }
+    let path = dir.join("fleet.toml");
+    std::fs::write(&path, &text).unwrap();
+    (text, path)
+}
+
+/// A frozen instance (SIGSTOP: its connection stays open, its keep-alives stop) is
+/// taken over once its Zenoh lease expires at the router: 2 s here
+/// (`transport.link.tx.lease` in the instances' Zenoh configuration), so after at
+/// least half a second (it is not the crash's closed connection) and within 3.5 s. When
+/// it wakes up (SIGCONT) it reconnects and the fleet converges to the assignment of
+/// both instances again, every channel with one owner.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_frozen_instance_is_taken_over_when_its_lease_expires() {
+    let dir = support::Scratch::new("failover-freeze");
+    let port = support::free_port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let router = support::Router::start(&endpoint).await;
+    let (text, cfg_path) = fleet_config(&dir.0);
+    let cfg = glrmon_spec::parse(&text).unwrap();
+    let zenoh_cfg = dir.0.join("zenoh.json5");
+    std::fs::write(
+        &zenoh_cfg,
+        format!(
+            r#"{{ mode: "client", connect: {{ endpoints: ["{endpoint}"] }},
+               scouting: {{ multicast: {{ enabled: false }} }},
+               transport: {{ link: {{ tx: {{ lease: 2000, keep_alive: 4 }} }} }} }}"#
+        ),
+    )
+    .unwrap();
+    let session = support::client(&endpoint).await;
+    let seen = Arc::new(Mutex::new(Seen::default()));
+    let _claims = follow_claims(&session, &seen).await;
+    let names = names_with_shares(&cfg, 3);
+    let zenoh_args = ["--zenoh-config", zenoh_cfg.to_str().unwrap()];
+    let a = Instance::start_with(&cfg_path, &names[0], &zenoh_args);
+    let mut b = Instance::start_with(&cfg_path, &names[1], &zenoh_args);
+    let both = assignment(&cfg, &names[..2]);
+    wait_for(
+        &seen,
+        "the assignment of both",
+        Duration::from_secs(10),
+        |s| s.single_owners().filter(|o| *o == both),
+    )
+    .await;
+    let alone = assignment(&cfg, &names[..1]);
+    let frozen = Instant::now();
+    signal(&b.child, "-STOP");
+    wait_for(
+        &seen,
+        "a owns every channel",
+        Duration::from_secs(10),
+        |s| s.single_owners().filter(|o| *o == alone),
+    )
+    .await;
+    let took = frozen.elapsed();
+    eprintln!(
+        "a frozen instance's channels taken over after {:.2} s (lease 2 s)",
+        took.as_secs_f64()
+    );
+    assert!(
+        took > Duration::from_millis(500) && took < Duration::from_millis(3500),
+        "{took:?}"
+    );
+    signal(&b.child, "-CONT");
+    wait_for(
+        &seen,
+        "the assignment of both again",
+        Duration::from_secs(15),
+        |s| s.single_owners().filter(|o| *o == both),
+    )
+    .await;
+    let _ = b.child.kill();
+    drop((a, b));
+    router.stop().await;
+}
+
+/// Sends `sig` (`-STOP`, `-CONT`, `-TERM`) to `child`.
+fn signal(child: &Child, sig: &str) {
+    let status = Command::new("kill")
+        .args([sig, &child.id().to_string()])
+        .status()
         .unwrap();
+    assert!(status.success());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_fleet_takes_over_a_lost_instance_and_hands_over_on_sigterm() {
+    let dir = support::Scratch::new("failover");
+    let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
+    let router = support::Router::start(&endpoint).await;
+    eprintln!("router: {}", router.kind());
+
+    let (text, cfg_path) = fleet_config(&dir.0);
+    let cfg = glrmon_spec::parse(&text).unwrap();
+
+    // The test's session: the owners' tokens, the stat and alarm records.
+    let session = support::client(&endpoint).await;
+    let seen = Arc::new(Mutex::new(Seen::default()));
+    let _claims = follow_claims(&session, &seen).await;
     let s = Arc::clone(&seen);
     let _results = session
         .declare_subscriber("glrmon/*/*")
@@ -568,11 +668,7 @@ async fn a_fleet_takes_over_a_lost_instance_and_hands_over_on_sigterm() {
         .collect();
     assert!(!c_channels.is_empty());
     let sent = Instant::now();
-    let status = Command::new("kill")
-        .args(["-TERM", &c.child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    signal(&c.child, "-TERM");
     assert_eq!(
         support::exit_code_within(&mut c.child, Duration::from_secs(15)),
         Some(0),
