@@ -16,10 +16,14 @@ deps: deps-zenohd deps-python ## the toolchain (rustfmt, clippy), zenohd for the
 
 ZENOHD_VERSION := 1.10.2
 ZENOHD := $(or $(CARGO_HOME),$(HOME)/.cargo)/bin/zenohd
-deps-zenohd: ## zenohd (the Zenoh router) from crates.io, built once (about 15 min on 2 cores), then kept in ~/.cargo/bin
+ZENOH_PLUGIN := $(dir $(ZENOHD))libzenoh_plugin_storage_manager.so
+deps-zenohd: ## zenohd (the Zenoh router) and its storage plugin from crates.io, built once (about 20 min on 2 cores), then kept in ~/.cargo/bin
 	@if $(ZENOHD) --version 2>/dev/null | grep -q "v$(ZENOHD_VERSION)"; then echo "zenohd $(ZENOHD_VERSION): $(ZENOHD)"; \
 	else echo "zenohd $(ZENOHD_VERSION) (the Zenoh router the router-mesh test runs) is not installed: building it from crates.io once, about 15 min on 2 cores; it is kept in $(ZENOHD)"; \
 	$(CARGO) install zenohd --version $(ZENOHD_VERSION) --locked; fi
+	@if [ -f $(ZENOH_PLUGIN) ]; then echo "zenohd storage plugin: $(ZENOH_PLUGIN)"; \
+	else echo "zenohd's storage plugin (the alarm-history test's storages) is not installed: building it once, about 5 min on 2 cores; it is kept beside zenohd"; \
+	CARGO=$(CARGO) scripts/zenoh-storage-plugin.sh $(ZENOHD_VERSION) $(dir $(ZENOHD)); fi
 
 # The official libraries (mcap, mcap-ros2-support, mcap-protobuf-support, Google's protobuf) that write the
 # binary payloads and foreign recordings the integration tests read, in a virtual

@@ -130,7 +130,7 @@ async fn the_secure_router_refuses_a_forged_alarm() {
         .args(["--instance", "secure-a", "--zenoh-config"])
         .arg(&glrmon_cfg);
     let (mut child, log) = support::spawn_logged(&mut cmd);
-    let _instance = KillOnDrop(child.id());
+    let _instance = support::KillOnDrop(child.id());
     let mut line = String::new();
     std::io::BufReader::new(child.stdout.take().unwrap())
         .read_line(&mut line)
@@ -291,15 +291,4 @@ async fn the_secure_router_refuses_a_forged_alarm() {
     forger.close().await.unwrap();
     plant.close().await.unwrap();
     router.stop().await;
-}
-
-/// Kills the process `pid` when dropped (the test ends or fails).
-struct KillOnDrop(u32);
-
-impl Drop for KillOnDrop {
-    fn drop(&mut self) {
-        let _ = std::process::Command::new("kill")
-            .args(["-9", &self.0.to_string()])
-            .status();
-    }
 }

@@ -382,3 +382,14 @@ impl Router {
         }
     }
 }
+
+/// Kills the process `pid` (SIGKILL) when dropped: the test ends or fails.
+pub(crate) struct KillOnDrop(pub(crate) u32);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .args(["-9", &self.0.to_string()])
+            .status();
+    }
+}

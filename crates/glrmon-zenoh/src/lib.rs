@@ -749,6 +749,44 @@ impl Results {
     }
 }
 
+/// The results under `key` that Zenoh storages keep (deploy/zenohd-history.json5: each
+/// channel's last record of each kind), published within the last `since` seconds,
+/// oldest first; those without a timestamp are kept. Waits at most `timeout` for the
+/// storages' answers.
+///
+/// # Errors
+/// [`ZenohError::Session`] when the query fails.
+pub async fn stored_results(
+    session: &Session,
+    key: &str,
+    since: f64,
+    timeout: Duration,
+) -> Result<Vec<zenoh::sample::Sample>, ZenohError> {
+    let replies = session
+        .get(key.to_owned())
+        .target(QueryTarget::All)
+        .consolidation(zenoh::query::ConsolidationMode::None)
+        .timeout(timeout)
+        .await
+        .map_err(session_err("query"))?;
+    let now = std::time::SystemTime::now();
+    let oldest = now
+        .checked_sub(Duration::from_secs_f64(since.clamp(0.0, 1e9)))
+        .unwrap_or(std::time::UNIX_EPOCH);
+    let mut kept = Vec::new();
+    while let Ok(reply) = replies.recv_async().await {
+        if let Ok(sample) = reply.into_result()
+            && sample
+                .timestamp()
+                .is_none_or(|t| t.get_time().to_system_time() >= oldest)
+        {
+            kept.push(sample);
+        }
+    }
+    kept.sort_by_key(|s| s.timestamp().map(|t| *t.get_time()));
+    Ok(kept)
+}
+
 /// Records of each kind but `stat` that an instance keeps per channel for the readers
 /// that were away (`glrmon watch --since`, any zenoh-ext advanced subscriber with
 /// history): the last 32 alarms, isolation updates, alarm ends, diagnoses, errors and

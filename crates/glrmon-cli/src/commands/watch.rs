@@ -6,8 +6,9 @@
 //! Each record line names its source: the instance that published it and its
 //! assignment generation (the Zenoh attachment of glrmon's records), flagged when no
 //! live instance has that name or the record carries no source: a record anyone else
-//! published. `--since 1h` first prints the records the live instances kept from the
-//! last hour (their publishers' caches), then the live ones.
+//! published (or one a storage kept of an instance that stopped). `--since 1h` first
+//! prints the records of the last hour that the storages kept, then those the live
+//! instances kept (their publishers' caches), then the live ones.
 //!
 //! Any Zenoh peer can publish under the watched key, so nothing received reaches the
 //! terminal raw: lines, key expressions and decode errors are escaped
@@ -40,8 +41,9 @@ pub(crate) struct WatchArgs {
     /// configuring it: the default for a key outside glrmon/**.
     #[arg(long)]
     raw: bool,
-    /// First print the records of this last time (`1h`, `30min`, `2d`) that the live
-    /// instances kept (the last 32 of each kind per channel, since each started).
+    /// First print the records of this last time (`1h`, `30min`, `2d`) that Zenoh
+    /// storages kept (each channel's last of each kind: deploy/zenohd-history.json5),
+    /// then those the live instances kept (the last 32 of each kind per channel).
     #[arg(long, value_name = "TIME", value_parser = crate::span::parse_time)]
     since: Option<f64>,
     #[command(flatten)]
@@ -57,6 +59,25 @@ pub(crate) fn run(args: &WatchArgs) -> anyhow::Result<()> {
 
 async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
     let session = glrmon_zenoh::open(&args.zenoh.client_settings()).await?;
+    // What the storages keep (deploy/zenohd-history.json5) comes first; the instances'
+    // caches then bring what they kept, of which a record already printed is not
+    // printed again.
+    let mut stored = std::collections::HashSet::new();
+    let mut first = std::collections::VecDeque::new();
+    if let Some(seconds) = args.since {
+        for sample in glrmon_zenoh::stored_results(
+            &session,
+            &args.key,
+            seconds,
+            std::time::Duration::from_secs(2),
+        )
+        .await
+        .map_err(|e| anyhow::anyhow!("asking the storages for {}: {e}", args.key))?
+        {
+            stored.insert(sample.payload().to_bytes().into_owned());
+            first.push_back(sample);
+        }
+    }
     let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
     let sub = glrmon_zenoh::Results::subscribe(&session, &args.key, args.since, move |s| {
         let _ = tx.send(s);
@@ -69,9 +90,18 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
     let raw = args.raw || !glrmon_spec::keys::intersects(&args.key, "glrmon/**");
     let mut printed = 0u64;
     loop {
-        let sample = tokio::select! {
-            s = rx.recv() => match s { Some(s) => s, None => break },
-            _ = tokio::signal::ctrl_c() => break,
+        let (sample, from_storage) = match first.pop_front() {
+            Some(s) => (s, true),
+            None => {
+                let s = tokio::select! {
+                    s = rx.recv() => match s { Some(s) => s, None => break },
+                    _ = tokio::signal::ctrl_c() => break,
+                };
+                if stored.contains(&*s.payload().to_bytes()) {
+                    continue;
+                }
+                (s, false)
+            }
         };
         let bytes = sample.payload().to_bytes();
         if raw {
@@ -96,7 +126,7 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
         if !args.all && matches!(record, Record::Stat(_) | Record::Error(_)) {
             continue;
         }
-        let source = source_note(&sample, &live);
+        let source = source_note(&sample, &live, from_storage);
         match print::line(&record) {
             Some(line) if !args.json => println!("{line}  [{source}]"),
             _ => {
@@ -120,13 +150,22 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
 }
 
 /// Who published `sample`: `from a g3` for a live instance's record, else a warning
-/// that starts with `!`.
-fn source_note(sample: &zenoh::sample::Sample, live: &glrmon_zenoh::LiveInstances) -> String {
+/// that starts with `!`. A storage keeps no attachment: a record `from_storage` without
+/// one is said to be stored.
+fn source_note(
+    sample: &zenoh::sample::Sample,
+    live: &glrmon_zenoh::LiveInstances,
+    from_storage: bool,
+) -> String {
     let Some(source) = sample
         .attachment()
         .and_then(|a| glrmon_wire::Source::decode(&a.to_bytes()).ok())
     else {
-        return "! no source: not published by a glrmon instance".to_owned();
+        return if from_storage {
+            "stored by a Zenoh storage, which keeps no source".to_owned()
+        } else {
+            "! no source: not published by a glrmon instance".to_owned()
+        };
     };
     let name = Escaped(&source.instance);
     if live.contains(&source.instance) {
