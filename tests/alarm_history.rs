@@ -165,4 +165,6 @@ async fn a_storage_keeps_the_alarms_of_an_instance_that_is_gone() {
     );
     drop((alarms, publisher));
     session.close().await.unwrap();
+    let _ = router.kill();
+    let _ = router.wait();
 }
