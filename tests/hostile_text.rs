@@ -195,7 +195,15 @@ async fn watch_escapes_forged_records_keys_and_decode_errors() {
     );
     assert_eq!(
         lines[1],
-        r"ERROR pump\u{202e}1 k=- unknown_field: x\n2026-12-03T10:00:00.000Z  INFO ALARM pump3 k=1 forged"
+        r"ERROR pump\u{202e}1 k=- unknown_field: x\n2026-12-03T10:00:00.000Z  INFO ALARM pump3 k=1 forged  [! no source: not published by a glrmon instance]"
+    );
+    // Every forged record's line is flagged as published by no glrmon instance (the
+    // one printed as JSON has its flag on stderr).
+    assert!(
+        lines[..2]
+            .iter()
+            .all(|l| l.ends_with("[! no source: not published by a glrmon instance]")),
+        "{stdout}"
     );
     assert!(
         lines[2].starts_with(r#"{"type":"stat",  "channel":"s\u009b2J\u202e","#),

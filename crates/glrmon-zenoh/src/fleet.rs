@@ -71,22 +71,12 @@ impl Ownership {
                 liveliness_key(instance)
             )));
         }
-        let replies = session
-            .liveliness()
-            .get("glrmon/@owners/**")
-            .timeout(wait)
-            .await
-            .map_err(session_err("liveliness query"))?;
-        let mut clashes = Vec::new();
-        while let Ok(reply) = replies.recv_async().await {
-            if let Ok(sample) = reply.result()
-                && let Some((channel, other)) = parse_owner(sample.key_expr().as_str())
-                && other != instance
-                && channels.iter().any(|c| c == channel)
-            {
-                clashes.push(format!("\"{channel}\" (instance \"{other}\")"));
-            }
-        }
+        let mut clashes: Vec<String> = owners_elsewhere(session, instance, wait)
+            .await?
+            .into_iter()
+            .filter(|(channel, _)| channels.contains(channel))
+            .map(|(channel, other)| format!("\"{channel}\" (instance \"{other}\")"))
+            .collect();
         if !clashes.is_empty() {
             clashes.sort();
             return Err(ZenohError::Overlap(format!(
@@ -129,6 +119,31 @@ impl Ownership {
             _watch: watch,
         })
     }
+}
+
+/// (channel, instance) of every owner token alive now of an instance other than
+/// `instance`, as the nodes that answer within `wait` tell.
+async fn owners_elsewhere(
+    session: &Session,
+    instance: &str,
+    wait: Duration,
+) -> Result<Vec<(String, String)>, ZenohError> {
+    let replies = session
+        .liveliness()
+        .get("glrmon/@owners/**")
+        .timeout(wait)
+        .await
+        .map_err(session_err("liveliness query"))?;
+    let mut owners = Vec::new();
+    while let Ok(reply) = replies.recv_async().await {
+        if let Ok(sample) = reply.result()
+            && let Some((channel, other)) = parse_owner(sample.key_expr().as_str())
+            && other != instance
+        {
+            owners.push((channel.to_owned(), other.to_owned()));
+        }
+    }
+    Ok(owners)
 }
 
 /// (channel, instance) of an owner token's key.
@@ -281,21 +296,11 @@ pub async fn unclaimed(
     channels: &[String],
     wait: Duration,
 ) -> Result<Vec<String>, ZenohError> {
-    let replies = session
-        .liveliness()
-        .get("glrmon/@owners/**")
-        .timeout(wait)
-        .await
-        .map_err(session_err("liveliness query"))?;
-    let mut elsewhere = BTreeSet::new();
-    while let Ok(reply) = replies.recv_async().await {
-        if let Ok(sample) = reply.result()
-            && let Some((channel, other)) = parse_owner(sample.key_expr().as_str())
-            && other != instance
-        {
-            elsewhere.insert(channel.to_owned());
-        }
-    }
+    let elsewhere: BTreeSet<String> = owners_elsewhere(session, instance, wait)
+        .await?
+        .into_iter()
+        .map(|(channel, _)| channel)
+        .collect();
     Ok(channels
         .iter()
         .filter(|c| !elsewhere.contains(c.as_str()))

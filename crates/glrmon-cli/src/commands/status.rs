@@ -129,29 +129,7 @@ fn channel_table(replies: &[(String, String)]) -> String {
             ]);
         }
     }
-    let mut widths = [0usize; 7];
-    for r in &rows {
-        for (w, c) in widths.iter_mut().zip(r) {
-            *w = (*w).max(c.chars().count());
-        }
-    }
-    let mut out = String::new();
-    for r in &rows {
-        let cells: Vec<String> = r
-            .iter()
-            .zip(widths)
-            .enumerate()
-            .map(|(i, (c, w))| {
-                if i < 2 || i == 6 {
-                    format!("{c:<w$}")
-                } else {
-                    format!("{c:>w$}")
-                }
-            })
-            .collect();
-        out.push_str(cells.join("  ").trim_end());
-        out.push('\n');
-    }
+    let mut out = aligned(&rows, |i| i < 2 || i == 6);
     let doubled = owners.values().filter(|l| l.len() > 1).count();
     out.push_str(&format!(
         "{} channel(s) monitored, {doubled} by more than one instance",
@@ -238,20 +216,31 @@ fn table(replies: &[(String, String)]) -> String {
             uptime(v.uptime),
         ]);
     }
-    let mut widths = [0usize; 11];
-    for r in &rows {
+    let mut out = aligned(&rows, |i| i < 2);
+    out.push_str(&format!(
+        "{} instance(s), {channels} channel(s), {rate:.0} samples/s\n",
+        replies.len()
+    ));
+    out
+}
+
+/// The rows as a table: each column as wide as its widest cell, two spaces apart,
+/// left-aligned where `left(column)`, else right-aligned; one line per row.
+fn aligned<const N: usize>(rows: &[[String; N]], left: impl Fn(usize) -> bool) -> String {
+    let mut widths = [0usize; N];
+    for r in rows {
         for (w, c) in widths.iter_mut().zip(r) {
             *w = (*w).max(c.chars().count());
         }
     }
     let mut out = String::new();
-    for r in &rows {
+    for r in rows {
         let cells: Vec<String> = r
             .iter()
             .zip(widths)
             .enumerate()
             .map(|(i, (c, w))| {
-                if i < 2 {
+                if left(i) {
                     format!("{c:<w$}")
                 } else {
                     format!("{c:>w$}")
@@ -261,10 +250,6 @@ fn table(replies: &[(String, String)]) -> String {
         out.push_str(cells.join("  ").trim_end());
         out.push('\n');
     }
-    out.push_str(&format!(
-        "{} instance(s), {channels} channel(s), {rate:.0} samples/s\n",
-        replies.len()
-    ));
     out
 }
 
