@@ -15,7 +15,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use glrmon_wire::{Sample, encode_sample};
+use glrmon_wire::encode_sample;
 use zenoh::Wait as _;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -97,16 +97,8 @@ async fn a_storage_keeps_the_alarms_of_an_instance_that_is_gone() {
     .unwrap();
     let publisher = support::matched_publisher(&session, "plant/dc_motor").await;
     let mut bytes = Vec::new();
-    for k in 0..400u64 {
-        let x = sim.next_sample();
+    for s in support::wire_samples(&mut sim, 0, 400) {
         bytes.clear();
-        let s = Sample {
-            k: Some(k),
-            t: None,
-            u: x.u,
-            y: x.y,
-            p: x.p,
-        };
         encode_sample("dc_motor", &s, &mut bytes).unwrap();
         publisher.put(bytes.clone()).wait().unwrap();
     }

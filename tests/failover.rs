@@ -495,18 +495,7 @@ async fn a_fleet_takes_over_a_lost_instance_and_hands_over_on_sigterm() {
                 ONSET,
             )
             .unwrap();
-            let samples = (0..6000u64)
-                .map(|k| {
-                    let x = sim.next_sample();
-                    Sample {
-                        k: Some(k),
-                        t: None,
-                        u: x.u,
-                        y: x.y,
-                        p: x.p,
-                    }
-                })
-                .collect();
+            let samples = support::wire_samples(&mut sim, 0, 6000);
             (ch.name.clone(), samples)
         })
         .collect();
@@ -516,24 +505,9 @@ async fn a_fleet_takes_over_a_lost_instance_and_hands_over_on_sigterm() {
         let (published, stop) = (Arc::clone(&published), Arc::clone(&stop));
         let mut pubs = Vec::new();
         for (i, (name, _)) in data.iter().enumerate() {
-            let key = format!("plant/{name}");
             let cache = if i < CACHED { 1000 } else { 0 };
-            let p = glrmon_zenoh::plant_publisher(
-                &session,
-                &key,
-                zenoh::bytes::Encoding::APPLICATION_JSON,
-                cache,
-            )
-            .await
-            .unwrap();
-            let t = Instant::now();
-            while !p.matching_status().await.unwrap().matching() {
-                assert!(
-                    t.elapsed() < Duration::from_secs(10),
-                    "no subscriber on {key}"
-                );
-                tokio::time::sleep(Duration::from_millis(10)).await;
-            }
+            let p =
+                support::matched_plant_publisher(&session, &format!("plant/{name}"), cache).await;
             pubs.push(p);
         }
         std::thread::spawn(move || {

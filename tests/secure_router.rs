@@ -21,7 +21,7 @@ use std::io::BufRead as _;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use glrmon_wire::{Record, Sample, Source, encode_sample};
+use glrmon_wire::{Record, Source, encode_sample};
 use rcgen::{BasicConstraints, CertificateParams, DnType, IsCa, Issuer, KeyPair};
 
 /// A certificate authority that signs the test's certificates.
@@ -173,15 +173,7 @@ async fn the_secure_router_refuses_a_forged_alarm() {
         tokio::time::sleep(Duration::from_millis(10)).await;
     }
     let mut bytes = Vec::new();
-    for k in 0..400u64 {
-        let x = sim.next_sample();
-        let s = Sample {
-            k: Some(k),
-            t: None,
-            u: x.u,
-            y: x.y,
-            p: x.p,
-        };
+    for s in support::wire_samples(&mut sim, 0, 400) {
         bytes.clear();
         encode_sample("dc_motor", &s, &mut bytes).unwrap();
         publisher.put(bytes.clone()).await.unwrap();

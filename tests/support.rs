@@ -187,12 +187,26 @@ pub(crate) async fn client(endpoint: &str) -> zenoh::Session {
 pub(crate) async fn matched_publisher(
     session: &zenoh::Session,
     key: &str,
-) -> zenoh::pubsub::Publisher<'static> {
-    let p = session
-        .declare_publisher(key.to_owned())
-        .congestion_control(zenoh::qos::CongestionControl::Block)
-        .await
-        .unwrap();
+) -> zenoh_ext::AdvancedPublisher<'static> {
+    matched_plant_publisher(session, key, 0).await
+}
+
+/// A plant publisher on `key` keeping its last `cache` samples
+/// (`glrmon_zenoh::plant_publisher`, JSON), returned once a subscriber matches (10 s at
+/// most).
+pub(crate) async fn matched_plant_publisher(
+    session: &zenoh::Session,
+    key: &str,
+    cache: usize,
+) -> zenoh_ext::AdvancedPublisher<'static> {
+    let p = glrmon_zenoh::plant_publisher(
+        session,
+        key,
+        zenoh::bytes::Encoding::APPLICATION_JSON,
+        cache,
+    )
+    .await
+    .unwrap();
     let t = Instant::now();
     while !p.matching_status().await.unwrap().matching() {
         assert!(
@@ -202,6 +216,26 @@ pub(crate) async fn matched_publisher(
         tokio::time::sleep(Duration::from_millis(10)).await;
     }
     p
+}
+
+/// The next `n` samples of `sim` as wire samples, numbered from `first`.
+pub(crate) fn wire_samples(
+    sim: &mut glrmon_sim::Simulator,
+    first: u64,
+    n: u64,
+) -> Vec<glrmon_wire::Sample> {
+    (first..first + n)
+        .map(|k| {
+            let x = sim.next_sample();
+            glrmon_wire::Sample {
+                k: Some(k),
+                t: None,
+                u: x.u,
+                y: x.y,
+                p: x.p,
+            }
+        })
+        .collect()
 }
 
 /// A running `glrmon run --config <config> --instance <instance>` (WARN log), returned

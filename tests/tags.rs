@@ -88,7 +88,7 @@ fn simulated(dir: &Path, config: &Path, samples: usize, onset: usize) -> Vec<[f6
 async fn publishers(
     endpoint: &str,
     keys: &[&str],
-) -> Vec<(zenoh::Session, zenoh::pubsub::Publisher<'static>)> {
+) -> Vec<(zenoh::Session, zenoh_ext::AdvancedPublisher<'static>)> {
     let mut out = Vec::new();
     for key in keys {
         let session = client(endpoint).await;
